@@ -1,0 +1,212 @@
+"""Observation histories: the per-object matrix a mapper takes, plus the ground truth that scores it.
+
+A :class:`History` is what one episode (or one logged run) leaves behind. Its ``matrix`` has one
+row per object and, per step, ``columns_per_step`` columns: 1 for visibility (0/1) and range,
+2 for bearing (cos, sin). Columns are in step order, so the first ``n`` steps of a history are
+its first ``n * columns_per_step`` columns (:meth:`History.head`).
+
+Ground truth (object positions, robot poses) travels with the history for scoring only; a mapper
+is given the matrix and the anchors, nothing else.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+SENSORS: dict[str, int] = {"visibility": 1, "bearing": 2, "range": 1}
+"""Sensor kinds and the number of matrix columns each step contributes."""
+
+FORMAT = "lfmdr-history"
+FORMAT_VERSION = 1
+
+
+class HistoryFileError(ValueError):
+    """A file that is not a readable lfmdr history (damaged, foreign, or of another version)."""
+
+
+@dataclass(frozen=True, eq=False)
+class History:
+    """Per-object observation histories of one episode, with the ground truth to score a map.
+
+    Attributes:
+        sensor: ``"visibility"``, ``"bearing"`` or ``"range"``.
+        matrix: (M, N * columns_per_step) float64, one row per object.
+        object_positions: (M, 2) true object positions [m] (NaN where unknown).
+        anchor_ids: (A,) indices of the anchor objects, A >= 3.
+        anchor_positions: (A, 2) known positions of the anchors [m].
+        robot_poses: (N, 3) true robot pose (x, y, heading) after each step, or None for
+            logged data without it. Never given to a mapper.
+        mask: None when every entry was observed, else a (M, N * columns_per_step) bool array,
+            True where the entry was observed.
+        meta: JSON-serialisable facts about where the history came from (env id, seed, ...).
+    """
+
+    sensor: str
+    matrix: np.ndarray
+    object_positions: np.ndarray
+    anchor_ids: np.ndarray
+    anchor_positions: np.ndarray
+    robot_poses: np.ndarray | None = None
+    mask: np.ndarray | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.sensor not in SENSORS:
+            raise ValueError(f"sensor must be one of {sorted(SENSORS)}, got {self.sensor!r}")
+        matrix = np.asarray(self.matrix, dtype=np.float64)
+        if matrix.ndim != 2:
+            raise ValueError(f"matrix must be 2-D (objects x columns), got shape {matrix.shape}")
+        m, d = matrix.shape
+        if d % SENSORS[self.sensor]:
+            raise ValueError(
+                f"matrix has {d} columns, not a multiple of {SENSORS[self.sensor]} "
+                f"(columns per step for {self.sensor!r})"
+            )
+        obj = np.asarray(self.object_positions, dtype=np.float64)
+        if obj.shape != (m, 2):
+            raise ValueError(f"object_positions must have shape ({m}, 2), got {obj.shape}")
+        ids = np.asarray(self.anchor_ids)
+        if ids.ndim != 1 or not np.issubdtype(ids.dtype, np.integer):
+            raise ValueError(f"anchor_ids must be a 1-D integer array, got {ids.dtype} {ids.shape}")
+        ids = ids.astype(np.int64)
+        if ids.size and (ids.min() < 0 or ids.max() >= m):
+            raise ValueError(f"anchor_ids must lie in [0, {m}), got {ids.tolist()}")
+        apos = np.asarray(self.anchor_positions, dtype=np.float64)
+        if apos.shape != (ids.size, 2):
+            raise ValueError(f"anchor_positions must have shape ({ids.size}, 2), got {apos.shape}")
+        poses = None
+        if self.robot_poses is not None:
+            poses = np.asarray(self.robot_poses, dtype=np.float64)
+            if poses.ndim != 2 or poses.shape[1] != 3:
+                raise ValueError(f"robot_poses must have shape (N, 3), got {poses.shape}")
+            if poses.shape[0] != d // SENSORS[self.sensor]:
+                raise ValueError(
+                    f"robot_poses has {poses.shape[0]} rows for {d // SENSORS[self.sensor]} steps"
+                )
+        mask = None
+        if self.mask is not None:
+            mask = np.asarray(self.mask)
+            if mask.dtype != np.bool_ or mask.shape != matrix.shape:
+                raise ValueError(
+                    f"mask must be a bool array of shape {matrix.shape}, got {mask.dtype} {mask.shape}"
+                )
+        object.__setattr__(self, "matrix", matrix)
+        object.__setattr__(self, "object_positions", obj)
+        object.__setattr__(self, "anchor_ids", ids)
+        object.__setattr__(self, "anchor_positions", apos)
+        object.__setattr__(self, "robot_poses", poses)
+        object.__setattr__(self, "mask", mask)
+        object.__setattr__(self, "meta", dict(self.meta))
+
+    # ------------------------------------------------------------------ views
+    @property
+    def columns_per_step(self) -> int:
+        return SENSORS[self.sensor]
+
+    @property
+    def n_objects(self) -> int:
+        return self.matrix.shape[0]
+
+    @property
+    def n_steps(self) -> int:
+        return self.matrix.shape[1] // self.columns_per_step
+
+    def head(self, n_steps: int) -> History:
+        """The history of the first ``n_steps`` steps (a checkpoint of the same episode)."""
+        if not 0 < n_steps <= self.n_steps:
+            raise ValueError(f"n_steps must be in [1, {self.n_steps}], got {n_steps}")
+        cols = n_steps * self.columns_per_step
+        return History(
+            sensor=self.sensor,
+            matrix=self.matrix[:, :cols],
+            object_positions=self.object_positions,
+            anchor_ids=self.anchor_ids,
+            anchor_positions=self.anchor_positions,
+            robot_poses=None if self.robot_poses is None else self.robot_poses[:n_steps],
+            mask=None if self.mask is None else self.mask[:, :cols],
+            meta=self.meta,
+        )
+
+    def __repr__(self) -> str:
+        return (
+            f"History(sensor={self.sensor!r}, objects={self.n_objects}, steps={self.n_steps}, "
+            f"anchors={self.anchor_ids.tolist()}, masked={self.mask is not None})"
+        )
+
+    # ------------------------------------------------------------------ files
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write the history to ``path`` (.npz) atomically: a reader never sees a half-written file."""
+        path = Path(path)
+        if path.suffix != ".npz":
+            raise ValueError(f"history files end in .npz, got {path.name!r}")
+        arrays: dict[str, np.ndarray] = {
+            "format": np.array(FORMAT),
+            "format_version": np.array(FORMAT_VERSION),
+            "sensor": np.array(self.sensor),
+            "matrix": self.matrix,
+            "object_positions": self.object_positions,
+            "anchor_ids": self.anchor_ids,
+            "anchor_positions": self.anchor_positions,
+            "meta": np.array(json.dumps(self.meta, sort_keys=True)),
+        }
+        if self.robot_poses is not None:
+            arrays["robot_poses"] = self.robot_poses
+        if self.mask is not None:
+            arrays["mask"] = self.mask
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                np.savez_compressed(fh, **arrays)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        return path
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> History:
+        """Read a history written by :meth:`save`; anything else raises :class:`HistoryFileError`."""
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"no history file at {path}")
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                files = set(data.files)
+                if "format" not in files or str(data["format"]) != FORMAT:
+                    raise HistoryFileError(f"{path} is not an lfmdr history file (no '{FORMAT}' tag)")
+                version = int(data["format_version"])
+                if version != FORMAT_VERSION:
+                    raise HistoryFileError(
+                        f"{path} has history format version {version}; this lfmdr reads {FORMAT_VERSION}"
+                    )
+                fields = {k: data[k] for k in files}
+        except HistoryFileError:
+            raise
+        except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as exc:
+            raise HistoryFileError(f"{path} is damaged or not an .npz history: {exc}") from exc
+        try:
+            return cls(
+                sensor=str(fields["sensor"]),
+                matrix=fields["matrix"],
+                object_positions=fields["object_positions"],
+                anchor_ids=fields["anchor_ids"],
+                anchor_positions=fields["anchor_positions"],
+                robot_poses=fields.get("robot_poses"),
+                mask=fields.get("mask"),
+                meta=json.loads(str(fields["meta"])),
+            )
+        except KeyError as exc:
+            raise HistoryFileError(f"{path} lacks the field {exc.args[0]!r}") from exc
+        except ValueError as exc:
+            raise HistoryFileError(f"{path} holds an inconsistent history: {exc}") from exc
