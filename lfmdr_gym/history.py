@@ -15,6 +15,7 @@ import json
 import os
 import tempfile
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -193,7 +194,8 @@ class History:
                 fields = {k: data[k] for k in files}
         except HistoryFileError:
             raise
-        except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as exc:
+        except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error,
+                NotImplementedError) as exc:  # zlib.error / NotImplementedError: damaged members
             raise HistoryFileError(f"{path} is damaged or not an .npz history: {exc}") from exc
         try:
             return cls(
@@ -210,3 +212,348 @@ class History:
             raise HistoryFileError(f"{path} lacks the field {exc.args[0]!r}") from exc
         except ValueError as exc:
             raise HistoryFileError(f"{path} holds an inconsistent history: {exc}") from exc
+
+
+# ---------------------------------------------------------------------- recording
+# collect() / collect_vector(): drive an env with a policy and stack what it senses into a History.
+# gymnasium is imported inside them so that History itself stays importable without it.
+
+def _sensor_key(observation: Any) -> str:
+    """The observation entry that holds the mapping sensor ("visibility", "bearing" or "range")."""
+    if not isinstance(observation, dict):
+        raise ValueError(
+            f"the env must return a dict observation holding one of {sorted(SENSORS)}, "
+            f"got {type(observation).__name__} (a flattening wrapper cannot be recorded)"
+        )
+    keys = [k for k in SENSORS if k in observation]
+    if len(keys) != 1:
+        raise ValueError(
+            f"the observation must hold exactly one sensor entry of {sorted(SENSORS)}, "
+            f"got keys {sorted(observation)}"
+        )
+    return keys[0]
+
+
+def _json_safe(mapping: dict[str, Any] | None) -> dict[str, Any]:
+    """The entries of ``mapping`` that survive a JSON round trip (env kwargs for ``meta``)."""
+    out: dict[str, Any] = {}
+    for key, value in (mapping or {}).items():
+        try:
+            json.dumps(value)
+        except (TypeError, ValueError):
+            continue
+        out[str(key)] = value
+    return out
+
+
+def _policy_seed(seed: int | None) -> int | None:
+    """A seed for the policy's generator derived from the episode seed (never the same stream)."""
+    if seed is None:
+        return None
+    return int(np.random.SeedSequence([int(seed), 0x706F6C]).generate_state(1)[0])
+
+
+def _reset_policy(policy: Any, seed: int | None) -> None:
+    reset = getattr(policy, "reset", None)
+    if callable(reset):
+        reset(seed=_policy_seed(seed))
+
+
+def _policy_name(policy: Any) -> str:
+    """How ``meta`` names the policy: its repr if its class defines one, else its name."""
+    if type(policy).__repr__ is not object.__repr__ and not hasattr(policy, "__name__"):
+        return repr(policy)
+    return str(getattr(policy, "__name__", type(policy).__name__))
+
+
+def _check_seed(seed: int | None) -> int | None:
+    if seed is None:
+        return None
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
+    return int(seed)
+
+
+def _check_n_steps(n_steps: int) -> int:
+    if isinstance(n_steps, bool) or not isinstance(n_steps, int | np.integer) or n_steps < 1:
+        raise ValueError(f"n_steps must be a positive integer, got {n_steps!r}")
+    return int(n_steps)
+
+
+def _steps_to_matrix(buffer: np.ndarray, sensor: str) -> np.ndarray:
+    """(N, M, *c) per-step observations -> the (M, N * c) History matrix, c interleaved per step."""
+    n, m = buffer.shape[:2]
+    per_step = int(np.prod(buffer.shape[2:], dtype=int))
+    if per_step != SENSORS[sensor]:
+        raise ValueError(
+            f"a {sensor!r} observation must give {SENSORS[sensor]} value(s) per object, "
+            f"got shape {buffer.shape[1:]}"
+        )
+    return np.moveaxis(buffer, 0, 1).reshape(m, n * per_step).astype(np.float64)
+
+
+def _truth(info: dict[str, Any], index: int | None = None) -> dict[str, np.ndarray]:
+    """Object positions and anchors from an env's info (row ``index`` of a vector env's info)."""
+    out = {}
+    for key in ("object_positions", "anchor_ids", "anchor_positions"):
+        if key not in info:
+            raise ValueError(f"the env's info lacks {key!r}; collect needs it to score the map")
+        value = np.asarray(info[key])
+        out[key] = np.array(value if index is None else value[index])
+    return out
+
+
+def collect(
+    env: Any,
+    policy: Any,
+    n_steps: int,
+    seed: int | None = None,
+    *,
+    make_kwargs: dict[str, Any] | None = None,
+) -> History:
+    """Run one episode of ``n_steps`` moves and return what the robot sensed as a :class:`History`.
+
+    ``env`` is a Gymnasium env with a dict observation (one sensor entry plus, for
+    :class:`~lfmdr_gym.policies.RandomWalkPolicy`, ``"proximity"``) and the ground truth in
+    ``info``, or an env id (made with ``make_kwargs`` and closed afterwards). ``policy`` is anything
+    :func:`~lfmdr_gym.policies.as_policy` accepts; its ``reset(seed=...)`` is called with a seed
+    derived from ``seed``, so one seed fixes layout, start pose and walk. The observation after
+    each move is column (or column pair) t of the matrix; the reset observation is not a move and
+    is not recorded. Raises ValueError if the episode ends before ``n_steps`` moves.
+    """
+    import gymnasium as gym
+
+    from lfmdr_gym.policies import as_policy
+
+    n_steps = _check_n_steps(n_steps)
+    seed = _check_seed(seed)
+    pol = as_policy(policy)
+    owned = isinstance(env, str)
+    if owned:
+        import lfmdr_gym  # noqa: F401  (registers the LFMDR ids)
+
+        env = gym.make(env, **(make_kwargs or {}))
+    elif make_kwargs:
+        raise ValueError("make_kwargs is only used when env is an env id string")
+    try:
+        spec = getattr(env, "spec", None)
+        limit = getattr(spec, "max_episode_steps", None)
+        if limit is not None and n_steps > limit:
+            raise ValueError(
+                f"n_steps={n_steps} exceeds the env's max_episode_steps={limit}: the episode "
+                "would be truncated; make the env with a larger max_episode_steps"
+            )
+        space = env.action_space
+        action_shape = tuple(space.shape or ())
+        action_dtype = space.dtype
+
+        obs, info = env.reset(seed=seed)
+        sensor = _sensor_key(obs)
+        truth = _truth(info)
+        _reset_policy(pol, seed)
+        first = np.asarray(obs[sensor])
+        buffer = np.empty((n_steps, *first.shape), dtype=first.dtype)
+        poses = np.empty((n_steps, 3), dtype=np.float64)
+        blocked = 0
+        for t in range(n_steps):
+            action = np.asarray(pol(obs), dtype=action_dtype)
+            if action.shape != action_shape:
+                if action.size != int(np.prod(action_shape, dtype=int)):
+                    raise ValueError(
+                        f"the policy returned an action of shape {action.shape}; the env's "
+                        f"action space has shape {action_shape}"
+                    )
+                action = action.reshape(action_shape)
+            obs, _, terminated, truncated, info = env.step(action)
+            buffer[t] = obs[sensor]
+            poses[t] = info["robot_pose"]
+            blocked += bool(info.get("blocked", False))
+            if (terminated or truncated) and t < n_steps - 1:
+                raise ValueError(
+                    f"the episode ended after {t + 1} of n_steps={n_steps} moves "
+                    f"({'terminated' if terminated else 'truncated'}); n_steps must not exceed "
+                    "the env's max_episode_steps"
+                )
+        meta = {
+            "env_id": getattr(spec, "id", None),
+            "env_kwargs": _json_safe(getattr(spec, "kwargs", None)),
+            "seed": seed,
+            "policy": _policy_name(pol),
+            "policy_seed": _policy_seed(seed),
+            "n_steps": n_steps,
+            "sensor": sensor,
+            "blocked_moves": int(blocked),
+        }
+        return History(
+            sensor=sensor,
+            matrix=_steps_to_matrix(buffer, sensor),
+            robot_poses=poses,
+            meta=meta,
+            **truth,
+        )
+    finally:
+        if owned:
+            env.close()
+
+
+def _batched_actions(action: Any, space: Any, batch: int) -> np.ndarray:
+    shape = (batch, *tuple(space.shape or ()))
+    out = np.asarray(action, dtype=space.dtype)
+    if out.shape == shape:
+        return out
+    if out.size == int(np.prod(shape, dtype=int)):
+        return out.reshape(shape)
+    raise ValueError(
+        f"the policy returned actions of shape {out.shape} for {batch} sub-environments; a policy "
+        f"used with a vector env must answer a batched observation with shape {shape}"
+    )
+
+
+def collect_vector(
+    envs: Any,
+    policy: Any,
+    n_steps: int,
+    seed: int | None = None,
+    *,
+    n_episodes: int = 1,
+) -> list[History]:
+    """Record ``n_episodes`` episodes of ``n_steps`` moves in every sub-env of a vector env.
+
+    ``envs`` is a ``gymnasium.vector.VectorEnv`` (e.g. ``gymnasium.make_vec(id, num_envs=4)``),
+    reset with ``seed`` (sub-env i gets ``seed + i``; later episodes continue each sub-env's
+    random stream, as its autoreset does). ``policy`` must accept batched observations (leading
+    sub-env axis) and return one action per sub-env. Returns the histories sub-env by sub-env:
+    index ``i * n_episodes + e`` is episode e of sub-env i.
+
+    Autoreset is handled for every mode: with NEXT_STEP (Gymnasium's default) the step after an
+    episode ends only resets that sub-env, so it is not recorded as a move; with SAME_STEP the
+    move's observation is taken from ``info["final_obs"]``; with DISABLED the collector resets
+    the finished sub-envs itself. Moves past ``n_steps`` in an episode are run but not recorded
+    (make the env with ``max_episode_steps=n_steps`` when collecting several episodes). An
+    episode that ends before ``n_steps`` moves raises ValueError.
+    """
+    from gymnasium.vector import AutoresetMode
+
+    from lfmdr_gym.policies import PredictPolicy, as_policy
+
+    n_steps = _check_n_steps(n_steps)
+    seed = _check_seed(seed)
+    if isinstance(n_episodes, bool) or not isinstance(n_episodes, int) or n_episodes < 1:
+        raise ValueError(f"n_episodes must be a positive integer, got {n_episodes!r}")
+    if not hasattr(envs, "num_envs") or not hasattr(envs, "single_action_space"):
+        raise ValueError(f"envs must be a gymnasium VectorEnv, got {type(envs).__name__}")
+    pol = as_policy(policy)
+    batch = int(envs.num_envs)
+    mode = AutoresetMode(envs.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP))
+    spec = getattr(envs, "spec", None)
+    # make_vec keeps the registered limit in spec.max_episode_steps and an override in its kwargs
+    limit = (getattr(spec, "kwargs", None) or {}).get(
+        "max_episode_steps", getattr(spec, "max_episode_steps", None)
+    )
+    if limit is not None and n_steps > limit:
+        raise ValueError(
+            f"n_steps={n_steps} exceeds the sub-envs' max_episode_steps={limit}: every episode "
+            "would be truncated first"
+        )
+
+    obs, info = envs.reset(seed=seed)
+    sensor = _sensor_key(obs)
+    _reset_policy(pol, seed)
+    sample = np.asarray(obs[sensor])
+    buffer = np.empty((batch, n_episodes, n_steps, *sample.shape[1:]), dtype=sample.dtype)
+    poses = np.empty((batch, n_episodes, n_steps, 3), dtype=np.float64)
+    blocked = np.zeros((batch, n_episodes), dtype=np.int64)
+    truths: list[list[dict[str, np.ndarray]]] = [[_truth(info, i)] for i in range(batch)]
+    count = np.zeros(batch, dtype=np.int64)  # moves recorded in the current episode
+    episode = np.zeros(batch, dtype=np.int64)  # index of the current episode
+    pending = np.zeros(batch, dtype=bool)  # NEXT_STEP: this sub-env's next step is a reset
+    starts = np.ones(batch, dtype=bool)  # episode_start flags for SB3-style policies
+
+    def record(rows: np.ndarray, observed: np.ndarray, step_info: dict[str, Any]) -> None:
+        for i in rows:
+            if episode[i] >= n_episodes or count[i] >= n_steps:
+                continue  # finished, or moves past n_steps: run, not recorded
+            buffer[i, episode[i], count[i]] = observed[i]
+            poses[i, episode[i], count[i]] = step_info["robot_pose"][i]
+            if "blocked" in step_info:
+                blocked[i, episode[i]] += bool(step_info["blocked"][i])
+            count[i] += 1
+
+    def new_episode(rows: np.ndarray, reset_info: dict[str, Any]) -> None:
+        for i in rows:
+            if count[i] < n_steps and episode[i] < n_episodes:
+                raise ValueError(
+                    f"sub-env {i}'s episode {episode[i]} ended after {count[i]} of "
+                    f"n_steps={n_steps} moves; n_steps must not exceed max_episode_steps"
+                )
+            episode[i] += 1
+            count[i] = 0
+            starts[i] = True
+            if episode[i] < n_episodes:
+                truths[i].append(_truth(reset_info, i))
+
+    def finished() -> bool:
+        last_done = (episode == n_episodes - 1) & (count >= n_steps)
+        return bool((last_done | (episode >= n_episodes)).all())
+
+    while not finished():
+        if isinstance(pol, PredictPolicy):
+            action = pol(obs, episode_start=starts.copy())
+        else:
+            action = pol(obs)
+        starts[:] = False
+        obs, _, terminated, truncated, info = envs.step(
+            _batched_actions(action, envs.single_action_space, batch)
+        )
+        done = np.asarray(terminated) | np.asarray(truncated)
+        if mode == AutoresetMode.NEXT_STEP:
+            moved = np.flatnonzero(~pending)
+            record(moved, np.asarray(obs[sensor]), info)
+            new_episode(np.flatnonzero(pending), info)  # these rows were reset steps
+            pending = done & ~pending
+        elif mode == AutoresetMode.SAME_STEP:
+            observed = np.asarray(obs[sensor]).copy()
+            step_info = {k: np.array(v, copy=True) for k, v in info.items()
+                         if k in ("robot_pose", "blocked")}
+            ended = np.flatnonzero(done)
+            for i in ended:  # the move's own observation and info, before the autoreset
+                observed[i] = info["final_obs"][i][sensor]
+                final_info = info["final_info"]
+                step_info["robot_pose"][i] = final_info["robot_pose"][i]
+                if "blocked" in step_info:
+                    step_info["blocked"][i] = final_info["blocked"][i]
+            record(np.arange(batch), observed, step_info)
+            new_episode(ended, info)
+        else:  # DISABLED: the collector resets finished sub-envs itself
+            record(np.arange(batch), np.asarray(obs[sensor]), info)
+            if done.any():
+                obs, reset_info = envs.reset(options={"reset_mask": done})
+                new_episode(np.flatnonzero(done), reset_info)
+
+    meta_base = {
+        "env_id": getattr(spec, "id", None),
+        "env_kwargs": _json_safe(getattr(spec, "kwargs", None)),
+        "policy": _policy_name(pol),
+        "policy_seed": _policy_seed(seed),
+        "n_steps": n_steps,
+        "sensor": sensor,
+        "num_envs": batch,
+        "autoreset_mode": mode.value,
+    }
+    histories = []
+    for i in range(batch):
+        for e in range(n_episodes):
+            meta = dict(meta_base, sub_env=i, episode=e, blocked_moves=int(blocked[i, e]))
+            meta["seed"] = (seed + i) if (seed is not None and e == 0) else None
+            if seed is not None:
+                meta["first_episode_seed"] = seed + i
+            histories.append(
+                History(
+                    sensor=sensor,
+                    matrix=_steps_to_matrix(buffer[i, e], sensor),
+                    robot_poses=poses[i, e],
+                    meta=meta,
+                    **truths[i][e],
+                )
+            )
+    return histories

@@ -1,0 +1,38 @@
+"""lfmdr_gym: the paper's simulated world as Gymnasium environments, and its recorded histories.
+
+``import lfmdr_gym`` registers the environment ids (importing twice is harmless)::
+
+    import gymnasium as gym
+    import lfmdr_gym  # noqa: F401
+
+    env = gym.make("LFMDR-Visibility-v0")   # or "LFMDR-Bearing-v0", "LFMDR-Range-v0"
+"""
+
+from __future__ import annotations
+
+from gymnasium.envs.registration import register, registry
+
+from lfmdr_gym.env import LFMDREnv
+from lfmdr_gym.history import History, collect
+from lfmdr_gym.policies import RandomWalkPolicy, as_policy
+
+__all__ = ["ENV_IDS", "History", "LFMDREnv", "RandomWalkPolicy", "as_policy", "collect"]
+
+MAX_EPISODE_STEPS = 2000
+"""The paper's episode length N (SPEC section 5)."""
+
+ENV_IDS: dict[str, str] = {
+    "LFMDR-Visibility-v0": "visibility",
+    "LFMDR-Bearing-v0": "bearing",
+    "LFMDR-Range-v0": "range",
+}
+"""Registered id -> sensor."""
+
+for _env_id, _sensor in ENV_IDS.items():  # one loop, as panda-gym registers its variants
+    if _env_id not in registry:  # a second import (or importlib.reload) must not re-register
+        register(
+            id=_env_id,
+            entry_point="lfmdr_gym.env:LFMDREnv",
+            kwargs={"sensor": _sensor},
+            max_episode_steps=MAX_EPISODE_STEPS,
+        )

@@ -1,0 +1,343 @@
+"""The ``lfmdr`` command: parse, call one library function, print. No logic of its own.
+
+Subcommands: ``reproduce`` (the paper's protocol), ``run`` (one episode mapped at its
+checkpoints), ``map`` (map a saved history), ``collect`` (record a random-walk episode) and
+``mrclam`` (map a real MRCLAM run). Bad options exit with status 2 and a one-line message;
+Ctrl-C exits with 130 after saying how to resume.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import textwrap
+from collections.abc import Sequence
+from typing import Any
+
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+
+_DESCRIPTION = """\
+Localisation-free mapping by dimensionality reduction (Yairi 2007): a robot's per-object
+observation histories are embedded in the plane and aligned to a few anchors; no pose is estimated.
+"""
+
+
+class _Formatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
+    """Shows defaults, except the uninformative None/False (the help text explains those)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        if action.default is None or action.default is False or action.required:
+            return action.help
+        return super()._get_help_string(action)
+
+
+def _text(*paragraphs: str) -> str:
+    """Help paragraphs wrapped for the terminal (the raw formatter keeps the blank lines)."""
+    return "\n\n".join(textwrap.fill(" ".join(p.split()), width=88) for p in paragraphs)
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+    return value
+
+
+def _jobs(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer or -1, got {text!r}") from None
+    if value == 0 or value < -1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer or -1 (all cores), got {value}")
+    return value
+
+
+def _csv_list(text: str) -> list[str]:
+    return [t.strip() for t in text.split(",") if t.strip()]
+
+
+def _int_list(text: str) -> list[int]:
+    try:
+        return [int(t) for t in _csv_list(text)]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected numbers like 1,2,3, got {text!r}") from None
+
+
+def _method_list(values: Sequence[str] | None) -> list[str] | None:
+    if not values:
+        return None
+    return [name for v in values for name in _csv_list(v)]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``lfmdr`` (exposed for tests and documentation)."""
+    parser = argparse.ArgumentParser(prog="lfmdr", description=_DESCRIPTION, formatter_class=_Formatter)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    # ---------------------------------------------------------------- reproduce
+    p = sub.add_parser(
+        "reproduce", formatter_class=_Formatter,
+        help="run the paper's protocol and write results.csv, table.md/csv and figures",
+        description=_text(
+            "Run the paper's protocol (SPEC §5): every (layout, pose) episode with the random-walk "
+            "agent; at the last checkpoint every method over its whole parameter grid, at every "
+            "checkpoint each method's default (the paper's optimum). Writes into --out: "
+            "results.csv (one row per mode, layout, pose, method, param, n_steps), table.md and "
+            "table.csv (best parameter per method, mean ± std of MPE and MOE, beside the paper), "
+            "mpe_vs_n.png (figures 4/5/8) and map_*.png example maps (figures 6/7/9).",
+            "Safe to interrupt: each result is saved as soon as it exists; rerunning the same "
+            "command resumes where it stopped, after Ctrl-C or a kill alike. Other settings on "
+            "the same --out are refused. Episodes are cached in --out/histories.",
+        ),
+    )
+    p.add_argument("--mode", required=True, choices=["visibility", "bearing"],
+                   help="sensor: visibility (Table 1) or bearing (Table 2)")
+    p.add_argument("--layouts", type=_positive_int, default=5, help="random object layouts")
+    p.add_argument("--poses", type=_positive_int, default=5,
+                   help="random start poses per layout (runs = layouts x poses)")
+    p.add_argument("--steps", type=_positive_int, default=2000, help="episode length N")
+    p.add_argument("--every", type=_positive_int, default=None,
+                   help="checkpoint interval; must divide --steps (default: 500 for visibility, "
+                        "200 for bearing)")
+    p.add_argument("--methods", nargs="+", default=None, metavar="METHOD",
+                   help="method labels, space- or comma-separated, case-insensitive "
+                        "(default: all of mappers.METHODS)")
+    p.add_argument("--seed", type=int, default=0, help="base seed of layouts and poses")
+    p.add_argument("--jobs", type=_jobs, default=1,
+                   help="worker processes on this machine (-1: all cores); BLAS is kept to one "
+                        "thread per worker")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the work on an existing Dask distributed cluster at ADDRESS "
+                        "(e.g. tcp://host:8786) instead of local processes")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="run directory (default: results/<mode>); reuse it to resume")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(handler=_cmd_reproduce)
+
+    # ---------------------------------------------------------------- run
+    p = sub.add_parser(
+        "run", formatter_class=_Formatter,
+        help="one episode, mapped at its checkpoints, scores printed, a map figure",
+        description=_text(
+            "Collect one random-walk episode, map it with one method at every checkpoint, print "
+            "MPE and MOE, and write history.npz, scores.csv, map.csv and map.png into --out."
+        ),
+    )
+    p.add_argument("--env", default="LFMDR-Visibility-v0", metavar="ID",
+                   help="environment id (LFMDR-Visibility-v0, LFMDR-Bearing-v0, LFMDR-Range-v0)")
+    p.add_argument("--steps", type=_positive_int, default=2000, help="episode length N")
+    p.add_argument("--method", required=True, help="method label (e.g. SDE, 'SMA(WGT)')")
+    p.add_argument("--param", action="append", default=None, metavar="NAME=VALUE",
+                   help="method parameter overriding its default (repeatable), e.g. K=7 or "
+                        "n_neighbors=7, sigma2=1, d=4")
+    p.add_argument("--seed", type=int, default=0, help="seed of layout, start pose and walk")
+    p.add_argument("--every", type=_positive_int, default=None,
+                   help="checkpoint interval; must divide --steps (default: 500 for visibility, "
+                        "200 otherwise, plus N itself)")
+    p.add_argument("--out", default="lfmdr-run", metavar="DIR", help="output directory")
+    p.set_defaults(handler=_cmd_run)
+
+    # ---------------------------------------------------------------- map
+    p = sub.add_parser(
+        "map", formatter_class=_Formatter,
+        help="map a saved history (.npz); scores when it holds the ground truth",
+        description=_text(
+            "Map a saved history with one method; print MPE and MOE when the file holds every "
+            "object's true position; write map.csv and map.png into --out."
+        ),
+    )
+    p.add_argument("history", metavar="HISTORY.npz", help="a history saved by lfmdr collect/run")
+    p.add_argument("--method", required=True, help="method label (e.g. SDE, 'SMA(WGT)')")
+    p.add_argument("--param", action="append", default=None, metavar="NAME=VALUE",
+                   help="method parameter overriding its default (repeatable), e.g. K=7 or "
+                        "n_neighbors=7, sigma2=1, d=4")
+    p.add_argument("--steps", type=_positive_int, default=None,
+                   help="map only the first N steps (default: all)")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="output directory (default: next to the history, named after it)")
+    p.set_defaults(handler=_cmd_map)
+
+    # ---------------------------------------------------------------- collect
+    p = sub.add_parser(
+        "collect", formatter_class=_Formatter,
+        help="record one random-walk episode as a history file and summarise it",
+        description=_text(
+            "Run one episode with the paper's random-walk agent and save what the robot sensed "
+            "(and the ground truth for scoring) as a History .npz; print a summary."
+        ),
+    )
+    p.add_argument("--env", default="LFMDR-Visibility-v0", metavar="ID", help="environment id")
+    p.add_argument("--steps", type=_positive_int, default=2000, help="episode length N")
+    p.add_argument("--seed", type=int, default=0, help="seed of layout, start pose and walk")
+    p.add_argument("--out", required=True, metavar="FILE.npz", help="history file to write")
+    p.set_defaults(handler=_cmd_collect)
+
+    # ---------------------------------------------------------------- mrclam
+    p = sub.add_parser(
+        "mrclam", formatter_class=_Formatter,
+        help="map the landmarks of a real UTIAS MRCLAM run",
+        description=_text(
+            "Map the landmarks of an MRCLAM run directory from the robots' logged sightings "
+            "(no localisation); writes DIR/map.csv (subject, x, y) and a figure, and prints MPE "
+            "and MOE over the non-anchor landmarks."
+        ),
+    )
+    p.add_argument("run_dir", metavar="RUN_DIR", help="an MRCLAM run directory")
+    p.add_argument("--mode", required=True, choices=["visibility", "bearing", "range"],
+                   help="which measurement to map from")
+    p.add_argument("--robots", type=_int_list, default=None, metavar="1,2,3,4,5",
+                   help="robot subject numbers whose logs are used (default: all five)")
+    p.add_argument("--method", default=None,
+                   help="masked mapping method of mappers.missing.MASKED_METHODS, or 'naive' "
+                        "(the baseline) (default: the mode's best: range-quantile for range, "
+                        "covis-nonmetric otherwise)")
+    p.add_argument("--anchors", type=_int_list, default=None, metavar="S1,S2,S3,S4",
+                   help="landmark subject numbers used as anchors (default: the 4 nearest the "
+                        "corners of the landmarks' bounding box)")
+    p.add_argument("--bin-width", type=float, default=None, metavar="SECONDS",
+                   help="width of the time bins of the histories (default: the mode's default)")
+    p.add_argument("--param", action="append", default=None, metavar="NAME=VALUE",
+                   help="parameter of the masked method (repeatable), e.g. quantile=0.95")
+    p.add_argument("--out", default="lfmdr-mrclam", metavar="DIR",
+                   help="output directory for map.csv and map.png")
+    p.set_defaults(handler=_cmd_mrclam)
+    return parser
+
+
+# --------------------------------------------------------------------------- handlers
+def _cmd_reproduce(args: argparse.Namespace) -> int:
+    from lfmdr_gym.experiments.protocol import ProtocolConfig, run_protocol
+
+    config = ProtocolConfig(
+        mode=args.mode, layouts=args.layouts, poses=args.poses, steps=args.steps,
+        every=args.every, methods=_method_list(args.methods), seed=args.seed,
+    )
+    out = args.out or f"results/{args.mode}"
+    try:
+        summary = run_protocol(config, out, jobs=args.jobs, scheduler=args.scheduler,
+                               progress=not args.no_progress)
+    except KeyboardInterrupt:
+        print(f"\ninterrupted: finished results are saved in {out}; rerun the same command to "
+              "resume", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    print(summary)
+    table = summary.out / "table.md"
+    if table.exists():
+        print()
+        print(table.read_text(encoding="utf-8"))
+    return 0
+
+
+def _print_scores(rows: Sequence[dict[str, Any]]) -> None:
+    print(f"{'N':>6}  {'MPE [m]':>8}  {'MOE [%]':>8}  {'MPE non-anchor':>14}  {'seconds':>7}")
+    for r in rows:
+        line = (f"{r['n_steps']:>6}  {r['mpe']:>8.4f}  {r['moe']:>8.2f}  "
+                f"{r['mpe_nonanchor']:>14.4f}  {r['seconds']:>7.2f}")
+        if r.get("error"):
+            line += f"  failed: {r['error']}"
+        print(line)
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from lfmdr_gym.experiments.protocol import run_episode
+
+    rows = run_episode(args.env, args.steps, args.method, seed=args.seed, every=args.every,
+                       params=args.param, out=args.out)
+    print(f"{args.env}, seed {args.seed}, {rows[-1]['method']} ({rows[-1]['param']})")
+    _print_scores(rows)
+    print(f"wrote {args.out}/history.npz, scores.csv, map.csv, map.png")
+    return 0
+
+
+def _cmd_map(args: argparse.Namespace) -> int:
+    from lfmdr_gym.experiments.protocol import map_history_file
+
+    info = map_history_file(args.history, args.method, params=args.param,
+                            n_steps=args.steps, out=args.out)
+    m = info["map"]
+    print(f"{info['history']!r}: {info['method']} ({info['param']})")
+    if m.unmapped:
+        print(f"unmapped objects (never sensed): {list(m.unmapped)}")
+    for w in getattr(m, "warnings", ()):
+        print(f"warning: {w}")
+    if "mpe" in info:
+        print(f"MPE {info['mpe']:.4f} m (non-anchor {info['mpe_nonanchor']:.4f} m), "
+              f"MOE {info['moe']:.2f} %")
+    else:
+        print("no ground truth in the file: not scored")
+    print(f"wrote {info['out'] / 'map.csv'} and {info['figure']}")
+    return 0
+
+
+def _cmd_collect(args: argparse.Namespace) -> int:
+    from lfmdr_gym.experiments.protocol import collect_history, describe_history
+
+    history = collect_history(args.env, args.steps, args.seed, out=args.out)
+    print(describe_history(history))
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _cmd_mrclam(args: argparse.Namespace) -> int:
+    import warnings
+
+    from lfmdr_gym.datasets.mrclam import MRCLAMDataWarning, map_mrclam_run
+    from lfmdr_gym.experiments.protocol import parse_params
+
+    kwargs: dict[str, Any] = {"mode": args.mode, "out": args.out, "bin_width": args.bin_width}
+    if args.robots is not None:
+        kwargs["robots"] = args.robots
+    if args.anchors is not None:
+        kwargs["anchors"] = args.anchors
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MRCLAMDataWarning)  # they come back in result.warnings
+        result = map_mrclam_run(args.run_dir, method=args.method, **kwargs,
+                                **parse_params(args.param))
+    params = ", ".join(f"{k}={v}" for k, v in result.params.items()) or "-"
+    print(f"{result.run} ({result.mode}), {result.method} ({params}), anchors "
+          f"{list(result.anchor_subjects)}")
+    for w in result.warnings:
+        print(f"warning: {w}")
+    print(f"MPE {result.mpe:.3f} m, MOE {result.moe:.2f} % over the non-anchor landmarks "
+          f"(anchors' centroid baseline: MPE {result.centroid_mpe:.3f} m)")
+    written = [str(p) for p in (result.csv_path, result.png_path) if p is not None]
+    if written:
+        print("wrote " + " and ".join(written))
+    return 0
+
+
+# --------------------------------------------------------------------------- entry point
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``lfmdr`` console script; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    previous = signal.getsignal(signal.SIGTERM)
+    if previous is signal.SIG_DFL:
+        # A polite kill (SIGTERM) stops like Ctrl-C: finished work is kept and summarised.
+        signal.signal(signal.SIGTERM, _terminate)
+    try:
+        return int(args.handler(args))
+    except (ValueError, FileNotFoundError, NotADirectoryError, PermissionError) as exc:
+        # Bad input is reported in one line, like argparse's own errors, without a traceback.
+        print(f"lfmdr {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("\ninterrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    finally:
+        if previous is signal.SIG_DFL:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _terminate(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,29 @@
+"""Loaders for logged robot data that produce :class:`lfmdr_gym.history.History` objects."""
+
+from lfmdr_gym.datasets.mrclam import (
+    DEFAULT_BIN_WIDTH,
+    MODES,
+    MRCLAMDataWarning,
+    MRCLAMMap,
+    MRCLAMReport,
+    MRCLAMRun,
+    check_groundtruth,
+    corner_anchors,
+    load_mrclam,
+    map_mrclam_run,
+    read_run,
+)
+
+__all__ = [
+    "DEFAULT_BIN_WIDTH",
+    "MODES",
+    "MRCLAMDataWarning",
+    "MRCLAMMap",
+    "MRCLAMReport",
+    "MRCLAMRun",
+    "check_groundtruth",
+    "corner_anchors",
+    "load_mrclam",
+    "map_mrclam_run",
+    "read_run",
+]

@@ -1,0 +1,335 @@
+"""The Gymnasium environment: a robot wandering among identifiable objects (SPEC section 2)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from lfmdr_gym import sensors
+from lfmdr_gym.render import HumanViewer, draw_frame, human_rendering_error
+from lfmdr_gym.world import World, check_int, check_real
+
+__all__ = ["LFMDREnv", "OBSERVATION_TYPES", "observation_factory"]
+
+
+# ----------------------------------------------------------------------------- observation types
+class VisibilityObservation:
+    """``"visibility"``: MultiBinary(M), 1 where the object is seen (visual angle and occlusion)."""
+
+    key = "visibility"
+
+    def __init__(self, env: LFMDREnv) -> None:
+        self.radius = env.world.object_radius
+        self.visual_angle = math.radians(env.visual_angle_deg)
+        self.occlusion = env.occlusion
+        self.n_objects = env.world.n_objects
+        self.reach = sensors.visibility_distance(self.radius, self.visual_angle) + self.radius
+        self.space = spaces.MultiBinary(env.world.n_objects)
+
+    def observe(self, rel, d2, heading, cand, rc, dc2) -> np.ndarray:
+        return sensors.visibility_from_candidates(
+            self.n_objects, cand, rc, dc2, self.radius, self.visual_angle, self.occlusion
+        )
+
+
+class BearingObservation:
+    """``"bearing"``: Box(-1, 1, (M, 2)), ``[cos, sin]`` of each bearing from the heading, CCW positive."""
+
+    key = "bearing"
+    reach = 0.0  # needs every object, not a nearby subset
+
+    def __init__(self, env: LFMDREnv) -> None:
+        self.space = spaces.Box(-1.0, 1.0, (env.world.n_objects, 2), np.float32)
+
+    def observe(self, rel, d2, heading, cand, rc, dc2) -> np.ndarray:
+        return sensors.bearing_from_rel(rel, d2, heading, np.float32)
+
+
+class RangeObservation:
+    """``"range"``: Box(0, high, (M,)), centre-to-centre distance; 0 beyond ``max_range``.
+
+    ``high`` is ``max_range``, or without one the arena's diagonal (no two points inside are
+    farther apart): a finite bound, as Gymnasium's checker asks.
+    """
+
+    key = "range"
+    reach = 0.0  # needs every object, not a nearby subset
+
+    def __init__(self, env: LFMDREnv) -> None:
+        self.max_range = env.max_range
+        high = env.max_range if env.max_range is not None else env.world.arena_size * math.sqrt(2.0)
+        self.space = spaces.Box(0.0, high, (env.world.n_objects,), np.float32)
+
+    def observe(self, rel, d2, heading, cand, rc, dc2) -> np.ndarray:
+        return sensors.ranges_from_rel(d2, self.max_range, np.float32)
+
+
+OBSERVATION_TYPES = {
+    "visibility": VisibilityObservation,
+    "bearing": BearingObservation,
+    "range": RangeObservation,
+}
+
+
+def observation_factory(env: LFMDREnv, sensor: str):
+    """The observation type named ``sensor`` for ``env`` (as HighwayEnv's ``observation_factory``)."""
+    try:
+        cls = OBSERVATION_TYPES[sensor]
+    except (KeyError, TypeError):
+        raise ValueError(f"sensor must be one of {list(OBSERVATION_TYPES)}, got {sensor!r}") from None
+    return cls(env)
+
+
+# ----------------------------------------------------------------------------- the environment
+class LFMDREnv(gym.Env):
+    """
+    ## Description
+
+    The world of Yairi (ICML 2007), "Map Building without Localization by Dimensionality
+    Reduction Techniques": a disc robot wanders in a square arena (side 2.5 m, centred on the
+    origin) among ``n_objects`` identifiable static cylinders (48 mm diameter) laid out at random
+    with clearances. Each step it turns by the action, advances ``step_length`` (0.2 m) along its
+    new heading and observes every object with its mapping sensor. The world is simulated in
+    pymunk; a move that would hit an object or a wall stops just short of the contact, so no
+    policy can take the robot through one. The sensor histories are what a map is built from;
+    the ground truth in ``info`` is for scoring only.
+
+    ## Observation Space
+
+    A ``Dict`` with the mapping sensor (chosen by ``sensor``) and a proximity ring:
+
+    - ``"visibility"``: ``MultiBinary(M)`` (int8). Object j is visible iff its horizontal visual
+      angle ``2 asin(r / d_j)`` exceeds ``visual_angle_deg`` (d below 0.550 m by default) and, with
+      ``occlusion``, the segment from the robot's centre to the object's centre passes no nearer
+      than r to another object's centre (see :func:`lfmdr_gym.sensors.visibility`).
+    - ``"bearing"``: ``Box(-1, 1, (M, 2), float32)``: ``[cos theta, sin theta]`` of each object's
+      bearing relative to the heading, counter-clockwise positive (left is ``sin > 0``).
+    - ``"range"``: ``Box(0, high, (M,), float32)``: distance from the robot's centre to each
+      object's centre; with ``max_range`` an object farther away is not sensed and reads 0.
+      ``high`` is ``max_range``, or the arena's diagonal without one.
+    - ``"proximity"``: ``Box(0, proximity_range, (n_proximity_rays,), float32)``: ray k points at
+      ``heading + 2 pi k / n_proximity_rays`` (CCW, ray 0 straight ahead); its value is the
+      distance from the robot's centre to the first obstacle (object surface or wall), capped at
+      ``proximity_range``. Enough for a policy to avoid obstacles from the observation alone:
+      a move along ray k collides iff its reading is below ``step_length + robot_radius``
+      (within the ray's angular resolution).
+
+    ## Action Space
+
+    ``Box(-max_turn, max_turn, (1,), float32)``: the heading change [rad] before the move
+    (``max_turn = pi/4`` by default). Values outside are clipped; NaN raises ``ValueError``.
+
+    ## Rewards and episode end
+
+    Mapping has no reward: every step returns 0.0 and ``terminated=False``. Episodes end by
+    truncation only (``max_episode_steps=2000`` in the registered ids).
+
+    ## Info
+
+    At reset and after every step (fresh arrays each time): ``"robot_pose"`` (3,) float64
+    ``(x, y, heading)`` with heading in (-pi, pi]; ``"object_positions"`` (M, 2);
+    ``"anchor_ids"`` (A,) int64; ``"anchor_positions"`` (A, 2); ``"blocked"``: whether the last
+    move was stopped by an obstacle.
+
+    ## Starting State
+
+    ``reset(seed=...)`` draws a new layout, anchors and start pose from ``np_random`` and
+    rebuilds the pymunk world: the same seed and actions give bit-identical observations.
+    ``options`` may fix parts of the episode: ``{"object_positions": (M, 2), "anchor_ids": (A,),
+    "robot_pose": (3,)}`` (validated; user layouts need no clearances, only no overlaps).
+
+    ## Arguments
+
+    ```python
+    gymnasium.make("LFMDR-Visibility-v0")   # or LFMDR-Bearing-v0, LFMDR-Range-v0
+    LFMDREnv(sensor="visibility", n_objects=50, arena_size=2.5, object_diameter=0.048,
+             robot_radius=0.05, step_length=0.2, max_turn=pi/4, visual_angle_deg=5.0,
+             occlusion=True, anchors="corners", n_anchors=4, object_clearance=0.15,
+             wall_clearance=0.15, n_proximity_rays=16, proximity_range=0.5, max_range=None,
+             render_mode=None)
+    ```
+
+    Lengths in metres. ``object_clearance``/``wall_clearance``: least gap between two objects'
+    surfaces / between an object and a wall in random layouts. ``anchors``: ``"corners"`` (the
+    objects nearest ``n_anchors`` points spread along the walls from a corner; the four corners
+    by default) or ``"random"``; ``n_anchors >= 3``. Every argument is checked on construction
+    (``ValueError`` naming it).
+
+    ## Version History
+
+    - v0: initial version.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+
+    def __init__(
+        self,
+        sensor: str = "visibility",
+        *,
+        n_objects: int = 50,
+        arena_size: float = 2.5,
+        object_diameter: float = 0.048,
+        robot_radius: float = 0.05,
+        step_length: float = 0.2,
+        max_turn: float = math.pi / 4,
+        visual_angle_deg: float = 5.0,
+        occlusion: bool = True,
+        anchors: str = "corners",
+        n_anchors: int = 4,
+        object_clearance: float = 0.15,
+        wall_clearance: float = 0.15,
+        n_proximity_rays: int = 16,
+        proximity_range: float = 0.5,
+        max_range: float | None = None,
+        render_mode: str | None = None,
+    ) -> None:
+        if sensor not in OBSERVATION_TYPES:
+            raise ValueError(f"sensor must be one of {list(OBSERVATION_TYPES)}, got {sensor!r}")
+        self.world = World(
+            n_objects=n_objects,
+            arena_size=arena_size,
+            object_diameter=object_diameter,
+            robot_radius=robot_radius,
+            object_clearance=object_clearance,
+            wall_clearance=wall_clearance,
+            anchors=anchors,
+            n_anchors=n_anchors,
+        )
+        self.sensor = sensor
+        self.step_length = check_real("step_length", step_length, low=0.0, low_open=True)
+        self.max_turn = check_real("max_turn", max_turn, low=0.0, low_open=True, high=math.pi)
+        self.visual_angle_deg = check_real(
+            "visual_angle_deg", visual_angle_deg, low=0.0, low_open=True, high=180.0, high_open=True
+        )
+        if not isinstance(occlusion, bool | np.bool_):
+            raise ValueError(f"occlusion must be True or False, got {occlusion!r}")
+        self.occlusion = bool(occlusion)
+        self.n_proximity_rays = check_int("n_proximity_rays", n_proximity_rays, low=1)
+        self.proximity_range = check_real("proximity_range", proximity_range, low=0.0, low_open=True)
+        self.max_range = (
+            None if max_range is None else check_real("max_range", max_range, low=0.0, low_open=True)
+        )
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}"
+            )
+        if render_mode == "human":
+            err = human_rendering_error()
+            if err is not None:
+                raise err
+        self.render_mode = render_mode
+
+        self._obs_type = observation_factory(self, sensor)
+        self._key = self._obs_type.key
+        self._dirs = sensors.ray_directions(self.n_proximity_rays)
+        # One candidate prefilter serves the proximity ring and a nearby-only sensor.
+        self._reach = max(self.proximity_range + self.world.object_radius, self._obs_type.reach)
+        self.action_space = spaces.Box(-self.max_turn, self.max_turn, (1,), np.float32)
+        self.observation_space = spaces.Dict(
+            {
+                self._key: self._obs_type.space,
+                "proximity": spaces.Box(
+                    0.0, self.proximity_range, (self.n_proximity_rays,), np.float32
+                ),
+            }
+        )
+        self._anchor_positions = np.zeros((0, 2))
+        self._last_obs: dict[str, np.ndarray] | None = None
+        self._viewer: HumanViewer | None = None
+
+    # ------------------------------------------------------------------ core API
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        super().reset(seed=seed)
+        layout = self.world.layout(self.np_random, options)
+        self.world.build(layout)
+        self._anchor_positions = layout.object_positions[layout.anchor_ids]
+        obs = self._observe()
+        if self.render_mode == "human":
+            self.render()
+        return obs, self._info(False)
+
+    def step(self, action: Any) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        if self.world.space is None:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        try:
+            turn = float(action[0])
+        except (TypeError, IndexError):
+            turn = float(action)
+        if turn != turn:
+            raise ValueError(f"action must be a number, got {action!r}")
+        mt = self.max_turn
+        turn = mt if turn > mt else (-mt if turn < -mt else turn)
+        blocked = self.world.move(turn, self.step_length)
+        obs = self._observe()
+        if self.render_mode == "human":
+            self.render()
+        return obs, 0.0, False, False, self._info(blocked)
+
+    def _observe(self) -> dict[str, np.ndarray]:
+        w = self.world
+        x, y, h = w.x, w.y, w.heading
+        rel = w.object_positions - (x, y)
+        d2 = np.einsum("ij,ij->i", rel, rel)
+        cand = sensors.candidates(d2, self._reach)
+        rc, dc2 = rel[cand], d2[cand]
+        prox = sensors.proximity_from_candidates(
+            x, y, h, rc, dc2, w.object_radius, w.arena_half, self._dirs, self.proximity_range
+        )
+        obs = {
+            self._key: self._obs_type.observe(rel, d2, h, cand, rc, dc2),
+            "proximity": prox.astype(np.float32),
+        }
+        self._last_obs = obs
+        return obs
+
+    def _info(self, blocked: bool) -> dict[str, Any]:
+        # Fresh arrays every call: a caller may keep or modify them (and check_env insists).
+        w = self.world
+        return {
+            "robot_pose": w.pose,
+            "object_positions": w.object_positions.copy(),
+            "anchor_ids": w.anchor_ids.copy(),
+            "anchor_positions": self._anchor_positions.copy(),
+            "blocked": blocked,
+        }
+
+    # ------------------------------------------------------------------ rendering
+    def render(self) -> np.ndarray | None:
+        """An RGB frame (``"rgb_array"``) or a window update (``"human"``); see :mod:`lfmdr_gym.render`."""
+        if self.render_mode is None:
+            gym.logger.warn(
+                "render() called without a render_mode; pass render_mode='rgb_array' to gymnasium.make"
+            )
+            return None
+        if self.world.space is None:
+            raise gym.error.ResetNeeded("call reset() before render()")
+        w = self.world
+        obs = self._last_obs or {}
+        frame = draw_frame(
+            arena_half=w.arena_half,
+            object_positions=w.object_positions,
+            object_radius=w.object_radius,
+            robot_pose=w.pose,
+            robot_radius=w.robot_radius,
+            anchor_ids=w.anchor_ids,
+            sensor=self._key,
+            reading=obs.get(self._key),
+            proximity=obs.get("proximity"),
+        )
+        if self.render_mode == "rgb_array":
+            return frame
+        if self._viewer is None:
+            self._viewer = HumanViewer(frame.shape[0], self.metadata["render_fps"])
+        self._viewer.show(frame)
+        return None
+
+    def close(self) -> None:
+        if self._viewer is not None:
+            self._viewer.close()
+            self._viewer = None

@@ -1,0 +1,260 @@
+"""Tables and PNG figures of the protocol: the paper's Tables 1-2 and figures 4-9, from the rows.
+
+Everything here reads rows of ``results.csv`` (or a map and its history) and draws; nothing maps.
+Figures use matplotlib's object API with the Agg canvas, so no display and no global backend
+switch are needed (``pip install 'lfmdr[plots]'``).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import re
+from collections import defaultdict
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lfmdr_gym.history import History
+
+# The paper's figures as far as the seed's text conversion keeps them (SPEC §6). Parameters are
+# in the paper's notation; "mpe"/"moe" None where the pairing was lost.
+PAPER: dict[str, dict[str, dict[str, Any]]] = {
+    "visibility": {
+        "LPCA": {"param": "-", "mpe": 1.055, "moe": 18.19},
+        "SMA(UNWGT)": {"param": "-", "mpe": 0.421, "moe": 5.86},
+        "SMA(WGT)": {"param": "K=5", "mpe": 0.206, "moe": 4.83},
+        "KPCA(GAUS)": {"param": "σ²=0.5", "mpe": 0.926, "moe": 23.29},
+        "KPCA(POLY)": {"param": "d=8", "mpe": 0.953, "moe": 27.03},
+        "ISOMAP": {"param": "K=6", "note": "0.18-0.24"},
+        "LLE": {"param": "K=8", "note": "0.18-0.24"},
+        "LEM": {"param": "K=6", "note": "0.18-0.24"},
+        "HLLE": {"param": "K=8", "note": "0.18-0.24"},
+        "SDE": {"param": "K=7", "note": "best, >= 0.18"},
+    },
+    "bearing": {
+        "LPCA": {"note": "better than LLE and LEM"},
+        "HLLE": {"note": "often failed to run"},
+        "SMA(WGT)": {"param": "K=8", "note": "example map: 0.0512 m, 1.10 %"},
+    },
+}
+PAPER_SOURCE = {
+    "visibility": "Yairi 2007, Table 1 (graph-method pairings lost in the seed's conversion)",
+    "bearing": "Yairi 2007, Table 2 (numbers lost in the seed's conversion; remarks from §4.4.2)",
+}
+
+# The paper's split of its curves: figure 4 (global methods + ISOMAP), figure 5 (local methods).
+_PANELS = (
+    ("LPCA", "SMA(UNWGT)", "SMA(WGT)", "KPCA(GAUS)", "KPCA(POLY)", "ISOMAP"),
+    ("LPCA", "LLE", "LEM", "HLLE", "SDE"),
+)
+
+
+def slug(method: str) -> str:
+    """A file-name-safe form of a method label: ``"SMA(WGT)"`` -> ``"sma_wgt"``."""
+    return re.sub(r"[^a-z0-9]+", "_", method.lower()).strip("_")
+
+
+def _figure(width: float, height: float) -> Any:
+    try:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+    except ImportError as exc:  # pragma: no cover - optional extra
+        raise ValueError("figures need matplotlib: pip install 'lfmdr[plots]'") from exc
+    fig = Figure(figsize=(width, height), dpi=110, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _mean_std(values: Sequence[float]) -> tuple[float, float]:
+    """Mean and sample standard deviation (0 for a single run) of the finite values."""
+    arr = np.asarray([v for v in values if math.isfinite(v)], dtype=float)
+    if arr.size == 0:
+        return math.nan, math.nan
+    return float(arr.mean()), float(arr.std(ddof=1)) if arr.size > 1 else 0.0
+
+
+def summarise(rows: Sequence[Mapping[str, Any]], n_steps: int) -> dict[str, dict[str, dict[str, Any]]]:
+    """method -> param -> mean/std of MPE, MOE, non-anchor MPE over the runs at ``n_steps``,
+    with ``runs`` (successful) and ``failed`` counts."""
+    groups: dict[tuple[str, str], list[Mapping[str, Any]]] = defaultdict(list)
+    for r in rows:
+        if r["n_steps"] == n_steps:
+            groups[(r["method"], r["param"])].append(r)
+    out: dict[str, dict[str, dict[str, Any]]] = defaultdict(dict)
+    for (method, param), members in groups.items():
+        ok = [r for r in members if not r["error"] and math.isfinite(r["mpe"])]
+        stats: dict[str, Any] = {"param": param, "runs": len(ok), "failed": len(members) - len(ok)}
+        for col in ("mpe", "moe", "mpe_nonanchor"):
+            stats[f"{col}_mean"], stats[f"{col}_std"] = _mean_std([r[col] for r in ok])
+        out[method][param] = stats
+    return dict(out)
+
+
+def best_params(rows: Sequence[Mapping[str, Any]], n_steps: int) -> dict[str, dict[str, Any]]:
+    """Per method, the parameter with the lowest mean MPE at ``n_steps`` (SPEC §5).
+
+    A parameter that failed on fewer runs wins over one that failed on more: a mean over the
+    runs a method survived would otherwise flatter it.
+    """
+    best = {}
+    for method, by_param in summarise(rows, n_steps).items():
+        def rank(s: dict[str, Any]) -> tuple[float, float]:
+            mean = s["mpe_mean"]
+            return (s["failed"], mean if math.isfinite(mean) else math.inf)
+
+        best[method] = min(by_param.values(), key=rank)
+    return best
+
+
+def _pm(mean: float, std: float, digits: int) -> str:
+    if not math.isfinite(mean):
+        return "failed"
+    return f"{mean:.{digits}f} ± {std:.{digits}f}"
+
+
+def write_table(
+    rows: Sequence[Mapping[str, Any]],
+    out: Path,
+    *,
+    mode: str,
+    n_steps: int,
+    methods: Sequence[str],
+    defaults: Mapping[str, str] | None = None,
+    n_runs: int | None = None,
+) -> list[Path]:
+    """``table.csv`` and ``table.md``: per method its best parameter at N = ``n_steps`` with
+    mean ± std of MPE and MOE over the runs, beside the paper's figures (Tables 1 and 2)."""
+    out = Path(out)
+    best = best_params(rows, n_steps)
+    paper = PAPER.get(mode, {})
+    cols = ["method", "param", "runs", "failed", "mpe_mean", "mpe_std", "moe_mean", "moe_std",
+            "mpe_nonanchor_mean", "mpe_nonanchor_std", "default_param", "paper_param",
+            "paper_mpe", "paper_moe", "paper_note"]
+    table = []
+    for m in methods:
+        if m not in best:
+            continue
+        b, p = best[m], paper.get(m, {})
+        table.append({
+            "method": m, **{k: b[k] for k in cols[1:10]},
+            "default_param": (defaults or {}).get(m, ""),
+            "paper_param": p.get("param", ""), "paper_mpe": p.get("mpe", ""),
+            "paper_moe": p.get("moe", ""), "paper_note": p.get("note", ""),
+        })
+    csv_path = out / "table.csv"
+    with open(csv_path, "w", newline="", encoding="utf-8") as fh:
+        writer = csv.DictWriter(fh, fieldnames=cols, lineterminator="\n")
+        writer.writeheader()
+        for row in table:
+            writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()})
+
+    runs = f"{n_runs} runs" if n_runs else "all runs"
+    lines = [
+        f"# {mode.capitalize()}-only mapping: final map errors at N = {n_steps} ({runs})",
+        "",
+        "Best parameter per method by mean MPE at the last checkpoint; mean ± sample std over the "
+        "runs. MPE over the mapped objects (anchors included, as in the paper), MOE over all "
+        "triangles of mapped objects.",
+        "",
+        "| method | best param | MPE [m] | MOE [%] | MPE non-anchor [m] | runs (failed) "
+        "| paper param | paper MPE [m] | paper MOE [%] |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in table:
+        pm = r["paper_mpe"] if r["paper_mpe"] != "" else r["paper_note"]
+        lines.append(
+            f"| {r['method']} | {r['param']} | {_pm(r['mpe_mean'], r['mpe_std'], 3)} "
+            f"| {_pm(r['moe_mean'], r['moe_std'], 2)} "
+            f"| {_pm(r['mpe_nonanchor_mean'], r['mpe_nonanchor_std'], 3)} "
+            f"| {r['runs']} ({r['failed']}) | {r['paper_param'] or '—'} | {pm or '—'} "
+            f"| {r['paper_moe'] or '—'} |"
+        )
+    lines += ["", f"Paper: {PAPER_SOURCE.get(mode, 'no published figures')}.", ""]
+    md_path = out / "table.md"
+    md_path.write_text("\n".join(lines), encoding="utf-8")
+    return [csv_path, md_path]
+
+
+def plot_curves(
+    rows: Sequence[Mapping[str, Any]],
+    path: Path,
+    *,
+    mode: str,
+    methods: Sequence[str],
+    curve_params: Mapping[str, str],
+) -> Path:
+    """MPE against N for every method at its curve parameter: mean over runs, ±1 std bars.
+
+    Two panels in the paper's grouping (figures 4/5; figure 8 for bearing), LPCA in both.
+    """
+    series: dict[str, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
+    for r in rows:
+        if r["param"] == curve_params.get(r["method"]) and not r["error"] and math.isfinite(r["mpe"]):
+            series[r["method"]][r["n_steps"]].append(r["mpe"])
+    panels = [[m for m in group if m in methods] for group in _PANELS]
+    rest = [m for m in methods if not any(m in g for g in _PANELS)]
+    panels[1] += rest
+    panels = [p for p in panels if p]
+    fig = _figure(6.0 * len(panels), 4.5)
+    axes = fig.subplots(1, len(panels), squeeze=False)[0]
+    for ax, group in zip(axes, panels, strict=True):
+        for m in group:
+            if m not in series:
+                continue
+            ns = sorted(series[m])
+            stats = [_mean_std(series[m][n]) for n in ns]
+            ax.errorbar(ns, [s[0] for s in stats], yerr=[s[1] for s in stats], marker="o",
+                        capsize=3, label=f"{m} ({curve_params.get(m, '-')})")
+        ax.set_xlabel("N (steps)")
+        ax.set_ylabel("mean position error [m]")
+        ax.set_ylim(bottom=0)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle(f"{mode.capitalize()}-only mapping: MPE against the number of observations")
+    fig.savefig(path)
+    return Path(path)
+
+
+def plot_map(positions: np.ndarray, history: History, path: Path, *, title: str = "") -> Path:
+    """An example map (paper figures 6, 7, 9): true positions, estimates, and a line between.
+
+    Anchors are drawn as squares; unmapped objects (NaN estimates) as grey crosses at the truth.
+    """
+    est = np.asarray(positions, dtype=float)
+    truth = history.object_positions
+    anchors = np.zeros(len(truth), dtype=bool)
+    anchors[history.anchor_ids] = True
+    fig = _figure(6.0, 6.2)
+    ax = fig.add_subplot()
+    known = np.all(np.isfinite(truth), axis=1)
+    mapped = np.all(np.isfinite(est), axis=1)
+    both = known & mapped
+    for (x0, y0), (x1, y1) in zip(truth[both], est[both], strict=True):
+        ax.plot([x0, x1], [y0, y1], color="tab:red", lw=0.8)
+    ax.scatter(*truth[known & ~anchors].T, s=22, facecolors="none", edgecolors="k", label="true")
+    ax.scatter(*est[mapped & ~anchors].T, s=16, marker="x", color="tab:blue", label="estimate")
+    ax.scatter(*truth[known & anchors].T, s=60, marker="s", facecolors="none",
+               edgecolors="tab:green", label="anchor")
+    if np.any(known & ~mapped):
+        ax.scatter(*truth[known & ~mapped].T, s=40, marker="x", color="grey", label="unmapped")
+    if history.robot_poses is not None:
+        ax.plot(*history.robot_poses[:, :2].T, color="0.85", lw=0.4, zorder=0)
+    for j in range(len(truth)):
+        if known[j]:
+            ax.annotate(str(j), truth[j], fontsize=6, color="0.4", xytext=(2, 2),
+                        textcoords="offset points")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper right")
+    if title:
+        ax.set_title(title, fontsize=9)
+    fig.savefig(path)
+    return Path(path)
+
+
+__all__ = ["PAPER", "best_params", "plot_curves", "plot_map", "slug", "summarise", "write_table"]

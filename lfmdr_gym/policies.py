@@ -1,0 +1,329 @@
+"""Exploration policies: the small contract a policy meets, and the paper's random-walk agent.
+
+A policy decides the robot's next heading change from the current observation alone. Anything
+that meets one of two shapes can drive an :class:`~lfmdr_gym.env.LFMDREnv`:
+
+* a callable ``policy(observation) -> action`` (optionally with ``reset(seed=None)``), or
+* a Stable-Baselines3-style object with ``predict(observation, state=None, episode_start=None,
+  deterministic=False) -> (action, state)`` — a trained SB3 model plugs in unchanged.
+
+:func:`as_policy` turns either into a callable. Observations may be single (as from
+``gymnasium.make``) or batched with a leading sub-environment axis (as from
+``gymnasium.make_vec``); the policies here answer in kind.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+__all__ = ["Policy", "PredictPolicy", "RandomWalkPolicy", "as_policy"]
+
+
+@runtime_checkable
+class Policy(Protocol):
+    """What :func:`~lfmdr_gym.history.collect` drives the robot with.
+
+    ``policy(observation)`` returns the action: shape (1,) for one observation, or (B, 1) for a
+    batch of B observations from a vector env. A policy that keeps state or randomness should also
+    offer ``reset(seed=None)``, called at the start of each collected episode (optional, so it is
+    not part of the runtime check).
+    """
+
+    def __call__(self, observation: Any) -> np.ndarray: ...
+
+
+class PredictPolicy:
+    """Adapter from an SB3-style ``predict`` method to the :class:`Policy` callable.
+
+    It carries the recurrent ``state`` from call to call (needed by SB3's recurrent policies) and
+    passes ``episode_start``: True on the first call after :meth:`reset`, False afterwards, unless
+    the caller gives it explicitly (a vector collector does, per sub-environment).
+    """
+
+    def __init__(self, model: Any, *, deterministic: bool = False) -> None:
+        if not callable(getattr(model, "predict", None)):
+            raise TypeError(f"{type(model).__name__} has no callable predict() method")
+        self.model = model
+        self.deterministic = deterministic
+        self._state: Any = None
+        self._starting = True
+
+    def reset(self, seed: int | None = None) -> None:
+        """Forget the recurrent state; the next call starts an episode. Seeds the model if it can."""
+        self._state = None
+        self._starting = True
+        if seed is not None and callable(getattr(self.model, "set_random_seed", None)):
+            self.model.set_random_seed(seed)
+
+    def __call__(self, observation: Any, episode_start: np.ndarray | bool | None = None) -> np.ndarray:
+        batch = _batch_size(observation)
+        if episode_start is None:
+            episode_start = self._starting
+        starts = np.asarray(episode_start, dtype=bool)
+        if batch is not None:
+            starts = np.broadcast_to(starts, (batch,)).copy()
+        else:
+            starts = starts.reshape(1)
+        action, self._state = self.model.predict(
+            observation,
+            state=self._state,
+            episode_start=starts,
+            deterministic=self.deterministic,
+        )
+        self._starting = False
+        return np.asarray(action)
+
+    def __repr__(self) -> str:
+        return f"PredictPolicy({self.model!r}, deterministic={self.deterministic})"
+
+
+def as_policy(obj: Any, *, deterministic: bool = False) -> Policy:
+    """Return ``obj`` as a :class:`Policy` callable.
+
+    An object with a ``predict`` method (SB3 style) is wrapped in :class:`PredictPolicy`
+    (``deterministic`` is handed to ``predict``); any other callable is returned unchanged.
+    Anything else raises TypeError.
+    """
+    if isinstance(obj, PredictPolicy):
+        return obj
+    if callable(getattr(obj, "predict", None)):
+        return PredictPolicy(obj, deterministic=deterministic)
+    if callable(obj):
+        return obj
+    raise TypeError(
+        "a policy must be a callable policy(observation) -> action or an object with an "
+        "SB3-style predict(observation, state=None, episode_start=None, deterministic=False) "
+        f"-> (action, state) method; got {type(obj).__name__}"
+    )
+
+
+def _batch_size(observation: Any) -> int | None:
+    """B for a batched observation (leading axis over sub-envs), None for a single one."""
+    if isinstance(observation, Mapping) and "proximity" in observation:
+        prox = np.asarray(observation["proximity"])
+        return prox.shape[0] if prox.ndim == 2 else None
+    return None
+
+
+class RandomWalkPolicy:
+    """The paper's agent (Yairi 2007, §4.1): a random walk with reactive obstacle avoidance.
+
+    Each step it draws a heading change uniformly in ``[-max_turn, max_turn]``. It reads the
+    observation's ``"proximity"`` ring (ray k at heading + 2*pi*k/n_rays, value = distance from the
+    robot's centre to the first obstacle) and rejects a candidate direction when the robot's disc
+    could not advance ``step_length + margin`` along it without touching an obstacle a ray
+    reported (:meth:`clearance`); it then draws again (up to ``n_tries`` candidates, so the
+    accepted direction is uniform over the free ones). With ``plan_ahead`` it prefers, among
+    the draws, the first one after which some heading within ``max_turn`` is still free (so it
+    does not walk into a corner it cannot turn out of in one step). If none is free it turns, by at most
+    ``max_turn``, toward the direction with the most room; the physics stops the robot short of
+    contact anyway.
+
+    The proximity range must exceed ``step_length + robot_radius`` for the check to see far
+    enough. Randomness comes from the policy's own generator, fixed by ``seed`` or
+    :meth:`reset`. Works on one observation (returns shape (1,)) or a batch (returns (B, 1)).
+    """
+
+    def __init__(
+        self,
+        max_turn: float = math.pi / 4,
+        step_length: float = 0.2,
+        robot_radius: float = 0.05,
+        *,
+        margin: float = 0.02,
+        obstacle_radius: float = 0.024,
+        plan_ahead: bool = True,
+        n_tries: int = 16,
+        seed: int | None = None,
+    ) -> None:
+        for name, value in (("max_turn", max_turn), ("step_length", step_length),
+                            ("robot_radius", robot_radius)):
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+        if max_turn > math.pi:
+            raise ValueError(f"max_turn must be at most pi, got {max_turn!r}")
+        if not (isinstance(margin, int | float) and math.isfinite(margin) and margin >= 0):
+            raise ValueError(f"margin must be a non-negative finite number, got {margin!r}")
+        if not (isinstance(obstacle_radius, int | float) and math.isfinite(obstacle_radius)
+                and obstacle_radius >= 0):
+            raise ValueError(
+                f"obstacle_radius must be a non-negative finite number, got {obstacle_radius!r}"
+            )
+        if not isinstance(plan_ahead, bool | np.bool_):
+            raise ValueError(f"plan_ahead must be True or False, got {plan_ahead!r}")
+        if not (isinstance(n_tries, int) and n_tries >= 1):
+            raise ValueError(f"n_tries must be a positive integer, got {n_tries!r}")
+        self.max_turn = float(max_turn)
+        self.step_length = float(step_length)
+        self.robot_radius = float(robot_radius)
+        self.margin = float(margin)
+        self.obstacle_radius = float(obstacle_radius)
+        self.plan_ahead = bool(plan_ahead)
+        self.n_tries = n_tries
+        self.seed = seed
+        self.rng = np.random.default_rng(seed)
+        self._stuck_sign: np.ndarray | None = None  # per row: turn direction while stuck
+        self._ray_cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    @classmethod
+    def for_env(cls, env: Any, **kwargs: Any) -> RandomWalkPolicy:
+        """A policy matched to ``env``'s geometry (max turn, step length, robot and object radii).
+
+        ``env`` may be an :class:`~lfmdr_gym.env.LFMDREnv` (wrapped or not) or a vector env of
+        them; what cannot be read keeps its default, and keywords override.
+        """
+        base = getattr(env, "unwrapped", env)
+        if hasattr(env, "get_attr") and not hasattr(base, "world"):  # vector env: ask sub-env 0
+            try:
+                base = env.get_attr("unwrapped")[0]
+            except (AttributeError, IndexError):
+                pass
+        world = getattr(base, "world", None)
+        found = {
+            "max_turn": getattr(base, "max_turn", None),
+            "step_length": getattr(base, "step_length", None),
+            "robot_radius": getattr(world, "robot_radius", None),
+            "obstacle_radius": getattr(world, "object_radius", None),
+        }
+        params: dict[str, Any] = {k: float(v) for k, v in found.items() if v is not None}
+        space = getattr(env, "single_action_space", None) or getattr(env, "action_space", None)
+        if "max_turn" not in params and space is not None and hasattr(space, "high"):
+            params["max_turn"] = float(np.max(space.high))
+        params.update(kwargs)
+        return cls(**params)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Start an episode; reseed the generator (with ``seed=None`` the random stream carries on)."""
+        self._stuck_sign = None
+        if seed is not None:
+            self.seed = seed
+            self.rng = np.random.default_rng(seed)
+
+    def _rays(self, n_rays: int) -> tuple[np.ndarray, np.ndarray]:
+        if n_rays not in self._ray_cache:
+            angles = 2.0 * np.pi * np.arange(n_rays) / n_rays
+            ray = np.exp(1j * angles)  # unit direction of each ray, x + iy
+            wrapped = np.angle(ray)  # heading-relative angle in (-pi, pi]
+            self._ray_cache[n_rays] = (wrapped, ray)
+        return self._ray_cache[n_rays]
+
+    def _obstacles(self, proximity: np.ndarray) -> np.ndarray:
+        """Modelled obstacle centres in the robot frame as complex x + iy (x ahead, y left).
+
+        Complex numbers make a change of frame one multiplication (fewer numpy calls per step:
+        the policy runs once per env step and must stay cheap).
+        """
+        _, ray = self._rays(proximity.shape[1])
+        return (proximity + self.obstacle_radius) * ray
+
+    def _travel(self, z: np.ndarray) -> np.ndarray:
+        """Distance the disc can advance along +x before touching an obstacle centred at z.
+
+        Minimum over the last axis; inf when nothing is in the way. Centres behind (x <= 0) never
+        block, and touching means centres within ``robot_radius + obstacle_radius``.
+        """
+        x, y = z.real, z.imag
+        reach2 = (self.robot_radius + self.obstacle_radius) ** 2 - y * y
+        travel = np.where((x > 0.0) & (reach2 > 0.0), x - np.sqrt(np.abs(reach2)), np.inf)
+        return np.maximum(travel.min(axis=-1), 0.0)
+
+    @staticmethod
+    def _rotate(z: np.ndarray, turns: np.ndarray) -> np.ndarray:
+        """Points z (..., n) seen from frames turned by ``turns`` (..., T): array (..., T, n)."""
+        return z[..., None, :] * np.exp(-1j * turns)[..., None]
+
+    def clearance(self, proximity: np.ndarray, turns: np.ndarray) -> np.ndarray:
+        """How far the robot could advance after each candidate turn before touching an obstacle.
+
+        ``proximity`` is (B, n_rays), ``turns`` (B, T); returns (B, T) distances (inf when no
+        reported obstacle is in the way). A ray only reports one point of an obstacle's surface,
+        so each reading is modelled as a cylinder of ``obstacle_radius`` just behind that point;
+        the disc collides with it once their centres come within ``robot_radius +
+        obstacle_radius``. Obstacles behind the robot (x <= 0 in the candidate's frame) never
+        block a forward move.
+        """
+        return self._travel(self._rotate(self._obstacles(proximity), turns))
+
+    def _plan(self, proximity: np.ndarray, turns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(free, safe) for each candidate turn, both (B, T) bool.
+
+        free: the move itself is clear. safe: free, and from where it ends some heading within
+        +-max_turn (five probes) is clear for the next move too, so the walk does not run into
+        a corner or a wall it cannot turn away from in one step.
+        """
+        need = self.step_length + self.margin
+        z = self._rotate(self._obstacles(proximity), turns)  # (B, T, n)
+        room = self._travel(z)
+        free = room >= need
+        if not self.plan_ahead:
+            return free, free
+        # Room for two moves straight on makes a draw safe without probing; probe only when
+        # the first free draw of some row lacks it (this keeps the common case cheap).
+        safe = room >= need + self.step_length
+        first = free.argmax(axis=1)
+        rows = np.flatnonzero(free.any(axis=1) & ~safe[np.arange(len(first)), first])
+        if rows.size:
+            probes = np.linspace(-self.max_turn, self.max_turn, 5)
+            moved = z[rows] - self.step_length  # the obstacles seen from where the move ends
+            z2 = self._rotate(moved, np.broadcast_to(probes, (*moved.shape[:2], 5)))
+            safe[rows] = free[rows] & (self._travel(z2) >= need).any(axis=-1)
+        return free, safe
+
+    def _act(self, proximity: np.ndarray) -> np.ndarray:
+        batch = proximity.shape[0]
+        turns = self.rng.uniform(-self.max_turn, self.max_turn, size=(batch, self.n_tries))
+        if self._stuck_sign is None or self._stuck_sign.shape != (batch,):
+            self._stuck_sign = np.zeros(batch)
+        # Readings beyond what two moves can reach cannot block: the common open-space case.
+        horizon = 2.0 * self.step_length + self.margin + self.robot_radius
+        if proximity.min() >= horizon:
+            self._stuck_sign[:] = 0.0
+            return turns[:, :1].astype(np.float32)
+        free, safe = self._plan(proximity, turns)
+        # the first draw that is safe, else the first merely free one
+        first = np.where(safe.any(axis=1), safe.argmax(axis=1), free.argmax(axis=1))
+        chosen = turns[np.arange(batch), first]
+        stuck = ~free.any(axis=1)
+        if stuck.any():
+            # No free draw: turn (by at most max_turn) toward the ray direction where the disc
+            # could travel farthest (ties go to the smallest turn). A robot still stuck keeps
+            # turning the same way, so that it cannot swing back and forth between two blocked
+            # headings.
+            wrapped, _ = self._rays(proximity.shape[1])
+            order = np.argsort(np.abs(wrapped), kind="stable")
+            dirs = np.broadcast_to(wrapped[order], (int(stuck.sum()), order.size))
+            room = self.clearance(proximity[stuck], dirs)
+            turn = np.clip(dirs[0, room.argmax(axis=1)], -self.max_turn, self.max_turn)
+            previous = self._stuck_sign[stuck]
+            turn = np.where(previous != 0, previous * self.max_turn, turn)
+            chosen[stuck] = turn
+            self._stuck_sign[stuck] = np.where(previous != 0, previous, np.sign(turn) + (turn == 0))
+        self._stuck_sign[~stuck] = 0.0
+        return chosen.astype(np.float32).reshape(batch, 1)
+
+    def __call__(self, observation: Mapping[str, Any]) -> np.ndarray:
+        """The heading change for ``observation``: shape (1,), or (B, 1) for a batch."""
+        if not isinstance(observation, Mapping) or "proximity" not in observation:
+            raise ValueError(
+                "RandomWalkPolicy needs a dict observation with a 'proximity' entry, got "
+                f"{type(observation).__name__}"
+            )
+        prox = np.asarray(observation["proximity"], dtype=np.float64)
+        if prox.ndim == 1:
+            return self._act(prox[None, :])[0]
+        if prox.ndim == 2:
+            return self._act(prox)
+        raise ValueError(f"observation['proximity'] must be 1-D or 2-D (batched), got {prox.shape}")
+
+    def __repr__(self) -> str:
+        return (
+            f"RandomWalkPolicy(max_turn={self.max_turn:.4g}, step_length={self.step_length:g}, "
+            f"robot_radius={self.robot_radius:g}, margin={self.margin:g}, "
+            f"obstacle_radius={self.obstacle_radius:g}, plan_ahead={self.plan_ahead}, "
+            f"n_tries={self.n_tries}, seed={self.seed!r})"
+        )
+

@@ -1,0 +1,192 @@
+"""Pictures of the arena drawn with numpy alone (no plotting library needed).
+
+:func:`draw_frame` is a pure function of the geometry and the current readings, so it draws
+logged data as well as the live environment. :class:`HumanViewer` shows frames in a pygame
+window for ``render_mode="human"`` (optional extra: ``pip install lfmdr[human]``).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from lfmdr_gym.sensors import ray_directions
+
+__all__ = ["HumanViewer", "draw_frame", "human_rendering_error"]
+
+BACKGROUND = (250, 250, 247)
+WALL = (60, 60, 60)
+OBJECT = (150, 150, 150)
+SENSED = (30, 160, 60)
+ANCHOR = (210, 40, 40)
+ROBOT = (40, 90, 200)
+HEADING = (10, 10, 40)
+SIGHT = (120, 200, 140)
+BEARING_RAY = (205, 215, 235)
+PROXIMITY_RAY = (240, 150, 40)
+
+
+class _Canvas:
+    """An (H, W, 3) uint8 image with world coordinates: x right, y up, square arena of half-side a."""
+
+    def __init__(self, size: int, arena_half: float, margin: int = 6) -> None:
+        self.img = np.empty((size, size, 3), dtype=np.uint8)
+        self.img[:] = BACKGROUND
+        self.size = size
+        self.margin = margin
+        self.scale = (size - 1 - 2 * margin) / (2.0 * arena_half)
+        self.a = arena_half
+
+    def to_px(self, xy: np.ndarray) -> np.ndarray:
+        """World points (..., 2) -> pixel (col, row) floats."""
+        xy = np.asarray(xy, dtype=np.float64)
+        col = self.margin + (xy[..., 0] + self.a) * self.scale
+        row = self.margin + (self.a - xy[..., 1]) * self.scale
+        return np.stack([col, row], axis=-1)
+
+    def lines(self, start: np.ndarray, end: np.ndarray, color: tuple[int, int, int]) -> None:
+        """Straight 1-px lines from each start (K, 2) to each end (K, 2), world coordinates."""
+        start, end = np.atleast_2d(start), np.atleast_2d(end)
+        if start.size == 0:
+            return
+        p0, p1 = self.to_px(start), self.to_px(end)
+        n = int(np.ceil(np.abs(p1 - p0).max())) + 1
+        t = np.linspace(0.0, 1.0, n)[None, :, None]
+        pts = np.rint(p0[:, None, :] + t * (p1 - p0)[:, None, :]).astype(np.int64).reshape(-1, 2)
+        keep = ((pts >= 0) & (pts < self.size)).all(axis=1)
+        pts = pts[keep]
+        self.img[pts[:, 1], pts[:, 0]] = color
+
+    def discs(self, centres: np.ndarray, radius_m: float, color: tuple[int, int, int],
+              min_px: float = 1.5, ring: bool = False) -> None:
+        """Filled discs (or 2-px rings) of ``radius_m`` around world ``centres`` (K, 2)."""
+        centres = np.atleast_2d(centres)
+        if centres.size == 0:
+            return
+        rad = max(radius_m * self.scale, min_px)
+        span = int(np.ceil(rad)) + 1
+        off = np.arange(-span, span + 1)
+        dc, dr = np.meshgrid(off, off)
+        for c, r in np.rint(self.to_px(centres)).astype(np.int64):
+            cols, rows = c + dc, r + dr
+            # sub-pixel centre ignored: the picture is a sketch, not a measurement
+            d2 = dc**2 + dr**2
+            mask = d2 <= rad * rad
+            if ring:
+                mask &= d2 >= (rad - 2.0) ** 2
+            mask &= (cols >= 0) & (cols < self.size) & (rows >= 0) & (rows < self.size)
+            self.img[rows[mask], cols[mask]] = color
+
+
+def draw_frame(
+    *,
+    arena_half: float,
+    object_positions: ArrayLike,
+    object_radius: float,
+    robot_pose: ArrayLike,
+    robot_radius: float,
+    anchor_ids: ArrayLike = (),
+    sensor: str | None = None,
+    reading: ArrayLike | None = None,
+    proximity: ArrayLike | None = None,
+    size: int = 480,
+) -> np.ndarray:
+    """Draw the arena as an (size, size, 3) uint8 RGB image.
+
+    Shows the walls, the objects (anchors ringed in red), the robot and its heading, and what it
+    senses now: for ``"visibility"`` the visible objects in green with their lines of sight; for
+    ``"bearing"`` a faint ray to every object; for ``"range"`` a ray to every object sensed
+    (non-zero reading); and the proximity ring's rays (orange) up to what each one hit.
+    """
+    if size < 32:
+        raise ValueError(f"size must be >= 32 pixels, got {size}")
+    obj = np.asarray(object_positions, dtype=np.float64).reshape(-1, 2)
+    pose = np.asarray(robot_pose, dtype=np.float64)
+    robot = pose[:2]
+    canvas = _Canvas(size, arena_half)
+    a = arena_half
+    corners = np.array([(-a, -a), (a, -a), (a, a), (-a, a)])
+    canvas.lines(corners, np.roll(corners, -1, axis=0), WALL)
+
+    sensed = np.zeros(obj.shape[0], dtype=bool)
+    if sensor is not None and reading is not None:
+        rd = np.asarray(reading)
+        if sensor == "visibility":
+            sensed = rd.reshape(-1).astype(bool)
+            canvas.lines(np.repeat(robot[None], sensed.sum(), 0), obj[sensed], SIGHT)
+        elif sensor == "bearing":
+            canvas.lines(np.repeat(robot[None], obj.shape[0], 0), obj, BEARING_RAY)
+        elif sensor == "range":
+            sensed = rd.reshape(-1) > 0
+            canvas.lines(np.repeat(robot[None], sensed.sum(), 0), obj[sensed], BEARING_RAY)
+        else:
+            raise ValueError(f"unknown sensor {sensor!r}")
+    if proximity is not None:
+        prox = np.asarray(proximity, dtype=np.float64).reshape(-1)
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        u = ray_directions(prox.size) @ np.array(((c, s), (-s, c)))
+        canvas.lines(np.repeat(robot[None], prox.size, 0), robot + u * prox[:, None], PROXIMITY_RAY)
+
+    canvas.discs(obj[~sensed], object_radius, OBJECT)
+    canvas.discs(obj[sensed], object_radius, SENSED)
+    ids = np.asarray(anchor_ids, dtype=np.int64).reshape(-1)
+    canvas.discs(obj[ids], object_radius * 2.2, ANCHOR, min_px=4.0, ring=True)
+    canvas.discs(robot, robot_radius, ROBOT)
+    # heading: a 3-px wide stroke from the centre to twice the robot's radius
+    ahead = np.array((np.cos(pose[2]), np.sin(pose[2])))
+    side = np.array((-ahead[1], ahead[0])) / canvas.scale  # one pixel sideways, in metres
+    for k in (-1.0, 0.0, 1.0):
+        canvas.lines(robot + k * side, robot + k * side + 2.0 * robot_radius * ahead, HEADING)
+    return canvas.img
+
+
+def human_rendering_error() -> Exception | None:
+    """Why ``render_mode="human"`` cannot work here (an exception to raise), or None if it can."""
+    try:
+        import pygame  # noqa: F401
+    except ImportError:
+        from gymnasium.error import DependencyNotInstalled
+
+        return DependencyNotInstalled(
+            'render_mode="human" needs pygame: pip install lfmdr[human] '
+            '(or use render_mode="rgb_array", which needs nothing extra)'
+        )
+    if sys.platform.startswith("linux") and not (
+        os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY") or os.environ.get("SDL_VIDEODRIVER")
+    ):
+        return RuntimeError(
+            'render_mode="human" needs a display (no DISPLAY or WAYLAND_DISPLAY is set); '
+            'use render_mode="rgb_array" on a headless machine (pip install lfmdr[human] on a desktop)'
+        )
+    return None
+
+
+class HumanViewer:
+    """A pygame window showing frames at ``fps``."""
+
+    def __init__(self, size: int, fps: int, title: str = "lfmdr") -> None:
+        err = human_rendering_error()
+        if err is not None:
+            raise err
+        import pygame
+
+        self._pygame = pygame
+        pygame.display.init()  # only the display: pygame.init() would open audio devices too
+        pygame.display.set_caption(title)
+        self.screen = pygame.display.set_mode((size, size))
+        self.clock = pygame.time.Clock()
+        self.fps = fps
+
+    def show(self, frame: np.ndarray) -> None:
+        pg = self._pygame
+        surf = pg.surfarray.make_surface(np.ascontiguousarray(frame.swapaxes(0, 1)))
+        self.screen.blit(surf, (0, 0))
+        pg.event.pump()
+        pg.display.flip()
+        self.clock.tick(self.fps)
+
+    def close(self) -> None:
+        self._pygame.display.quit()

@@ -1,0 +1,270 @@
+"""What the robot senses: pure, vectorised geometry of a robot pose and circular objects.
+
+Every function here takes a robot pose ``(x, y, heading)`` and the ``(M, 2)`` object centres and
+returns one reading per object (or per ray). Nothing depends on the simulator, so the same
+functions turn logged poses and landmark positions into the histories the simulator would have
+produced (SPEC section 2). Angles are in radians, counter-clockwise positive; the heading is the
+direction the robot faces.
+
+The ``*_from_rel`` kernels take the object offsets ``rel = objects - (x, y)`` and squared
+distances ``d2`` already computed, so that the environment computes them once per step and
+shares them between its sensors; the public functions are thin wrappers around them.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+__all__ = [
+    "bearing",
+    "proximity",
+    "ranges",
+    "ray_directions",
+    "visibility",
+    "visibility_distance",
+]
+
+
+# ----------------------------------------------------------------------------- helpers
+def _pose_and_rel(pose: ArrayLike, objects: ArrayLike) -> tuple[float, float, float, np.ndarray, np.ndarray]:
+    p = np.asarray(pose, dtype=np.float64)
+    if p.shape != (3,):
+        raise ValueError(f"pose must be (x, y, heading), got shape {p.shape}")
+    obj = np.asarray(objects, dtype=np.float64)
+    if obj.ndim != 2 or obj.shape[1] != 2:
+        raise ValueError(f"objects must have shape (M, 2), got {obj.shape}")
+    x, y, h = float(p[0]), float(p[1]), float(p[2])
+    rel = obj - (x, y)
+    d2 = np.einsum("ij,ij->i", rel, rel)
+    return x, y, h, rel, d2
+
+
+def visibility_distance(radius: float, visual_angle: float) -> float:
+    """Distance below which an object of ``radius`` subtends more than ``visual_angle``.
+
+    ``2 * asin(radius / d) > visual_angle``  <=>  ``d < radius / sin(visual_angle / 2)``
+    (for ``0 < visual_angle < pi``); e.g. 0.550 m for r = 24 mm and 5 degrees.
+    """
+    if not 0.0 < visual_angle < math.pi:
+        raise ValueError(f"visual_angle must be in (0, pi) radians, got {visual_angle}")
+    if not radius > 0.0:
+        raise ValueError(f"radius must be > 0, got {radius}")
+    return radius / math.sin(0.5 * visual_angle)
+
+
+@lru_cache(maxsize=32)
+def ray_directions(n_rays: int) -> np.ndarray:
+    """Unit vectors (n_rays, 2) of the proximity rays in the robot frame: ray k at 2*pi*k/n_rays."""
+    if n_rays < 1:
+        raise ValueError(f"n_rays must be >= 1, got {n_rays}")
+    a = 2.0 * np.pi * np.arange(n_rays) / n_rays
+    dirs = np.stack([np.cos(a), np.sin(a)], axis=1)
+    dirs.setflags(write=False)
+    return dirs
+
+
+# ----------------------------------------------------------------------------- visibility
+def candidates(d2: np.ndarray, reach: float) -> np.ndarray:
+    """Indices of the objects nearer than ``reach`` (squared distances ``d2``): a cheap prefilter.
+
+    Each sensor below only needs objects within a known distance (visibility: ``d_vis + r``;
+    proximity: ``max_range + r``), so the per-step work scales with the few objects nearby
+    rather than with M.
+    """
+    return (d2 < reach * reach).nonzero()[0]
+
+
+def visibility_from_candidates(
+    n_objects: int,
+    cand: np.ndarray,
+    rc: np.ndarray,
+    dc2: np.ndarray,
+    radius: float,
+    visual_angle: float,
+    occlusion: bool,
+) -> np.ndarray:
+    """Kernel of :func:`visibility` on a candidate subset.
+
+    ``cand`` indexes every object nearer than ``visibility_distance(radius, visual_angle) +
+    radius`` (more is fine); ``rc`` (K, 2) and ``dc2`` (K,) are their offsets from the robot and
+    squared distances. Targets are the candidates nearer than the visibility distance; an
+    occluder of a target is nearer than ``sqrt(d_vis^2 + r^2) < d_vis + r``, so among the
+    candidates too.
+    """
+    out = np.zeros(n_objects, dtype=np.int8)
+    d_vis = visibility_distance(radius, visual_angle)
+    # 2 asin(r/d) > visual_angle  <=>  d < d_vis  (asin is increasing; r/d > 1 is always visible)
+    tk = (dc2 < d_vis * d_vis).nonzero()[0]
+    if tk.size == 0:
+        return out
+    if occlusion and rc.shape[0] > 1:
+        rt = rc[tk]
+        dt2 = dc2[tk]
+        # For target j (line of sight rt_j, length d_j) and object k, p = rc_k . rt_j = t d_j
+        # where t is the position of k's foot along the line of sight, and the perpendicular h
+        # from k's centre obeys h^2 d_j^2 = d_k^2 d_j^2 - p^2. So k blocks j (0 <= t <= d_j and
+        # h < r) iff 0 <= p <= d_j^2 and p^2 > (d_k^2 - r^2) d_j^2 — no square roots needed.
+        p = rc @ rt.T
+        blk = p * p > np.multiply.outer(dc2 - radius * radius, dt2)
+        blk &= p >= 0.0
+        blk &= p <= dt2
+        blk[tk, _arange(tk.size)] = False  # a target does not hide itself
+        tk = tk[~blk.any(axis=0)]
+    out[cand[tk]] = 1
+    return out
+
+
+@lru_cache(maxsize=1024)
+def _arange(n: int) -> np.ndarray:
+    return np.arange(n)
+
+
+def visibility(
+    pose: ArrayLike,
+    objects: ArrayLike,
+    radius: float,
+    visual_angle: float,
+    occlusion: bool = True,
+) -> np.ndarray:
+    """Which objects the robot sees: (M,) int8, 1 = visible (SPEC section 2, paper 4.3.1).
+
+    Object ``j`` at distance ``d_j`` from the robot's centre is visible iff
+
+    1. its horizontal visual angle ``2 * asin(radius / d_j)`` exceeds ``visual_angle``
+       (radians; ``r / d`` is capped at 1), and
+    2. (when ``occlusion``) its line of sight is clear. Another object ``k`` blocks it when
+       the foot of the perpendicular from ``k``'s centre onto the line through the robot's
+       centre and ``j``'s centre lies on the segment between them and that perpendicular is
+       shorter than ``radius``. For a robot centre outside every object and object centres at
+       least ``radius`` apart (always so in the simulator, where objects never overlap) this is
+       exactly: the segment from the robot's centre to ``j``'s centre passes within ``radius``
+       of ``k``'s centre, i.e. meets ``k``'s disc.
+
+    Visibility is omnidirectional (the paper's robot has a panoramic camera); all objects share one
+    ``radius``. Works on any pose and object positions, e.g. logged data.
+    """
+    radius, visual_angle = float(radius), float(visual_angle)
+    _, _, _, rel, d2 = _pose_and_rel(pose, objects)
+    cand = candidates(d2, visibility_distance(radius, visual_angle) + radius)
+    return visibility_from_candidates(
+        d2.shape[0], cand, rel[cand], d2[cand], radius, visual_angle, bool(occlusion)
+    )
+
+
+# ----------------------------------------------------------------------------- bearing / range
+def bearing_from_rel(rel: np.ndarray, d2: np.ndarray, heading: float, dtype=np.float64) -> np.ndarray:
+    """Kernel of :func:`bearing` on precomputed offsets and squared distances."""
+    c, s = math.cos(heading), math.sin(heading)
+    # Columns: rel . h (cos * d) and h x rel (sin * d), h = (cos heading, sin heading).
+    b = rel @ np.array(((c, -s), (s, c)))
+    d = np.sqrt(d2)
+    d[d == 0.0] = np.inf  # an object at the robot's centre has no bearing: reading (0, 0)
+    b /= d[:, None]
+    return b.astype(dtype, copy=False)
+
+
+def bearing(pose: ArrayLike, objects: ArrayLike) -> np.ndarray:
+    """Bearing of every object relative to the heading, as (M, 2) ``[cos theta, sin theta]``.
+
+    ``theta`` is measured from the robot's heading, counter-clockwise positive: an object to the
+    robot's left has ``sin theta > 0``, one straight ahead ``(1, 0)``. Always available for every
+    object (paper 4.4.1). An object exactly at the robot's centre reads ``(0, 0)``.
+    """
+    _, _, h, rel, d2 = _pose_and_rel(pose, objects)
+    return bearing_from_rel(rel, d2, h)
+
+
+def ranges_from_rel(d2: np.ndarray, max_range: float | None, dtype=np.float64) -> np.ndarray:
+    """Kernel of :func:`ranges` on precomputed squared distances."""
+    d = np.sqrt(d2)
+    if max_range is not None:
+        d[d > max_range] = 0.0
+    return d.astype(dtype, copy=False)
+
+
+def ranges(pose: ArrayLike, objects: ArrayLike, max_range: float | None = None) -> np.ndarray:
+    """Distance (M,) from the robot's centre to each object's centre [m].
+
+    With ``max_range``, objects farther than it are not sensed and read 0 (a range of exactly 0
+    is otherwise impossible, since the robot never overlaps an object).
+    """
+    if max_range is not None and not max_range > 0:
+        raise ValueError(f"max_range must be > 0 or None, got {max_range}")
+    _, _, _, _, d2 = _pose_and_rel(pose, objects)
+    return ranges_from_rel(d2, max_range)
+
+
+# ----------------------------------------------------------------------------- proximity
+def proximity_from_candidates(
+    x: float,
+    y: float,
+    heading: float,
+    rc: np.ndarray,
+    dc2: np.ndarray,
+    radius: float,
+    arena_half: float,
+    dirs: np.ndarray,
+    max_range: float,
+) -> np.ndarray:
+    """Kernel of :func:`proximity` (float64). ``dirs`` = :func:`ray_directions` (robot frame);
+    ``rc`` (K, 2), ``dc2`` (K,): offsets and squared distances of (at least) every object nearer
+    than ``max_range + radius``."""
+    c, s = math.cos(heading), math.sin(heading)
+    u = dirs @ np.array(((c, s), (-s, c)))  # rays rotated into the world frame, (n, 2)
+    a = arena_half
+    # Misses are computed as inf/NaN and dropped by fmin rather than masked out first: fewer
+    # numpy calls per step (np.errstate is cheap next to the masks it saves).
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if a - abs(x) < max_range or a - abs(y) < max_range:  # a wall within range
+            # Seen from inside the square, the wall ahead along axis i is at (+-a - p_i) / u_i
+            # with the sign of u_i; u_i = +-0 gives +inf (the numerator has u_i's sign).
+            walls = np.copysign(a, u)
+            walls -= (x, y)
+            walls /= u
+            hit = walls.min(axis=1)
+            np.minimum(hit, max_range, out=hit)
+        else:
+            hit = np.full(dirs.shape[0], max_range)
+        if rc.shape[0]:
+            # Ray k meets circle j at t - sqrt(r^2 - (d^2 - t^2)), t = u_k . rc_j: NaN when the
+            # ray misses (negative root argument); behind the robot when t <= 0 (the robot's
+            # centre is outside every object, so both roots then lie behind it).
+            t = u @ rc.T
+            disc = t * t
+            disc += radius * radius - dc2
+            entry = t - np.sqrt(disc)
+            entry = np.where(t > 0.0, entry, np.inf)
+            np.fmin(hit, np.fmin.reduce(entry, axis=1), out=hit)
+    return hit
+
+
+def proximity(
+    pose: ArrayLike,
+    objects: ArrayLike,
+    radius: float,
+    arena_half: float,
+    n_rays: int,
+    max_range: float,
+) -> np.ndarray:
+    """A ring of ``n_rays`` range readings (n_rays,) for reactive obstacle avoidance.
+
+    Ray ``k`` leaves the robot's centre at ``heading + 2*pi*k/n_rays`` (counter-clockwise); its
+    reading is the distance to the first obstacle along it — an object's surface (a circle of
+    ``radius``) or one of the walls ``x = +-arena_half``, ``y = +-arena_half`` — capped at
+    ``max_range``. The robot's own radius is not subtracted; its centre is assumed to be inside
+    the walls and outside every object.
+    """
+    if not max_range > 0:
+        raise ValueError(f"max_range must be > 0, got {max_range}")
+    if not arena_half > 0:
+        raise ValueError(f"arena_half must be > 0, got {arena_half}")
+    radius, max_range = float(radius), float(max_range)
+    x, y, h, rel, d2 = _pose_and_rel(pose, objects)
+    cand = candidates(d2, max_range + radius)
+    return proximity_from_candidates(
+        x, y, h, rel[cand], d2[cand], radius, float(arena_half), ray_directions(int(n_rays)), max_range
+    )

@@ -1,0 +1,59 @@
+"""Least-squares affine fit of the anchors' embedded points onto their known positions (SPEC §3.4).
+
+A DR embedding is only defined up to an affine map (scale, rotation, shear, reflection,
+translation); the anchors fix it. Three non-collinear anchors determine the six affine
+parameters exactly; more anchors give a least-squares fit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["apply_affine", "check_not_collinear", "fit_affine"]
+
+
+def check_not_collinear(points: np.ndarray, what: str, *, rtol: float = 1e-6) -> None:
+    """Raise ValueError if the (n, 2) ``points`` are fewer than 3 or lie (nearly) on one line.
+
+    Collinear means the smaller singular value of the centred points is below ``rtol`` times
+    the larger one (or the points coincide).
+    """
+    points = np.asarray(points, dtype=float)
+    if points.ndim != 2 or points.shape[1] != 2:
+        raise ValueError(f"{what} must have shape (n, 2), got {points.shape}")
+    if points.shape[0] < 3:
+        raise ValueError(f"{what}: need at least 3 points for an affine fit, got {points.shape[0]}")
+    if not np.all(np.isfinite(points)):
+        raise ValueError(f"{what} contain NaN or inf")
+    s = np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
+    if s[0] == 0 or s[1] <= rtol * s[0]:
+        raise ValueError(
+            f"{what} are collinear (singular values {s[0]:.3g}, {s[1]:.3g}): "
+            "an affine map cannot be fitted"
+        )
+
+
+def fit_affine(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """Least-squares affine map taking ``src`` (n, 2) onto ``dst`` (n, 2), n >= 3.
+
+    Returns a (3, 2) matrix ``T`` with ``dst ~= [src, 1] @ T`` (use :func:`apply_affine`).
+    Raises ValueError when either point set is collinear (the fit would be degenerate).
+    """
+    src = np.asarray(src, dtype=float)
+    dst = np.asarray(dst, dtype=float)
+    if src.shape != dst.shape:
+        raise ValueError(f"src and dst must have the same shape, got {src.shape} and {dst.shape}")
+    check_not_collinear(dst, "anchor positions (world)")
+    check_not_collinear(src, "anchors' embedded points")
+    design = np.column_stack([src, np.ones(len(src))])
+    T, *_ = np.linalg.lstsq(design, dst, rcond=None)
+    return T
+
+
+def apply_affine(points: np.ndarray, transform: np.ndarray) -> np.ndarray:
+    """Apply a (3, 2) affine ``transform`` from :func:`fit_affine` to (n, 2) ``points``."""
+    points = np.asarray(points, dtype=float)
+    transform = np.asarray(transform, dtype=float)
+    if transform.shape != (3, 2):
+        raise ValueError(f"transform must have shape (3, 2), got {transform.shape}")
+    return points @ transform[:2] + transform[2]

@@ -1,0 +1,379 @@
+"""The paper's ten DR methods (SPEC §3) as a registry of scikit-learn-style estimators.
+
+``METHODS`` maps a label to a :class:`MethodSpec`: ``spec.factory(**params)`` builds an
+estimator whose ``fit_transform(X)`` returns the (M, 2) embedding; ``spec.defaults`` are the
+paper's optimum for visibility; ``spec.grid`` is the parameter grid of the protocol. New methods
+(yours, or issue 6's calibrated mapper) join through :func:`register_method`.
+
+scikit-learn supplies PCA, kernel PCA, Isomap, LLE / Hessian LLE and the spectral embedding;
+only weighted SMACOF (:mod:`mappers.smacof`) and SDE/MVU (:mod:`mappers.mvu`) are ours. Thin
+wrappers here add what the paper's setting needs: binary symmetric kNN weights for LEM, sign
+fixing and clear errors for (Hessian) LLE.
+"""
+
+from __future__ import annotations
+
+import inspect
+import warnings
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from numbers import Integral, Real
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.decomposition import PCA, KernelPCA
+from sklearn.manifold import Isomap, SpectralEmbedding
+from sklearn.manifold import LocallyLinearEmbedding as _SklearnLLE
+from sklearn.utils._param_validation import Interval, StrOptions
+from sklearn.utils.extmath import svd_flip
+from sklearn.utils.validation import validate_data
+
+from mappers.graph import GraphRepairWarning, connected_knn_graph
+from mappers.mvu import MaximumVarianceUnfolding
+from mappers.smacof import WeightedSMACOF
+
+__all__ = [
+    "DEFAULT_METHODS",
+    "METHODS",
+    "LaplacianEigenmap",
+    "LocallyLinear",
+    "MappingError",
+    "MethodSpec",
+    "register_method",
+]
+
+K_GRID: tuple[int, ...] = (4, 5, 6, 7, 8, 9, 10)
+SIGMA2_GRID: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0)
+DEGREE_GRID: tuple[int, ...] = (2, 4, 8)
+
+
+class MappingError(ValueError):
+    """A method could not embed the data (eigenproblem failure, solver failure, ...)."""
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """One mapping method: its label, how to build it, its default parameters and grid.
+
+    ``factory(**params)`` must return an object with ``fit_transform(X) -> (M, 2)``; the
+    parameters it accepts are the names in its signature (see :attr:`parameters`).
+    """
+
+    label: str
+    factory: Callable[..., Any]
+    defaults: Mapping[str, Any] = field(default_factory=dict)
+    grid: Mapping[str, Sequence[Any]] = field(default_factory=dict)
+    description: str = ""
+    # issue 6 (helper D): True when the estimator takes the anchors itself, as
+    # ``fit_transform(X, anchor_ids=..., anchor_positions=...)`` (ids index the rows of X), and
+    # holds them fixed; build_map then passes them and the affine fit is the identity.
+    uses_anchors: bool = False
+
+    @property
+    def parameters(self) -> tuple[str, ...]:
+        """Names of the keyword parameters ``factory`` accepts."""
+        sig = inspect.signature(self.factory)
+        return tuple(
+            name
+            for name, p in sig.parameters.items()
+            if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+        )
+
+    def build(self, **params: Any) -> Any:
+        """The estimator with ``defaults`` updated by ``params`` (unknown names: ValueError)."""
+        unknown = sorted(set(params) - set(self.parameters))
+        if unknown:
+            raise ValueError(
+                f"unknown parameter(s) {unknown} for method {self.label!r}; "
+                f"it accepts {list(self.parameters)}"
+            )
+        return self.factory(**{**self.defaults, **params})
+
+
+_METHODS: dict[str, MethodSpec] = {}
+METHODS: Mapping[str, MethodSpec] = MappingProxyType(_METHODS)
+"""Label -> :class:`MethodSpec`, in registration order (read-only view; use register_method)."""
+
+
+def register_method(spec: MethodSpec, *, replace: bool = False) -> MethodSpec:
+    """Add ``spec`` to :data:`METHODS` (ValueError if the label exists, unless ``replace``)."""
+    if not isinstance(spec, MethodSpec):
+        raise ValueError(f"spec must be a MethodSpec, got {type(spec).__name__}")
+    if not isinstance(spec.label, str) or not spec.label:
+        raise ValueError("spec.label must be a non-empty string")
+    if not callable(spec.factory):
+        raise ValueError(f"spec.factory of {spec.label!r} is not callable")
+    if spec.label in _METHODS and not replace:
+        raise ValueError(f"method {spec.label!r} is already registered (pass replace=True)")
+    for what, names in (("defaults", spec.defaults), ("grid", spec.grid)):
+        unknown = sorted(set(names) - set(spec.parameters))
+        if unknown:
+            raise ValueError(f"{spec.label!r}: {what} name(s) {unknown} not accepted by factory")
+    _METHODS[spec.label] = spec
+    return spec
+
+
+class LocallyLinear(TransformerMixin, BaseEstimator):
+    """scikit-learn's LLE / Hessian LLE with fixed signs and explicit errors.
+
+    Uses the dense eigensolver (ARPACK often fails to converge on these small, nearly
+    singular problems). Hessian LLE needs n_neighbors > n_components (n_components + 3) / 2
+    (K > 5 in 2-D) and its eigenproblem often fails on real histories (paper §4.4.2): both give
+    a ValueError that says so instead of a bare numpy/scipy traceback.
+    """
+
+    _parameter_constraints: dict = {
+        "n_neighbors": [Interval(Integral, 1, None, closed="left")],
+        "method": [StrOptions({"standard", "hessian"})],
+        "n_components": [Interval(Integral, 1, None, closed="left")],
+        "reg": [Interval(Real, 0, None, closed="left")],
+        "random_state": ["random_state"],
+    }
+
+    def __init__(
+        self,
+        *,
+        n_neighbors: int = 8,
+        method: str = "standard",
+        n_components: int = 2,
+        reg: float = 1e-3,
+        random_state=None,
+    ) -> None:
+        self.n_neighbors = n_neighbors
+        self.method = method
+        self.n_components = n_components
+        self.reg = reg
+        self.random_state = random_state
+
+    def fit(self, X, y=None):
+        """Compute the embedding of ``X``."""
+        self._validate_params()
+        X = validate_data(self, X, ensure_min_samples=2, dtype=float)
+        n = X.shape[0]
+        if self.n_neighbors >= n:
+            raise ValueError(f"n_neighbors={self.n_neighbors} must be < number of points ({n})")
+        if self.method == "hessian":
+            need = self.n_components * (self.n_components + 3) // 2
+            if self.n_neighbors <= need:
+                raise ValueError(
+                    f"Hessian LLE needs n_neighbors > n_components * (n_components + 3) / 2 "
+                    f"= {need}, got n_neighbors={self.n_neighbors}"
+                )
+        est = _SklearnLLE(
+            n_neighbors=self.n_neighbors,
+            n_components=self.n_components,
+            method=self.method,
+            reg=self.reg,
+            eigen_solver="dense",
+            random_state=self.random_state,
+        )
+        label = "Hessian LLE" if self.method == "hessian" else "LLE"
+        try:
+            with np.errstate(all="ignore"):
+                Y = est.fit_transform(X)
+        except (ValueError, np.linalg.LinAlgError, ArithmeticError) as exc:
+            raise ValueError(f"{label} eigenproblem failed: {exc}") from exc
+        if not np.all(np.isfinite(Y)):
+            raise ValueError(f"{label} eigenproblem failed: the embedding has NaN/inf")
+        sv = np.linalg.svd(Y - Y.mean(axis=0), compute_uv=False)
+        if sv[0] == 0 or sv[-1] <= 1e-10 * sv[0]:
+            raise ValueError(f"{label} eigenproblem failed: degenerate (rank-deficient) embedding")
+        self.embedding_, _ = svd_flip(Y, None)
+        self.reconstruction_error_ = est.reconstruction_error_
+        return self
+
+    def fit_transform(self, X, y=None) -> np.ndarray:
+        """Fit and return the (n, n_components) embedding."""
+        return self.fit(X).embedding_
+
+
+class LaplacianEigenmap(TransformerMixin, BaseEstimator):
+    """Laplacian eigenmap (Belkin & Niyogi 2002) with binary symmetric kNN weights (paper §4.2).
+
+    w_ij = 1 when i is among j's K nearest neighbours or j among i's, else 0; a disconnected
+    graph is joined at its closest pairs (GraphRepairWarning) since the eigenmap of a
+    disconnected graph only separates the pieces. Embedding by scikit-learn's
+    ``SpectralEmbedding(affinity="precomputed")`` (signs fixed there).
+    """
+
+    _parameter_constraints: dict = {
+        "n_neighbors": [Interval(Integral, 1, None, closed="left")],
+        "n_components": [Interval(Integral, 1, None, closed="left")],
+        "random_state": ["random_state"],
+    }
+
+    def __init__(self, *, n_neighbors: int = 6, n_components: int = 2, random_state=None) -> None:
+        self.n_neighbors = n_neighbors
+        self.n_components = n_components
+        self.random_state = random_state
+
+    def fit(self, X, y=None):
+        """Compute the embedding of ``X``."""
+        self._validate_params()
+        X = validate_data(self, X, ensure_min_samples=2, dtype=float)
+        n = X.shape[0]
+        if self.n_neighbors >= n:
+            raise ValueError(f"n_neighbors={self.n_neighbors} must be < number of points ({n})")
+        A, _, added = connected_knn_graph(X, self.n_neighbors)
+        if added:
+            warnings.warn(
+                f"kNN graph (K={self.n_neighbors}) was disconnected: joined its components by "
+                f"{len(added)} closest-pair edge(s)",
+                GraphRepairWarning,
+                stacklevel=2,
+            )
+        self.affinity_matrix_, self.added_edges_ = A, added
+        est = SpectralEmbedding(
+            n_components=self.n_components, affinity="precomputed", random_state=self.random_state
+        )
+        try:
+            self.embedding_ = est.fit_transform(A)
+        except (ValueError, np.linalg.LinAlgError, ArithmeticError) as exc:
+            raise ValueError(f"Laplacian eigenmap eigenproblem failed: {exc}") from exc
+        return self
+
+    def fit_transform(self, X, y=None) -> np.ndarray:
+        """Fit and return the (n, n_components) embedding."""
+        return self.fit(X).embedding_
+
+
+# --- factories: one per label, parameters named as in the paper (K, sigma2, d) ---------------
+
+
+def _lpca() -> PCA:
+    return PCA(n_components=2, svd_solver="full")
+
+
+def _sma_unweighted(max_iter: int = 300, tol: float = 1e-6) -> WeightedSMACOF:
+    # equal weights, LPCA start: the paper's SMA(UNWGT)
+    return WeightedSMACOF(n_neighbors=None, init="lpca", max_iter=max_iter, tol=tol)
+
+
+def _sma_weighted(
+    n_neighbors: int = 5,
+    init: str = "unweighted",
+    n_init: int = 1,
+    max_iter: int = 300,
+    tol: float = 1e-6,
+    random_state=None,
+) -> WeightedSMACOF:
+    return WeightedSMACOF(
+        n_neighbors=n_neighbors,
+        init=init,
+        n_init=n_init,
+        max_iter=max_iter,
+        tol=tol,
+        random_state=random_state,
+    )
+
+
+def _kpca_gauss(sigma2: float = 0.5) -> KernelPCA:
+    if not sigma2 > 0:
+        raise ValueError(f"sigma2 must be > 0, got {sigma2}")
+    # k(a, b) = exp(-||a-b||^2 / (2 sigma^2)); sklearn's rbf is exp(-gamma ||a-b||^2)
+    return KernelPCA(n_components=2, kernel="rbf", gamma=1.0 / (2.0 * sigma2), eigen_solver="dense")
+
+
+def _kpca_poly(degree: int = 8) -> KernelPCA:
+    if not (isinstance(degree, Integral) and degree >= 1):
+        raise ValueError(f"degree must be a positive integer, got {degree!r}")
+    # k(a, b) = (<a, b> + 1)^d
+    return KernelPCA(
+        n_components=2,
+        kernel="poly",
+        gamma=1.0,
+        coef0=1.0,
+        degree=int(degree),
+        eigen_solver="dense",
+    )
+
+
+def _isomap(n_neighbors: int = 6) -> Isomap:
+    return Isomap(n_neighbors=n_neighbors, n_components=2, eigen_solver="dense")
+
+
+def _lle(n_neighbors: int = 8, random_state=None) -> LocallyLinear:
+    return LocallyLinear(n_neighbors=n_neighbors, method="standard", random_state=random_state)
+
+
+def _lem(n_neighbors: int = 6, random_state=None) -> LaplacianEigenmap:
+    return LaplacianEigenmap(n_neighbors=n_neighbors, random_state=random_state)
+
+
+def _hlle(n_neighbors: int = 8, random_state=None) -> LocallyLinear:
+    return LocallyLinear(n_neighbors=n_neighbors, method="hessian", random_state=random_state)
+
+
+def _sde(
+    n_neighbors: int = 7, solver: str = "SCS", tol: float = 1e-3, n_basis: int | None = None
+) -> MaximumVarianceUnfolding:
+    return MaximumVarianceUnfolding(
+        n_neighbors=n_neighbors, solver=solver, tol=tol, n_basis=n_basis
+    )
+
+
+for _spec in (
+    MethodSpec("LPCA", _lpca, {}, {}, "linear PCA / classical MDS"),
+    MethodSpec("SMA(UNWGT)", _sma_unweighted, {}, {}, "SMACOF, equal weights, LPCA start"),
+    MethodSpec(
+        "SMA(WGT)",
+        _sma_weighted,
+        {"n_neighbors": 5},
+        {"n_neighbors": list(K_GRID)},
+        "SMACOF, symmetric kNN weights, started from the SMA(UNWGT) solution",
+    ),
+    MethodSpec(
+        "KPCA(GAUS)",
+        _kpca_gauss,
+        {"sigma2": 0.5},
+        {"sigma2": list(SIGMA2_GRID)},
+        "kernel PCA, Gaussian kernel",
+    ),
+    MethodSpec(
+        "KPCA(POLY)",
+        _kpca_poly,
+        {"degree": 8},
+        {"degree": list(DEGREE_GRID)},
+        "kernel PCA, polynomial kernel",
+    ),
+    MethodSpec("ISOMAP", _isomap, {"n_neighbors": 6}, {"n_neighbors": list(K_GRID)}, "Isomap"),
+    MethodSpec(
+        "LLE", _lle, {"n_neighbors": 8}, {"n_neighbors": list(K_GRID)}, "locally linear embedding"
+    ),
+    MethodSpec(
+        "LEM",
+        _lem,
+        {"n_neighbors": 6},
+        {"n_neighbors": list(K_GRID)},
+        "Laplacian eigenmap, binary kNN weights",
+    ),
+    MethodSpec(
+        # Hessian LLE needs K > 5 in 2-D, so its grid starts at 6 (K = 4, 5 would always fail).
+        "HLLE",
+        _hlle,
+        {"n_neighbors": 8},
+        {"n_neighbors": [k for k in K_GRID if k > 5]},
+        "Hessian LLE",
+    ),
+    MethodSpec(
+        "SDE",
+        _sde,
+        {"n_neighbors": 7},
+        {"n_neighbors": list(K_GRID)},
+        "semidefinite embedding / maximum variance unfolding",
+    ),
+):
+    register_method(_spec)
+del _spec
+
+DEFAULT_METHODS: dict[str, str] = {
+    # issue 6 (helper D): CAL-SMA (mappers/calibrated.py, registered on import of mappers)
+    "visibility": "CAL-SMA",
+    "bearing": "CAL-SMA",
+    "range": "SMA(WGT)",
+}
+"""Method build_map uses when none is given, per sensor: the best (lowest non-anchor MPE) of the
+ten at their default parameters on synthetic random-walk histories (M = 50, N = 2000, 6 layouts;
+see benchmarks/bench_mappers.py). Issue 6 updates it with its calibrated method."""

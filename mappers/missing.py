@@ -1,0 +1,433 @@
+"""Mapping from histories with missing observations (SPEC §7).
+
+On real data a landmark is sensed in a few percent of the steps only (limited field of view,
+occlusion, detection range), so a history is mostly *missing*, not zero. Filling the gaps with
+zeros (what the paper's pipeline does to a visibility history) makes every rarely-seen landmark
+look far from everything. The methods here use only what was observed and say which
+assumptions they add:
+
+``"range-quantile"`` (range sensor)
+    Two landmarks ranged in the same step (same image) from an unknown viewpoint satisfy
+    ``|r_i - r_j| <= d_ij`` (triangle inequality), with equality when the viewpoint is on the
+    line through them. A high quantile (``quantile``, default 0.98) of ``|r_i - r_j|`` over the
+    steps that observed both estimates ``d_ij``. Pairs observed together in fewer than
+    ``min_pairs`` steps are missing; the rest are weighted by ``min(n_ij, weight_cap) /
+    weight_cap``. Metric weighted SMACOF (``mappers.smacof.weighted_smacof``) with the anchors
+    held at their known positions gives the map.
+    *Assumes*: one step's ranges come from one viewpoint (bin no longer than a camera frame
+    or two); over the run some viewpoints are nearly collinear with each observed pair
+    (robots roam the whole area); ranges are calibrated (unbiased, metric).
+
+``"covis-nonmetric"`` (any sensor; uses only the pattern of what was observed)
+    Co-observation counts ``C_ij`` (steps in which both were sensed) normalised by how often
+    each was sensed (Ochiai / cosine, the missing-data analogue of the paper's L2-normalised
+    visibility): ``delta_ij = -log(C_ij / sqrt(n_i n_j))``. Only the *order* of these
+    dissimilarities is trusted: non-metric weighted SMACOF (isotonic regression of the map's
+    distances on ``delta``, then a Guttman step) with weights ``sqrt(C_ij)`` and the anchors
+    held fixed (they set the scale). Pairs seen together in fewer than ``min_co`` steps are
+    treated as *lower bounds* (at least as far as any co-observed pair), not as measurements.
+    *Assumes*: the chance of seeing two landmarks in one step falls monotonically with their
+    distance, the same way everywhere (roughly uniform viewpoints and headings; one field of
+    view for all robots).
+
+``"masked-euclidean"`` (any sensor; the plain SPEC §7 recipe, kept as a comparison)
+    Root-mean-square difference of the two histories over the steps that observed both
+    (pairs with fewer than ``min_pairs`` such steps missing), weighted SMACOF over the pairs
+    that have it, anchors fixed. *Assumes*: a history difference is comparable across pairs —
+    false for a narrow field of view, where co-observed bearings always differ by less than
+    the field of view (measured: worse than ``covis-nonmetric``).
+
+Every method returns positions in the anchors' frame when anchors are given (the anchors are
+held at their positions, so the affine fit that follows is the identity), else a free embedding.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components, shortest_path
+from sklearn.isotonic import IsotonicRegression
+
+from mappers.align import apply_affine, fit_affine
+from mappers.smacof import classical_mds, weighted_smacof
+
+__all__ = [
+    "MASKED_METHODS",
+    "MaskedMap",
+    "build_masked_embedding",
+    "co_observation_counts",
+    "covisibility_dissimilarity",
+    "masked_embedding",
+    "masked_euclidean_dissimilarity",
+    "nonmetric_smacof",
+    "range_pair_distances",
+    "step_observations",
+]
+
+MASKED_METHODS: dict[str, dict[str, Any]] = {
+    "range-quantile": {"quantile": 0.98, "min_pairs": 5, "weight_cap": 50},
+    "covis-nonmetric": {"min_co": 3},
+    "masked-euclidean": {"min_pairs": 5},
+}
+"""Label -> default parameters of each masked method (chosen by leave-one-run-out on MRCLAM;
+see benchmarks/bench_mrclam.py)."""
+
+DEFAULT_METHOD = {
+    "range": "range-quantile",
+    "visibility": "covis-nonmetric",
+    "bearing": "covis-nonmetric",
+}
+_COLUMNS = {"visibility": 1, "bearing": 2, "range": 1}
+
+
+# ------------------------------------------------------------------------- observations
+def step_observations(
+    X: np.ndarray, mask: np.ndarray | None, sensor: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per-step view of a (possibly masked) history matrix.
+
+    Returns ``(seen, values)``: ``seen`` (M, N) bool, True where the object was sensed in the
+    step; ``values`` (M, N) float: the 0/1 visibility, the bearing angle [rad] or the range [m]
+    (NaN where not sensed). A visibility 0 or an unmasked range of 0 counts as not sensed.
+    """
+    if sensor not in _COLUMNS:
+        raise ValueError(f"sensor must be one of {sorted(_COLUMNS)}, got {sensor!r}")
+    X = np.asarray(X, dtype=float)
+    if X.ndim != 2 or X.shape[1] % _COLUMNS[sensor]:
+        raise ValueError(f"X must be (M, N*{_COLUMNS[sensor]}) for {sensor!r}, got {X.shape}")
+    if mask is not None:
+        mask = np.asarray(mask)
+        if mask.dtype != np.bool_ or mask.shape != X.shape:
+            raise ValueError(
+                f"mask must be a bool array of shape {X.shape}, got {mask.dtype} {mask.shape}"
+            )
+    Xf = np.where(np.isfinite(X), X, 0.0)
+    if sensor == "bearing":
+        c, s = Xf[:, 0::2], Xf[:, 1::2]
+        seen = (c != 0) | (s != 0)
+        if mask is not None:
+            seen &= mask[:, 0::2] & mask[:, 1::2]
+        values = np.where(seen, np.arctan2(s, c), np.nan)
+    else:
+        seen = Xf > 0 if mask is None else (mask & np.isfinite(X))
+        if sensor == "visibility":
+            seen &= Xf > 0
+        values = np.where(seen, Xf, np.nan)
+    return seen, values
+
+
+def co_observation_counts(seen: np.ndarray) -> np.ndarray:
+    """(M, M) number of steps in which both objects were sensed (diagonal: each one's count)."""
+    S = np.asarray(seen, dtype=float)
+    return S @ S.T
+
+
+# ---------------------------------------------------------------------- dissimilarities
+def covisibility_dissimilarity(seen: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``-log`` of the Ochiai co-observation coefficient, and the co-observation counts.
+
+    Returns ``(delta, C)``; pairs never seen together get ``delta = -log(1e-6)``.
+    """
+    C = co_observation_counts(seen)
+    n = np.diag(C).copy()
+    with np.errstate(divide="ignore", invalid="ignore"):
+        och = C / np.sqrt(np.outer(n, n))
+    och = np.nan_to_num(och, nan=0.0)
+    delta = -np.log(np.clip(och, 1e-6, 1.0))
+    np.fill_diagonal(delta, 0.0)
+    return delta, C
+
+
+def range_pair_distances(
+    ranges: np.ndarray, seen: np.ndarray, *, quantile: float = 0.98, min_pairs: int = 5
+) -> tuple[np.ndarray, np.ndarray]:
+    """Distance estimates from same-step ranges: the ``quantile`` of ``|r_i - r_j|``.
+
+    Returns ``(delta, counts)``; ``delta`` is 0 where ``counts < min_pairs`` (missing).
+    """
+    if not 0 < quantile <= 1:
+        raise ValueError(f"quantile must be in (0, 1], got {quantile}")
+    if min_pairs < 1:
+        raise ValueError(f"min_pairs must be >= 1, got {min_pairs}")
+    M = seen.shape[0]
+    delta = np.zeros((M, M))
+    counts = co_observation_counts(seen)
+    for i in range(M):
+        for j in range(i + 1, M):
+            both = seen[i] & seen[j]
+            if both.sum() >= min_pairs:
+                delta[i, j] = delta[j, i] = np.quantile(
+                    np.abs(ranges[i, both] - ranges[j, both]), quantile
+                )
+    counts[counts < min_pairs] = 0
+    np.fill_diagonal(counts, 0)
+    return delta, counts
+
+
+def masked_euclidean_dissimilarity(
+    values: np.ndarray, seen: np.ndarray, sensor: str, *, min_pairs: int = 5
+) -> tuple[np.ndarray, np.ndarray]:
+    """RMS difference of two histories over the steps that observed both (bearing: chord
+    ``|e^{ib_i} - e^{ib_j}|``). Returns ``(delta, counts)``, counts 0 where missing."""
+    M = seen.shape[0]
+    delta = np.zeros((M, M))
+    counts = co_observation_counts(seen)
+    for i in range(M):
+        for j in range(i + 1, M):
+            both = seen[i] & seen[j]
+            if both.sum() < min_pairs:
+                counts[i, j] = counts[j, i] = 0
+                continue
+            a, b = values[i, both], values[j, both]
+            diff2 = 2 - 2 * np.cos(a - b) if sensor == "bearing" else (a - b) ** 2
+            delta[i, j] = delta[j, i] = np.sqrt(np.mean(diff2))
+    np.fill_diagonal(counts, 0)
+    return delta, counts
+
+
+# ------------------------------------------------------------------------------ solvers
+def _components(weights: np.ndarray) -> list[list[int]]:
+    n, labels = connected_components(csr_matrix(weights > 0), directed=False)
+    return [np.flatnonzero(labels == k).tolist() for k in range(n)]
+
+
+def _initial(delta: np.ndarray, weights: np.ndarray, anchor_ids, anchor_positions) -> np.ndarray:
+    """Classical MDS of the shortest-path completion of the observed dissimilarities, aligned
+    to the anchors when given (a start for SMACOF; missing pairs get graph distances)."""
+    G = np.where(weights > 0, np.maximum(delta, 1e-9), 0.0)
+    sp = shortest_path(csr_matrix(G), directed=False)
+    finite = np.isfinite(sp)
+    big = sp[finite].max() if finite.any() else 1.0
+    sp = np.where(finite, sp, 1.5 * big)
+    Y = classical_mds(sp, 2)
+    if anchor_ids is not None:
+        try:
+            Y = apply_affine(Y, fit_affine(Y[anchor_ids], anchor_positions))
+        except ValueError:
+            pass  # degenerate start: keep the unaligned one, SMACOF with fixed anchors fixes it
+    return Y
+
+
+def nonmetric_smacof(
+    delta: np.ndarray,
+    weights: np.ndarray,
+    init: np.ndarray,
+    *,
+    censored: np.ndarray | None = None,
+    fixed: np.ndarray | None = None,
+    fixed_positions: np.ndarray | None = None,
+    max_iter: int = 300,
+    tol: float = 1e-6,
+) -> np.ndarray:
+    """Non-metric (ordinal) weighted SMACOF, optionally with fixed points and lower bounds.
+
+    Each iteration fits disparities by isotonic regression of the current distances on
+    ``delta`` (pairs with weight > 0 and not ``censored``), sets each censored pair's
+    disparity to its current distance clipped to [t, u] (t = largest fitted disparity: a
+    censored pair is at least as far as any measured one; u = max(2 t, 1.5 x the fixed points'
+    diameter) only stops a point held by nothing but lower bounds from drifting away), then takes one Guttman step of
+    :func:`mappers.smacof.weighted_smacof`. sklearn's non-metric MDS has neither weights nor
+    fixed points nor bounds, hence this loop. Without fixed points the disparities are scaled
+    to a constant weighted sum of squares (Kruskal's normalisation).
+    """
+    delta = np.asarray(delta, dtype=float)
+    W = np.asarray(weights, dtype=float).copy()
+    np.fill_diagonal(W, 0.0)
+    n = len(delta)
+    iu = np.triu_indices(n, 1)
+    cens = np.zeros((n, n), bool) if censored is None else np.asarray(censored, bool)
+    w = W[iu]
+    obs = (w > 0) & ~cens[iu]
+    cen = (w > 0) & cens[iu]
+    if obs.sum() < 2:
+        raise ValueError("nonmetric_smacof needs at least 2 measured (weighted, uncensored) pairs")
+    X = np.array(init, dtype=float)
+    if fixed is not None and fixed_positions is not None:
+        X[np.asarray(fixed)] = fixed_positions
+    iso = IsotonicRegression(increasing=True)
+    scale = np.sqrt(np.sum(w[obs | cen]))
+    span = 0.0
+    if fixed is not None and len(np.atleast_1d(fixed)) > 1:
+        F = X[np.asarray(fixed)]
+        span = float(np.max(np.linalg.norm(F[:, None] - F[None], axis=2)))
+    for _ in range(max_iter):
+        d = np.linalg.norm(X[iu[0]] - X[iu[1]], axis=1)
+        dh = np.zeros_like(d)
+        dh[obs] = iso.fit_transform(delta[iu][obs], d[obs], sample_weight=w[obs])
+        if cen.any():
+            t = dh[obs].max()
+            dh[cen] = np.clip(d[cen], t, max(2 * t, 1.5 * span))
+        if fixed is None:
+            norm = np.sqrt(np.sum(w * dh**2))
+            if norm > 0:
+                dh *= scale / norm
+        T = np.zeros((n, n))
+        T[iu] = dh
+        T = T + T.T
+        X_new, _, _ = weighted_smacof(T, W, X, fixed=fixed, max_iter=1, tol=0.0)
+        step = np.abs(X_new - X).max()
+        X = X_new
+        if step <= tol * max(np.abs(X).max(), 1e-12):
+            break
+    return X
+
+
+# ---------------------------------------------------------------------------- entry points
+@dataclass(frozen=True, eq=False)
+class MaskedMap:
+    """Result of :func:`masked_embedding`.
+
+    positions: (M, 2) map (in the anchors' frame when anchors were given), NaN rows unmapped.
+    delta, weights: the dissimilarities and weights used (weight 0 = missing pair).
+    components: connected components of the graph of usable pairs (one list when connected).
+    unmapped: objects never sensed.
+    """
+
+    positions: np.ndarray
+    method: str
+    params: dict[str, Any]
+    delta: np.ndarray
+    weights: np.ndarray
+    components: list[list[int]]
+    unmapped: tuple[int, ...] = ()
+    warnings: tuple[str, ...] = field(default=())
+
+
+def masked_embedding(
+    X: np.ndarray,
+    mask: np.ndarray | None,
+    sensor: str,
+    method: str | None = None,
+    *,
+    anchor_ids: np.ndarray | None = None,
+    anchor_positions: np.ndarray | None = None,
+    max_iter: int = 300,
+    **params: Any,
+) -> MaskedMap:
+    """Map objects from a history with missing entries (see the module docstring for methods).
+
+    Args:
+        X: (M, N * c) history matrix (c = 2 for bearing).
+        mask: (M, N * c) bool, True where observed; None = every entry observed (then a
+            visibility 0 / range 0 / bearing (0, 0) counts as not sensed).
+        sensor: ``"visibility"``, ``"bearing"`` or ``"range"``.
+        method: a key of :data:`MASKED_METHODS`; None = ``"range-quantile"`` for range,
+            else ``"covis-nonmetric"``.
+        anchor_ids, anchor_positions: anchors held fixed at their positions (recommended; the
+            non-metric method needs them to know the scale of the map).
+        **params: overrides of the method's defaults.
+    """
+    method = DEFAULT_METHOD.get(sensor, "covis-nonmetric") if method is None else method
+    if method not in MASKED_METHODS:
+        raise ValueError(f"method must be one of {sorted(MASKED_METHODS)}, got {method!r}")
+    unknown = set(params) - set(MASKED_METHODS[method])
+    if unknown:
+        raise ValueError(f"unknown parameter(s) {sorted(unknown)} for method {method!r}")
+    if method == "range-quantile" and sensor != "range":
+        raise ValueError(f"method 'range-quantile' needs a range history, got sensor {sensor!r}")
+    p = {**MASKED_METHODS[method], **params}
+    seen, values = step_observations(X, mask, sensor)
+    M = seen.shape[0]
+    never = np.flatnonzero(~seen.any(axis=1))
+    if anchor_ids is not None:
+        anchor_ids = np.asarray(anchor_ids, dtype=np.int64)
+        anchor_positions = np.asarray(anchor_positions, dtype=float)
+        if anchor_positions.shape != (anchor_ids.size, 2):
+            raise ValueError(
+                f"anchor_positions must have shape ({anchor_ids.size}, 2), got {anchor_positions.shape}"
+            )
+        if anchor_ids.size < 3:
+            raise ValueError(f"need at least 3 anchors, got {anchor_ids.size}")
+        if anchor_ids.min() < 0 or anchor_ids.max() >= M:
+            raise ValueError(f"anchor_ids must lie in [0, {M})")
+        if np.isin(anchor_ids, never).any():
+            raise ValueError(f"anchor(s) {sorted(set(anchor_ids) & set(never))} were never sensed")
+    msgs: list[str] = []
+    keep = np.setdiff1d(np.arange(M), never)
+    if len(keep) < 3:
+        raise ValueError(f"only {len(keep)} object(s) were ever sensed; need at least 3")
+    sub_anchor = None if anchor_ids is None else np.searchsorted(keep, anchor_ids)
+
+    s, v = seen[keep], values[keep]
+    censored = None
+    if method == "range-quantile":
+        delta, counts = range_pair_distances(v, s, quantile=p["quantile"], min_pairs=p["min_pairs"])
+        W = np.minimum(counts, p["weight_cap"]) / p["weight_cap"]
+    elif method == "masked-euclidean":
+        delta, counts = masked_euclidean_dissimilarity(v, s, sensor, min_pairs=p["min_pairs"])
+        W = (counts > 0).astype(float)
+    else:
+        delta, C = covisibility_dissimilarity(s)
+        Cn = C.copy()
+        np.fill_diagonal(Cn, 0)
+        W = np.sqrt(np.maximum(Cn, 1.0))
+        W /= W.max()
+        np.fill_diagonal(W, 0.0)
+        censored = Cn < p["min_co"]
+        counts = np.where(censored, 0, Cn)
+    comps = _components(counts)
+    if method == "covis-nonmetric":
+        start = _initial(
+            np.where(censored, 0, delta), counts.astype(float), sub_anchor, anchor_positions
+        )
+        Y = nonmetric_smacof(
+            delta,
+            W,
+            start,
+            censored=censored,
+            fixed=sub_anchor,
+            fixed_positions=anchor_positions,
+            max_iter=max_iter,
+        )
+    else:
+        start = _initial(delta, W, sub_anchor, anchor_positions)
+        Y, _, _ = weighted_smacof(
+            delta, W, start, fixed=sub_anchor, fixed_positions=anchor_positions, max_iter=max_iter
+        )
+        if method == "masked-euclidean" and sub_anchor is not None:
+            # a history difference has no metric scale: the anchors can only fix an affine frame
+            free, _, _ = weighted_smacof(delta, W, start, max_iter=max_iter)
+            Y = apply_affine(free, fit_affine(free[sub_anchor], anchor_positions))
+    if len(comps) > 1:
+        sizes = sorted((len(c) for c in comps), reverse=True)
+        msgs.append(
+            f"the graph of usable pairs falls apart into {len(comps)} components (sizes {sizes}): "
+            "the relative placement of the components is not measured"
+        )
+    positions = np.full((M, 2), np.nan)
+    positions[keep] = Y
+    comps_full = [[int(keep[i]) for i in c] for c in comps]
+    D_full = np.zeros((M, M))
+    W_full = np.zeros((M, M))
+    D_full[np.ix_(keep, keep)] = delta
+    W_full[np.ix_(keep, keep)] = W
+    if never.size:
+        msgs.append(f"object(s) {never.tolist()} were never sensed and are unmapped")
+    return MaskedMap(
+        positions=positions,
+        method=method,
+        params=p,
+        delta=D_full,
+        weights=W_full,
+        components=comps_full,
+        unmapped=tuple(int(i) for i in never),
+        warnings=tuple(msgs),
+    )
+
+
+def build_masked_embedding(
+    X: np.ndarray, mask: np.ndarray | None, method: str | None, sensor: str, **params: Any
+) -> np.ndarray:
+    """Hook for ``mappers.build_map(..., mask=...)``: an (M, 2) embedding (NaN rows unmapped).
+
+    ``method`` may be a key of :data:`MASKED_METHODS` (anything else, e.g. a paper label, falls
+    back to the sensor's default masked method). Pass ``anchor_ids`` and ``anchor_positions``
+    in ``params`` to get positions with the anchors held fixed (the affine fit that
+    ``build_map`` applies afterwards is then the identity).
+    """
+    if method not in MASKED_METHODS:
+        method = None
+    return masked_embedding(X, mask, sensor, method, **params).positions

@@ -1,0 +1,258 @@
+"""The ``lfmdr`` command: help, every subcommand end to end, interrupts (SIGKILL, Ctrl-C), bad options."""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from lfmdr_gym.cli import build_parser, main
+from lfmdr_gym.experiments.store import JOURNAL, read_results
+
+ROOT = Path(__file__).resolve().parents[1]
+SMALL = ["--mode", "visibility", "--layouts", "1", "--poses", "2", "--steps", "200",
+         "--every", "100", "--methods", "LPCA", "SMA(WGT)", "ISOMAP", "--no-progress"]
+# Longer, for the interrupt tests: enough units that a kill lands in the middle.
+LONGER = ["--mode", "visibility", "--layouts", "1", "--poses", "2", "--steps", "300",
+          "--every", "50", "--methods", "LPCA,SMA(WGT),ISOMAP,LLE", "--no-progress"]
+
+
+def _lfmdr(*args: str, **kwargs) -> subprocess.Popen:
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    return subprocess.Popen([sys.executable, "-m", "lfmdr_gym.cli", *args], cwd=ROOT, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs)
+
+
+def _comparable(rows):
+    out = []
+    for r in rows:
+        r = {k: v for k, v in r.items() if k != "seconds"}
+        out.append({k: ("nan" if isinstance(v, float) and math.isnan(v) else v) for k, v in r.items()})
+    return out
+
+
+def _journal_rows(path: Path) -> int:
+    try:
+        return max(0, path.read_bytes().count(b"\n") - 1)
+    except FileNotFoundError:
+        return 0
+
+
+# ------------------------------------------------------------------ help
+@pytest.mark.parametrize("command", ["reproduce", "run", "map", "collect", "mrclam"])
+def test_help_explains_every_option(command, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([command, "--help"])
+    assert exc.value.code == 0
+    text = capsys.readouterr().out
+    sub = build_parser()._subparsers._group_actions[0].choices[command]
+    for action in sub._actions:
+        if action.option_strings and action.dest != "help":
+            assert action.help, f"{command} {action.option_strings} has no help"
+            assert action.option_strings[0] in text
+
+
+def test_top_level_help_lists_the_commands(capsys):
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    text = capsys.readouterr().out
+    for command in ("reproduce", "run", "map", "collect", "mrclam"):
+        assert command in text
+
+
+# ------------------------------------------------------------------ reproduce end to end
+@pytest.fixture(scope="module")
+def clean(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cli-clean")
+    assert main(["reproduce", *SMALL, "--out", str(out)]) == 0
+    return out
+
+
+def test_reproduce_end_to_end(clean, capsys):
+    rows = read_results(clean / "results.csv")
+    # per run: LPCA at N=100, 200; SMA(WGT), ISOMAP: K=4..10 at N=200 + the default at N=100
+    assert len(rows) == 2 * (2 + 8 + 8)
+    assert {r["method"] for r in rows} == {"LPCA", "SMA(WGT)", "ISOMAP"}
+    for name in ("table.md", "table.csv", "mpe_vs_n.png", "map_lpca.png"):
+        assert (clean / name).stat().st_size > 200
+    # Run again: everything is resumed, nothing recomputed.
+    assert main(["reproduce", *SMALL, "--out", str(clean)]) == 0
+    assert "0 computed now" in capsys.readouterr().out
+
+
+@pytest.fixture(scope="module")
+def clean_longer(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cli-longer")
+    assert main(["reproduce", *LONGER, "--out", str(out)]) == 0
+    return _comparable(read_results(out / "results.csv"))
+
+
+def _interrupt_then_resume(tmp_path: Path, sig: int, extra: list[str]) -> tuple[int, int]:
+    journal = tmp_path / JOURNAL
+    proc = _lfmdr("reproduce", *LONGER, *extra, "--out", str(tmp_path))
+    deadline = time.monotonic() + 60
+    while _journal_rows(journal) < 1:
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() < deadline, "no row was written within 60 s"
+        time.sleep(0.005)
+    proc.send_signal(sig)
+    proc.communicate(timeout=60)
+    rows_at_stop = _journal_rows(journal)
+    if sig == signal.SIGKILL:
+        # As if the kill had struck in the middle of a write: a torn last line.
+        with open(journal, "ab") as fh:
+            fh.write(b"visibility,0,2,ISOMAP,K=")
+    resume = _lfmdr("reproduce", *LONGER, *extra, "--out", str(tmp_path))
+    out, err = resume.communicate(timeout=120)
+    assert resume.returncode == 0, err
+    return proc.returncode, rows_at_stop
+
+
+def test_sigkill_then_rerun_gives_the_rows_of_a_clean_run(clean_longer, tmp_path):
+    code, stopped = _interrupt_then_resume(tmp_path, signal.SIGKILL, [])
+    assert code == -signal.SIGKILL
+    assert 0 < stopped < len(clean_longer), "the kill did not land in the middle of the run"
+    assert _comparable(read_results(tmp_path / "results.csv")) == clean_longer
+
+
+def test_ctrl_c_then_rerun_gives_the_rows_of_a_clean_run(clean_longer, tmp_path):
+    code, stopped = _interrupt_then_resume(tmp_path, signal.SIGINT, ["--jobs", "2"])
+    assert code == 130
+    assert 0 < stopped < len(clean_longer), "Ctrl-C did not land in the middle of the run"
+    assert _comparable(read_results(tmp_path / "results.csv")) == clean_longer
+
+
+# ------------------------------------------------------------------ bad options
+def _error(argv, capsys) -> str:
+    code = main(argv)
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    return err
+
+
+def test_unknown_method_is_refused(tmp_path, capsys):
+    err = _error(["reproduce", "--mode", "visibility", "--methods", "LPCA", "MAGIC",
+                  "--out", str(tmp_path)], capsys)
+    assert "unknown method 'MAGIC'" in err
+
+
+def test_steps_not_a_multiple_of_every_is_refused(tmp_path, capsys):
+    err = _error(["reproduce", "--mode", "bearing", "--steps", "450", "--out", str(tmp_path)], capsys)
+    assert "steps (450) must be a multiple of every (200)" in err
+
+
+def test_unwritable_out_is_refused(tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    err = _error(["reproduce", *SMALL, "--out", str(blocker / "run")], capsys)
+    assert "cannot write to output directory" in err
+
+
+def test_changed_settings_on_same_out_are_refused(clean, capsys):
+    args = [a if a != "200" else "300" for a in SMALL]
+    err = _error(["reproduce", *args, "--out", str(clean)], capsys)
+    assert "other settings" in err and "steps: 200 in the directory, 300 now" in err
+
+
+@pytest.mark.parametrize("argv", [
+    ["reproduce", "--mode", "visibility", "--layouts", "0"],
+    ["reproduce", "--mode", "visibility", "--poses", "-2"],
+    ["reproduce", "--mode", "visibility", "--jobs", "0"],
+    ["reproduce", "--mode", "smell"],
+    ["reproduce"],
+])
+def test_argparse_rejects_bad_values(argv, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    assert "error:" in capsys.readouterr().err
+
+
+def test_unknown_method_in_run_and_map(tmp_path, capsys):
+    err = _error(["run", "--steps", "20", "--method", "nope", "--out", str(tmp_path)], capsys)
+    assert "unknown method 'nope'" in err
+    err = _error(["map", str(tmp_path / "missing.npz"), "--method", "LPCA"], capsys)
+    assert "no history file" in err
+    err = _error(["run", "--steps", "20", "--method", "SDE", "--param", "sigma2=1",
+                  "--out", str(tmp_path)], capsys)
+    assert "unknown parameter(s) ['sigma2'] for method 'SDE'" in err
+
+
+# ------------------------------------------------------------------ single runs
+def test_collect_then_map(tmp_path, capsys):
+    path = tmp_path / "walk.npz"
+    assert main(["collect", "--steps", "150", "--seed", "3", "--out", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "steps=150" in out and "sightings per object" in out
+    assert path.is_file()
+    assert main(["map", str(path), "--method", "isomap", "--param", "K=7",
+                 "--out", str(tmp_path / "m")]) == 0
+    out = capsys.readouterr().out
+    assert "MPE" in out and "ISOMAP (n_neighbors=7)" in out
+    lines = (tmp_path / "m" / "map.csv").read_text().splitlines()
+    assert lines[0] == "object,x,y,true_x,true_y,anchor" and len(lines) == 51
+    assert (tmp_path / "m" / "map.png").stat().st_size > 10_000
+
+
+def test_run_prints_scores_at_each_checkpoint(tmp_path, capsys):
+    assert main(["run", "--env", "LFMDR-Visibility-v0", "--steps", "200", "--every", "100",
+                 "--method", "LPCA", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    table = [line.split() for line in out.splitlines() if line.strip()[:3].isdigit()]
+    assert [int(t[0]) for t in table] == [100, 200]
+    assert all(0 <= float(t[1]) < 3 for t in table)
+    for name in ("history.npz", "scores.csv", "map.csv", "map.png"):
+        assert (tmp_path / name).is_file()
+
+
+def test_mrclam_passes_its_options_to_the_loader(monkeypatch, tmp_path, capsys):
+    from types import SimpleNamespace
+
+    mrclam = pytest.importorskip("lfmdr_gym.datasets.mrclam")
+    seen = {}
+
+    def fake(run_dir, **kwargs):
+        seen.update(kwargs, run_dir=run_dir)
+        return SimpleNamespace(
+            run="MRCLAM_X", mode=kwargs["mode"], method="range-quantile", params={"quantile": 0.9},
+            anchor_subjects=(6, 7, 8, 9), warnings=("clustered layout",), mpe=0.25, moe=3.5,
+            centroid_mpe=3.0, csv_path=tmp_path / "o" / "map.csv", png_path=None,
+        )
+
+    monkeypatch.setattr(mrclam, "map_mrclam_run", fake)
+    assert main(["mrclam", str(tmp_path), "--mode", "range", "--robots", "1,3",
+                 "--anchors", "6,7,8,9", "--method", "range-quantile", "--param", "quantile=0.9",
+                 "--bin-width", "0.5", "--out", str(tmp_path / "o")]) == 0
+    assert seen == {"run_dir": str(tmp_path), "mode": "range", "robots": [1, 3],
+                    "anchors": [6, 7, 8, 9], "method": "range-quantile", "quantile": 0.9,
+                    "bin_width": 0.5, "out": str(tmp_path / "o")}
+    out = capsys.readouterr().out
+    assert "MPE 0.250 m, MOE 3.50 %" in out and "warning: clustered layout" in out
+    assert "centroid baseline: MPE 3.000 m" in out
+
+
+def test_mrclam_bad_robots_is_an_argparse_error(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["mrclam", "somewhere", "--mode", "range", "--robots", "one,two"])
+    assert exc.value.code == 2
+    assert "expected numbers like 1,2,3" in capsys.readouterr().err
+
+
+MRCLAM_DATA = Path("/work/shared/data/mrclam")
+
+
+@pytest.mark.slow
+def test_mrclam_on_a_real_run(tmp_path, capsys):
+    runs = sorted(p for p in MRCLAM_DATA.glob("*") if p.is_dir()) if MRCLAM_DATA.is_dir() else []
+    if not runs:
+        pytest.skip("no MRCLAM data here")
+    assert main(["mrclam", str(runs[0]), "--mode", "range", "--out", str(tmp_path)]) == 0
+    assert "MPE" in capsys.readouterr().out
+    assert (tmp_path / "map.csv").read_text().splitlines()[0].startswith("subject")

@@ -1,0 +1,15 @@
+"""The mapper example runs and prints a row per method (examples double as documentation)."""
+
+import runpy
+from pathlib import Path
+
+from mappers import METHODS
+
+
+def test_map_synthetic_example_runs(capsys):
+    runpy.run_path(str(Path(__file__).resolve().parents[1] / "examples" / "map_synthetic.py"))
+    out = capsys.readouterr().out
+    rows = [line.split() for line in out.splitlines()[1:]]
+    assert [r[0] for r in rows] == list(METHODS)
+    assert all(0 <= float(r[1]) < 2.0 and 0 <= float(r[2]) <= 100 for r in rows)
+    assert float(dict((r[0], r[1]) for r in rows)["SMA(WGT)"]) < 0.2

@@ -1,0 +1,227 @@
+"""build_map: the whole pipeline, unmapped objects, sensor inference, and every bad input."""
+
+import importlib.util
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from mappers import (
+    DEFAULT_METHODS,
+    METHODS,
+    MappingError,
+    MethodSpec,
+    build_map,
+    infer_sensor,
+    mean_position_error,
+    register_method,
+)
+from mappers.methods import _METHODS
+
+
+def world(n_objects=40, n_steps=1200, seed=0, sensor="visibility"):
+    """Raw (unnormalised) histories of known points, corner anchors and their positions."""
+    rng = np.random.default_rng(seed)
+    g = np.linspace(-1.0, 1.0, 7)
+    grid = np.array([(x, y) for x in g for y in g])
+    idx = np.concatenate([[0, 6, 42, 48], rng.choice(np.arange(1, 42), n_objects - 4, replace=False)])
+    P = grid[idx] + rng.uniform(-0.05, 0.05, (n_objects, 2))
+    R = rng.uniform(-1.25, 1.25, (n_steps, 2))
+    d = P[:, None, :] - R[None]
+    dist = np.hypot(d[..., 0], d[..., 1])
+    if sensor == "visibility":
+        H = (dist < 0.55).astype(float)
+    elif sensor == "bearing":
+        th = np.arctan2(d[..., 1], d[..., 0]) - rng.uniform(-np.pi, np.pi, n_steps)[None]
+        H = np.stack([np.cos(th), np.sin(th)], -1).reshape(n_objects, -1)
+    else:
+        H = dist
+    anchors = np.array([0, 1, 2, 3])
+    return H, P, anchors
+
+
+@pytest.mark.parametrize("sensor", ["visibility", "bearing", "range"])
+def test_default_method_maps_each_sensor(sensor):
+    H, P, a = world(sensor=sensor)
+    m = build_map(H, a, P[a])
+    assert m.sensor == sensor and m.method == DEFAULT_METHODS[sensor]
+    assert m.positions.shape == (40, 2) and m.unmapped == ()
+    assert np.all(np.isfinite(m.positions))
+    m = build_map(H, a, P[a], "SMA(WGT)")
+    assert m.params["n_neighbors"] == 5
+    assert mean_position_error(m.positions, P, exclude=a) < 0.25
+    np.testing.assert_allclose(m.positions, np.column_stack([m.embedding, np.ones(40)]) @ m.affine)
+
+
+@pytest.mark.parametrize("label", list(METHODS)[:10])
+def test_every_method_through_build_map(label):
+    H, P, a = world(sensor="bearing", n_steps=600)
+    m = build_map(H, a, P[a], label)
+    assert m.method == label
+    assert np.all(np.isfinite(m.positions))
+    # anchor fit only (4 corners); measured: KPCA(POLY) 0.61, KPCA(GAUS) 0.44, LEM 0.37,
+    # LLE 0.24, LPCA 0.19, SMA(UNWGT) 0.13, ISOMAP 0.14, SDE 0.12, SMA(WGT) 0.10, HLLE 0.08
+    limit = {"KPCA(POLY)": 0.8, "KPCA(GAUS)": 0.6, "LEM": 0.55, "LLE": 0.35, "LPCA": 0.3}
+    limit = limit.get(label, 0.2)
+    assert mean_position_error(m.positions, P, exclude=a) < limit
+
+
+def test_empty_history_is_unmapped_and_others_still_mapped():
+    H, P, a = world()
+    H[[7, 19]] = 0.0
+    m = build_map(H, a, P[a], "ISOMAP")
+    assert m.unmapped == (7, 19)
+    assert np.all(np.isnan(m.positions[[7, 19]])) and np.all(np.isnan(m.embedding[[7, 19]]))
+    assert mean_position_error(m.positions, P, exclude=[*a, *m.unmapped]) < 0.25
+
+
+def test_unmapped_anchor_warns_or_fails():
+    H, P, _ = world()
+    a = np.array([0, 1, 2, 3, 10])
+    H[2] = 0.0
+    m = build_map(H, a, P[a], "SMA(WGT)")
+    assert m.unmapped == (2,) and m.anchor_ids == (0, 1, 3, 10)
+    assert any("anchors [2]" in w for w in m.warnings)
+    H[3] = 0.0
+    H[10] = 0.0
+    with pytest.raises(ValueError, match="only 2 anchors remain"):
+        build_map(H, a, P[a])
+
+
+def test_normalize_switch_and_history_like_object():
+    H, P, a = world()
+    H = H * np.arange(1, 41)[:, None]  # objects seen "more easily" have larger rows
+    on = build_map(H, a, P[a], "SMA(UNWGT)")
+    off = build_map(H, a, P[a], "SMA(UNWGT)", normalize=False)
+    assert not np.allclose(on.positions, off.positions)
+    assert on.sensor == "range"  # not 0/1 any more
+    assert build_map(H, a, P[a], "SMA(UNWGT)", sensor="visibility").sensor == "visibility"
+    hist = SimpleNamespace(matrix=(H > 0).astype(float), sensor="visibility", mask=None)
+    assert build_map(hist, a, P[a], "LPCA").sensor == "visibility"
+
+
+def test_infer_sensor():
+    assert infer_sensor(np.array([[0, 1], [1, 1.0]])) == "visibility"
+    th = np.array([[0.3, 1.2], [2.0, -1.0]])
+    bearing = np.stack([np.cos(th), np.sin(th)], -1).reshape(2, 4)
+    assert infer_sensor(bearing) == "bearing"
+    assert infer_sensor(np.array([[0.3, 1.2, 0.5], [2.0, 0.0, 1.0]])) == "range"
+
+
+def test_mask_all_true_is_no_mask():
+    H, P, a = world()
+    m1 = build_map(H, a, P[a], "LEM")
+    m2 = build_map(H, a, P[a], "LEM", mask=np.ones(H.shape, dtype=bool))
+    np.testing.assert_array_equal(m1.positions, m2.positions)
+
+
+@pytest.mark.skipif(
+    importlib.util.find_spec("mappers.missing") is not None, reason="mappers.missing exists"
+)
+def test_partial_mask_needs_missing_module():
+    H, P, a = world()
+    mask = np.ones(H.shape, dtype=bool)
+    mask[5, :10] = False
+    with pytest.raises(ValueError, match="mappers.missing"):
+        build_map(H, a, P[a], mask=mask)
+
+
+def test_partial_mask_calls_the_missing_data_hook(monkeypatch):
+    import sys
+    import types
+
+    calls = []
+
+    def fake(X, mask, method, sensor, **params):
+        calls.append((X.shape, mask.shape, method, sensor, params))
+        return X[:, :2] + 0.01 * np.arange(len(X))[:, None] ** 1.5 * [1, -1]
+
+    monkeypatch.setitem(sys.modules, "mappers.missing", types.SimpleNamespace(build_masked_embedding=fake))
+    H, P, a = world()
+    H[9] = 0.0  # unmapped: not handed to the hook
+    mask = np.ones(H.shape, dtype=bool)
+    mask[5, :10] = False
+    H[5, :10] = np.nan  # unobserved entries may hold anything
+    m = build_map(H, a, P[a], "SMA(WGT)", mask=mask, n_neighbors=6)
+    assert calls == [((39, 1200), (39, 1200), "SMA(WGT)", "visibility", {"n_neighbors": 6})]
+    assert m.unmapped == (9,) and np.all(np.isfinite(np.delete(m.positions, 9, axis=0)))
+
+
+def test_method_failure_is_a_mapping_error_naming_method():
+    class Broken:
+        def fit_transform(self, X):
+            raise np.linalg.LinAlgError("Singular matrix")
+
+    register_method(MethodSpec("BROKEN-TEST", lambda: Broken()))
+    try:
+        H, P, a = world()
+        with pytest.raises(MappingError, match=r"'BROKEN-TEST' failed: LinAlgError: Singular"):
+            build_map(H, a, P[a], "BROKEN-TEST")
+    finally:
+        _METHODS.pop("BROKEN-TEST")
+
+
+def test_collinear_embedding_of_anchors_is_a_mapping_error():
+    H, P, a = world()
+    register_method(MethodSpec("LINE-TEST", lambda: SimpleNamespace(
+        fit_transform=lambda X: np.column_stack([np.arange(len(X)), np.arange(len(X))]).astype(float)
+    )))
+    try:
+        with pytest.raises(MappingError, match="collinear"):
+            build_map(H, a, P[a], "LINE-TEST")
+    finally:
+        _METHODS.pop("LINE-TEST")
+
+
+def test_disconnected_graph_is_repaired_and_reported():
+    H, P, a = world()
+    # two groups of objects that are never seen together
+    H2 = np.zeros((40, 2400))
+    H2[:20, :1200] = H[:20]
+    H2[20:, 1200:] = H[20:]
+    m = build_map(H2, [0, 1, 2, 25], P[[0, 1, 2, 25]], "LEM", n_neighbors=4)
+    assert any("GraphRepairWarning" in w and "joined" in w for w in m.warnings)
+
+
+def test_hessian_lle_k_too_small_is_clear():
+    H, P, a = world()
+    with pytest.raises(MappingError, match=r"'HLLE' failed: .*n_neighbors > "):
+        build_map(H, a, P[a], "HLLE", n_neighbors=5)
+
+
+H0, P0, A0 = world(n_steps=300)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(anchor_ids=[0, 1]), "at least 3 anchors"),
+        (dict(anchor_ids=[0, 1, 2], anchor_positions=[[0, 0], [1, 1], [2, 2]]), "collinear"),
+        (dict(anchor_ids=[0, 1, 40], anchor_positions=P0[:3]), "out of range"),
+        (dict(anchor_ids=[0, 1, -1], anchor_positions=P0[:3]), "out of range"),
+        (dict(anchor_ids=[0, 1, 1], anchor_positions=P0[:3]), "duplicates"),
+        (dict(anchor_ids=[0.0, 1.0, 2.0], anchor_positions=P0[:3]), "integer"),
+        (dict(anchor_positions=P0[:3]), r"shape \(4, 2\)"),
+        (dict(anchor_positions=np.full((4, 2), np.nan)), "NaN"),
+        (dict(histories=np.where(np.eye(40, 300) > 0, np.nan, H0)), "NaN or inf"),
+        (dict(histories=np.where(np.eye(40, 300) > 0, np.inf, H0)), "NaN or inf"),
+        (dict(histories=H0[0]), "2-D"),
+        (dict(histories=H0[:2]), "at least 3 objects"),
+        (dict(histories=[["a", "b"]] * 5), "numeric"),
+        (dict(method="PCA"), "unknown method 'PCA'"),
+        (dict(method="ISOMAP", K=6), r"unknown parameter\(s\) \['K'\]"),
+        (dict(method="ISOMAP", n_neighbors=40), "n_neighbors must be an integer in"),
+        (dict(method="ISOMAP", n_neighbors=0), "n_neighbors must be an integer in"),
+        (dict(method="ISOMAP", n_neighbors=2.5), "n_neighbors must be an integer in"),
+        (dict(method="KPCA(GAUS)", sigma2=-1.0), "sigma2 must be > 0"),
+        (dict(sensor="sonar"), "sensor must be one of"),
+        (dict(histories=H0[:, :299], sensor="bearing"), "even number of columns"),
+        (dict(mask=np.ones((40, 300))), "boolean"),
+        (dict(mask=np.ones((40, 299), dtype=bool)), "shape"),
+    ],
+)
+def test_bad_input_raises_value_error_naming_problem(kwargs, match):
+    args = dict(histories=H0, anchor_ids=A0, anchor_positions=P0[A0])
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=match):
+        build_map(**args)

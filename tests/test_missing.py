@@ -1,0 +1,166 @@
+"""Masked (missing-data) mapping: mappers/missing.py."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mappers.missing import (
+    MASKED_METHODS,
+    build_masked_embedding,
+    covisibility_dissimilarity,
+    masked_embedding,
+    nonmetric_smacof,
+    range_pair_distances,
+    step_observations,
+)
+
+
+def _corners(P: np.ndarray) -> np.ndarray:
+    lo, hi = P.min(0), P.max(0)
+    ids: list[int] = []
+    for c in [(lo[0], lo[1]), (hi[0], lo[1]), (hi[0], hi[1]), (lo[0], hi[1])]:
+        d = np.linalg.norm(P - np.array(c), axis=1)
+        d[ids] = np.inf
+        ids.append(int(np.argmin(d)))
+    return np.array(ids)
+
+
+def _simulate(n_obj=20, n_steps=3000, fov=0.6, max_range=6.0, noise=0.0, seed=0):
+    """Landmarks in a 5 x 10 m area seen by a camera with a +-fov field of view from random
+    poses: returns positions and per-step (seen, range, bearing)."""
+    rng = np.random.default_rng(seed)
+    P = rng.uniform([0, 0], [5, 10], size=(n_obj, 2))
+    poses = np.column_stack([rng.uniform(-0.5, 5.5, n_steps), rng.uniform(-0.5, 10.5, n_steps),
+                             rng.uniform(-np.pi, np.pi, n_steps)])
+    d = P[None] - poses[:, None, :2]
+    r = np.linalg.norm(d, axis=2)
+    b = np.angle(np.exp(1j * (np.arctan2(d[..., 1], d[..., 0]) - poses[:, 2:3])))
+    seen = (np.abs(b) <= fov) & (r <= max_range) & (r > 0.3)
+    r = r + noise * rng.standard_normal(r.shape)
+    return P, seen.T, r.T, b.T
+
+
+def _score(est, P, anchors):
+    na = np.setdiff1d(np.arange(len(P)), anchors)
+    return float(np.mean(np.linalg.norm(est[na] - P[na], axis=1)))
+
+
+def test_step_observations_per_sensor():
+    seen = np.array([[True, False, True], [False, False, True]])
+    X = np.where(seen, 2.0, 0.0)
+    s, v = step_observations(X, seen, "range")
+    assert np.array_equal(s, seen) and np.isnan(v[1, 0]) and v[0, 0] == 2.0
+    s, v = step_observations(seen.astype(float), None, "visibility")
+    assert np.array_equal(s, seen)
+    ang = np.array([[0.3, 0.0, -0.2]])
+    Xb = np.zeros((1, 6))
+    Xb[:, 0::2], Xb[:, 1::2] = np.cos(ang), np.sin(ang)
+    mask = np.repeat(np.array([[True, False, True]]), 2, axis=1)
+    s, v = step_observations(Xb, mask, "bearing")
+    assert s.tolist() == [[True, False, True]]
+    assert np.allclose(v[0, [0, 2]], [0.3, -0.2])
+    with pytest.raises(ValueError, match="sensor"):
+        step_observations(X, None, "sonar")
+    with pytest.raises(ValueError, match="mask"):
+        step_observations(X, seen.astype(int), "range")
+
+
+def test_range_pair_distances_are_lower_bounds_close_to_truth():
+    P, seen, r, _ = _simulate(seed=1)
+    delta, counts = range_pair_distances(r, seen, quantile=1.0, min_pairs=5)
+    D = np.linalg.norm(P[:, None] - P[None], axis=2)
+    ok = counts > 0
+    assert ok.sum() > 0.5 * ok.size  # most pairs are measured despite the narrow view
+    assert np.all(delta[ok] <= D[ok] + 1e-9)  # |r_i - r_j| <= d_ij, noise-free
+    assert np.median(D[ok] - delta[ok]) < 0.05
+
+
+def test_range_quantile_recovers_layout_with_heavy_missingness():
+    P, seen, r, _ = _simulate(noise=0.02, seed=2)
+    assert seen.mean() < 0.15  # each landmark is missing from > 85 % of the steps
+    X = np.where(seen, r, 0.0)
+    anchors = _corners(P)
+    mm = masked_embedding(X, seen, "range", anchor_ids=anchors, anchor_positions=P[anchors])
+    assert mm.method == "range-quantile"
+    assert np.allclose(mm.positions[anchors], P[anchors])
+    assert _score(mm.positions, P, anchors) < 0.15
+    assert len(mm.components) == 1 and not mm.warnings
+
+
+def test_covis_nonmetric_beats_zero_filled_baseline():
+    P, seen, _, _ = _simulate(n_steps=4000, seed=3)
+    anchors = _corners(P)
+    mm = masked_embedding(seen.astype(float), None, "visibility",
+                          anchor_ids=anchors, anchor_positions=P[anchors])
+    err = _score(mm.positions, P, anchors)
+    centroid = _score(np.repeat(P[anchors].mean(0)[None], len(P), 0), P, anchors)
+    assert err < 0.35 * centroid
+    assert err < 1.0
+
+
+def test_nonmetric_smacof_uses_only_the_order_of_dissimilarities():
+    rng = np.random.default_rng(4)
+    P = rng.uniform(0, 4, size=(12, 2))
+    D = np.linalg.norm(P[:, None] - P[None], axis=2)
+    W = 1.0 - np.eye(12)
+    fixed = np.array([0, 1, 2, 3])
+    start = P + rng.normal(scale=0.5, size=P.shape)
+    a = nonmetric_smacof(D, W, start, fixed=fixed, fixed_positions=P[fixed])
+    b = nonmetric_smacof(np.exp(D), W, start, fixed=fixed, fixed_positions=P[fixed])
+    assert np.allclose(a, b, atol=1e-6)
+    assert np.mean(np.linalg.norm(a - P, axis=1)) < 0.1
+
+
+def test_censored_pairs_are_kept_at_least_as_far_as_measured_ones():
+    rng = np.random.default_rng(5)
+    P = np.vstack([rng.uniform(0, 1, (8, 2)), rng.uniform(0, 1, (8, 2)) + [4.0, 1.0]])
+    D = np.linalg.norm(P[:, None] - P[None], axis=2)
+    cens = D > 2  # never co-observed: only "farther than anything measured" is known
+    W = 1.0 - np.eye(16)
+    fixed = np.array([0, 1, 2, 8])
+    start = P + rng.normal(scale=0.3, size=P.shape)
+    X = nonmetric_smacof(np.where(cens, 0, D), W, start, censored=cens,
+                         fixed=fixed, fixed_positions=P[fixed], max_iter=1000)
+    d = np.linalg.norm(X[:, None] - X[None], axis=2)
+    measured = ~cens & (W > 0)
+    assert d[cens].min() >= 0.9 * d[measured].max()
+    assert np.mean(np.linalg.norm(X - P, axis=1)) < 0.5
+
+
+def test_covisibility_dissimilarity_orders_by_co_observation():
+    seen = np.array([[1, 1, 1, 0, 0, 0], [1, 1, 0, 0, 0, 0], [0, 0, 1, 1, 1, 1]], bool)
+    delta, C = covisibility_dissimilarity(seen)
+    assert C[0, 1] == 2 and C[1, 2] == 0
+    assert delta[0, 1] < delta[0, 2] < delta[1, 2]
+
+
+def test_never_sensed_objects_are_unmapped_and_hook_shape():
+    P, seen, r, _ = _simulate(seed=6)
+    seen[7] = False
+    X = np.where(seen, r, 0.0)
+    anchors = _corners(P)
+    anchors = anchors[anchors != 7]
+    if len(anchors) < 3:
+        anchors = np.array([0, 1, 2])
+    Y = build_masked_embedding(X, seen, None, "range", anchor_ids=anchors,
+                               anchor_positions=P[anchors])
+    assert Y.shape == (len(P), 2)
+    assert np.isnan(Y[7]).all() and np.isfinite(np.delete(Y, 7, axis=0)).all()
+
+
+def test_bad_arguments_raise_value_error():
+    P, seen, r, _ = _simulate(n_obj=8, n_steps=500, seed=7)
+    X = np.where(seen, r, 0.0)
+    with pytest.raises(ValueError, match="method"):
+        masked_embedding(X, seen, "range", "nope")
+    with pytest.raises(ValueError, match="unknown parameter"):
+        masked_embedding(X, seen, "range", "range-quantile", bogus=1)
+    with pytest.raises(ValueError, match="range history"):
+        masked_embedding(seen.astype(float), None, "visibility", "range-quantile")
+    with pytest.raises(ValueError, match="quantile"):
+        masked_embedding(X, seen, "range", quantile=1.5)
+    with pytest.raises(ValueError, match="anchors"):
+        masked_embedding(X, seen, "range", anchor_ids=np.array([0, 1]),
+                         anchor_positions=P[:2])
+    assert set(MASKED_METHODS) >= {"range-quantile", "covis-nonmetric", "masked-euclidean"}

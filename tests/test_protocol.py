@@ -1,0 +1,209 @@
+"""The protocol: its plan of units, seeding, resumable runs, parallel and Dask engines, figures."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from lfmdr_gym.experiments import figures
+from lfmdr_gym.experiments.protocol import (
+    ProtocolConfig,
+    collect_episode,
+    default_params,
+    grid_params,
+    param_label,
+    parse_params,
+    run_protocol,
+)
+from lfmdr_gym.experiments.store import SettingsMismatchError, read_results
+
+METHODS = ("LPCA", "SMA(WGT)", "ISOMAP")
+SMALL = dict(mode="visibility", layouts=1, poses=2, steps=200, every=100, methods=METHODS)
+
+
+def _without_seconds(rows):
+    return [{k: v for k, v in r.items() if k != "seconds"} for r in rows]
+
+
+def _same_rows(a, b):
+    """Rows equal up to wall time (NaN scores of failed units compare equal)."""
+    a, b = _without_seconds(a), _without_seconds(b)
+    assert len(a) == len(b)
+    for ra, rb in zip(a, b, strict=True):
+        for k in ra:
+            if isinstance(ra[k], float) and math.isnan(ra[k]):
+                assert math.isnan(rb[k]), (k, ra, rb)
+            else:
+                assert ra[k] == rb[k], (k, ra, rb)
+
+
+@pytest.fixture(scope="module")
+def clean_run(tmp_path_factory):
+    """One uninterrupted small protocol run, shared by the comparisons below."""
+    out = tmp_path_factory.mktemp("clean")
+    summary = run_protocol(ProtocolConfig(**SMALL), out, progress=False)
+    return out, summary, read_results(out / "results.csv")
+
+
+# ------------------------------------------------------------------ configuration and plan
+def test_config_defaults_follow_the_paper():
+    vis = ProtocolConfig(mode="visibility", methods=["lpca"])
+    bea = ProtocolConfig(mode="bearing", methods=["lpca"])
+    assert (vis.layouts, vis.poses, vis.steps, vis.every) == (5, 5, 2000, 500)
+    assert bea.every == 200 and bea.checkpoints[-1] == 2000 and len(bea.checkpoints) == 10
+    assert vis.methods == ("LPCA",)  # labels matched case-insensitively
+    from mappers import METHODS as ALL
+
+    assert ProtocolConfig().methods == tuple(ALL)  # all methods by default, in table order
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"layouts": 0}, "layouts must be a positive integer"),
+        ({"poses": -1}, "poses must be a positive integer"),
+        ({"steps": 250, "every": 100}, r"steps \(250\) must be a multiple of every \(100\)"),
+        ({"methods": ["LPCA", "NOPE"]}, "unknown method 'NOPE'"),
+        ({"mode": "smell"}, "mode must be one of"),
+    ],
+)
+def test_bad_config_is_a_value_error(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        ProtocolConfig(**{**SMALL, **kwargs})
+
+
+def test_units_cover_the_grid_at_n_and_the_default_everywhere():
+    config = ProtocolConfig(**SMALL)
+    units = config.units()
+    keys = [config.key(u) for u in units]
+    assert len(keys) == len(set(keys)), "a unit is planned twice"
+    for method in METHODS:
+        grid = {param_label(p) for p in grid_params(method)}
+        at_n = {u.param for u in units if u.method == method and u.n_steps == 200}
+        assert at_n == grid | {param_label(default_params(method))}
+        early = {u.param for u in units if u.method == method and u.n_steps == 100}
+        assert early == {param_label(default_params(method))}
+    per_episode = sum(len(grid_params(m)) + 1 for m in METHODS)  # grid at N, default at N=100
+    assert len(units) == 2 * per_episode
+
+
+def test_param_labels_round_trip():
+    assert param_label({}) == "-"
+    assert param_label({"sigma2": 0.5, "K": 5}) == "K=5,sigma2=0.5"
+    assert parse_params(["K=5,sigma2=0.5"]) == {"K": 5, "sigma2": 0.5}
+    assert parse_params(["-"]) == {}
+    with pytest.raises(ValueError, match="NAME=VALUE"):
+        parse_params(["K5"])
+
+
+def test_poses_share_their_layout_and_layouts_differ():
+    config = ProtocolConfig(mode="visibility", layouts=2, poses=2, steps=20, every=10,
+                            methods=["LPCA"])
+    eps = config.episodes()
+    hs = {(e.layout, e.pose): collect_episode(e) for e in eps}
+    np.testing.assert_array_equal(hs[0, 0].object_positions, hs[0, 1].object_positions)
+    np.testing.assert_array_equal(hs[0, 0].anchor_ids, hs[0, 1].anchor_ids)
+    assert not np.array_equal(hs[0, 0].robot_poses, hs[0, 1].robot_poses)
+    assert not np.array_equal(hs[0, 0].object_positions, hs[1, 0].object_positions)
+    again = collect_episode(eps[1])
+    np.testing.assert_array_equal(again.matrix, hs[0, 1].matrix)  # deterministic
+    assert hs[0, 1].meta["layout"] == 0 and hs[0, 1].meta["pose"] == 1
+
+
+# ------------------------------------------------------------------ running
+def test_small_protocol_writes_every_row_table_and_figures(clean_run):
+    out, summary, rows = clean_run
+    config = ProtocolConfig(**SMALL)
+    assert summary.total_units == len(config.units()) == len(rows) == summary.computed
+    assert {(r["layout"], r["pose"]) for r in rows} == {(0, 0), (0, 1)}
+    assert all(r["mode"] == "visibility" for r in rows)
+    ok = [r for r in rows if not r["error"]]
+    assert ok and all(0 <= r["mpe"] < 3 and 0 <= r["moe"] <= 100 for r in ok)
+    assert (out / "histories" / "L0_P0.npz").is_file()
+    table = (out / "table.md").read_text()
+    for method in METHODS:
+        assert f"| {method} |" in table
+    assert "1.055" in table  # the paper's LPCA figure beside ours
+    for name in ("mpe_vs_n.png", "map_lpca.png"):
+        png = out / name
+        assert png.stat().st_size > 10_000
+        from matplotlib.image import imread
+
+        assert imread(png).std() > 0.01  # not a blank canvas
+    assert len(list(out.glob("map_*.png"))) == 2  # LPCA and the best method
+
+
+def test_rerun_resumes_without_recomputing(clean_run, tmp_path):
+    out, _, rows = clean_run
+    summary = run_protocol(ProtocolConfig(**SMALL), out, progress=False, report=False)
+    assert summary.computed == 0 and summary.resumed == len(rows)
+    _same_rows(read_results(out / "results.csv"), rows)
+
+
+def test_other_settings_on_the_same_directory_are_refused(clean_run):
+    out, _, _ = clean_run
+    with pytest.raises(SettingsMismatchError, match="steps: 200 in the directory, 400 now"):
+        run_protocol(ProtocolConfig(**{**SMALL, "steps": 400}), out, progress=False)
+
+
+def test_partial_journal_is_completed_to_the_same_rows(clean_run, tmp_path):
+    """A run stopped after some units resumes to exactly the rows of a clean run."""
+    _, _, rows = clean_run
+    config = ProtocolConfig(**SMALL)
+    from lfmdr_gym.experiments.store import ResultStore
+
+    with ResultStore(tmp_path, config.settings()) as store:
+        store.add(rows[::3])  # as if a third of the units had finished before a crash
+    summary = run_protocol(config, tmp_path, progress=False, report=False)
+    assert summary.resumed == len(rows[::3])
+    assert summary.computed == len(rows) - len(rows[::3])
+    _same_rows(read_results(tmp_path / "results.csv"), rows)
+
+
+def test_two_worker_processes_give_the_same_rows(clean_run, tmp_path):
+    _, _, rows = clean_run
+    run_protocol(ProtocolConfig(**SMALL), tmp_path, jobs=2, progress=False, report=False)
+    _same_rows(read_results(tmp_path / "results.csv"), rows)
+
+
+def test_dask_cluster_gives_the_same_rows(clean_run, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    _, _, rows = clean_run
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        summary = run_protocol(ProtocolConfig(**SMALL), tmp_path,
+                               scheduler=cluster.scheduler_address, progress=False, report=False)
+    assert summary.computed == len(rows)
+    _same_rows(read_results(tmp_path / "results.csv"), rows)
+
+
+def test_unreachable_scheduler_is_a_clear_error(tmp_path):
+    with pytest.raises(ValueError, match="cannot reach the Dask scheduler"):
+        run_protocol(ProtocolConfig(**SMALL), tmp_path, scheduler="tcp://127.0.0.1:1",
+                     scheduler_timeout=1.0, progress=False)
+
+
+def test_bad_jobs_is_refused(tmp_path):
+    with pytest.raises(ValueError, match="jobs must be"):
+        run_protocol(ProtocolConfig(**SMALL), tmp_path, jobs=0)
+
+
+# ------------------------------------------------------------------ tables
+def _rows(values):
+    return [
+        {"mode": "visibility", "layout": 0, "pose": i, "method": m, "param": p, "n_steps": 100,
+         "mpe": v, "moe": 1.0, "mpe_nonanchor": v, "unmapped": 0, "seconds": 0.0,
+         "error": "" if math.isfinite(v) else "boom"}
+        for m, p, vs in values for i, v in enumerate(vs)
+    ]
+
+
+def test_best_param_is_lowest_mean_mpe_and_penalises_failures():
+    rows = _rows([("X", "K=4", [0.3, 0.5]), ("X", "K=5", [0.2, 0.4]), ("X", "K=6", [0.1, math.nan])])
+    best = figures.best_params(rows, n_steps=100)["X"]
+    assert best["param"] == "K=5"  # K=6 is lower but failed on a run
+    assert best["mpe_mean"] == pytest.approx(0.3)
+    assert best["mpe_std"] == pytest.approx(np.std([0.2, 0.4], ddof=1))
+    assert (best["runs"], best["failed"]) == (2, 0)
