@@ -9,12 +9,13 @@ For each run and mode (4 corner anchors, all 5 robots, scores over the 11 non-an
   unweighted SMACOF from classical MDS, affine fit to the anchors);
 * ``masked-euclidean`` (bearing, range): RMS history difference over co-observed bins only,
   weighted SMACOF over the pairs that have it (the plain SPEC §7 recipe);
-* ``default``: the mode's default method with its default settings;
-* ``LOO``: the method with the setting chosen *without* the run (lowest mean MPE over the other
-  runs in a small grid), i.e. a score on a run the setting was not tuned on.
+* each masked method of mappers/missing.py that suits the mode, with its default settings;
+* ``<method> LOO``: the method with the setting chosen *without* the run (lowest mean MPE over
+  the other runs in a small grid), i.e. a score on a run the setting was not tuned on.
 
 Settings grids: covis-nonmetric (visibility, bearing): bin width {1, 2, 3, 5} s x min_co {3, 5};
-range-quantile: bin width {0.25, 0.5, 1} s x quantile {0.95, 0.98, 0.99}.
+range-quantile: bin width {0.25, 0.5, 1} s x quantile {0.95, 0.98, 0.99}; range-bounds: the same
+x slack {0.5, 1}.
 """
 
 from __future__ import annotations
@@ -37,8 +38,17 @@ GRIDS = {
         {"bin_width": bw, "quantile": q}
         for bw, q in itertools.product([0.25, 0.5, 1.0], [0.95, 0.98, 0.99])
     ],
+    "range-bounds": [
+        {"bin_width": bw, "quantile": q, "slack": sl}
+        for bw, q, sl in itertools.product([0.25, 0.5, 1.0], [0.95, 0.98, 0.99], [0.5, 1.0])
+    ],
+    "masked-euclidean": [],
 }
-DEFAULT_METHOD = {"visibility": "covis-nonmetric", "bearing": "covis-nonmetric", "range": "range-quantile"}
+CANDIDATES = {
+    "visibility": ["covis-nonmetric"],
+    "bearing": ["masked-euclidean", "covis-nonmetric"],
+    "range": ["masked-euclidean", "range-quantile", "range-bounds"],
+}
 
 
 def _run(run_dir: Path, mode: str, method: str | None, **kw):
@@ -56,55 +66,53 @@ def main(argv: list[str] | None = None) -> None:
     runs = sorted(p for p in args.data.glob("MRCLAM_Dataset*") if p.is_dir())
     if not runs:
         raise SystemExit(f"no MRCLAM_Dataset* directories under {args.data}")
-    modes = args.modes.split(",")
     t_start = time.perf_counter()
-    notes: dict[str, tuple[str, ...]] = {}
-    for mode in modes:
-        method = DEFAULT_METHOD[mode]
-        grid = GRIDS[method]
-        # every setting on every run (the LOO choice needs them all)
-        table = np.zeros((len(grid), len(runs)))
-        for g, setting in enumerate(grid):
-            for r, run in enumerate(runs):
-                table[g, r] = _run(run, mode, method, **setting).mpe
-        print(f"\n## mode = {mode}   (MPE [m] / MOE [%] over non-anchor landmarks)")
-        head = f"{'run':<16}{'centroid':>10}{'naive 1s':>16}"
-        if mode != "visibility":
-            head += f"{'masked-eucl.':>16}"
-        head += f"{'default':>16}{'LOO':>16}  LOO setting"
-        print(head)
-        sums: dict[str, list[float]] = {"centroid": [], "naive": [], "me": [], "default": [], "loo": []}
-        for r, run in enumerate(runs):
-            naive = _run(run, mode, "naive", bin_width=1.0)
-            default = _run(run, mode, None)
-            others = [k for k in range(len(runs)) if k != r]
-            best = int(np.argmin(table[:, others].mean(axis=1)))
-            loo = _run(run, mode, method, **grid[best])
-            notes[run.name] = default.warnings
-            line = f"{run.name:<16}{default.centroid_mpe:>10.2f}{naive.mpe:>9.2f}/{naive.moe:>5.1f}"
-            sums["centroid"].append(default.centroid_mpe)
-            sums["naive"].append(naive.mpe)
-            if mode != "visibility":
-                me = _run(run, mode, "masked-euclidean")
-                line += f"{me.mpe:>9.2f}/{me.moe:>5.1f}"
-                sums["me"].append(me.mpe)
-            line += f"{default.mpe:>9.2f}/{default.moe:>5.1f}{loo.mpe:>9.2f}/{loo.moe:>5.1f}  {grid[best]}"
-            sums["default"].append(default.mpe)
-            sums["loo"].append(loo.mpe)
-            print(line)
-        for label, sel in (("mean (all)", slice(None)), ("mean (spread)", slice(0, 3))):
-            if label == "mean (spread)" and len(runs) != 4:
+    notes: dict[str, list[str]] = {}
+    for mode in args.modes.split(","):
+        cols: list[tuple[str, list]] = []  # (label, per-run results)
+        cols.append(("naive 1s", [_run(run, mode, "naive", bin_width=1.0) for run in runs]))
+        chosen: dict[str, list[str]] = {}
+        for method in CANDIDATES[mode]:
+            default = [_run(run, mode, method) for run in runs]
+            cols.append((method, default))
+            grid = GRIDS[method]
+            if not grid:
                 continue
-            line = f"{label:<16}{np.mean(sums['centroid'][sel]):>10.2f}{np.mean(sums['naive'][sel]):>9.2f}{'':>6}"
-            if mode != "visibility":
-                line += f"{np.mean(sums['me'][sel]):>9.2f}{'':>6}"
-            line += f"{np.mean(sums['default'][sel]):>9.2f}{'':>6}{np.mean(sums['loo'][sel]):>9.2f}"
+            table = np.array([[_run(run, mode, method, **g).mpe for run in runs] for g in grid])
+            loo, picks = [], []
+            for r, run in enumerate(runs):
+                others = [k for k in range(len(runs)) if k != r]
+                best = int(np.argmin(table[:, others].mean(axis=1)))
+                loo.append(_run(run, mode, method, **grid[best]))
+                picks.append(", ".join(f"{k}={v}" for k, v in grid[best].items()))
+            cols.append((f"{method} LOO", loo))
+            chosen[method] = picks
+        for run, res in zip(runs, cols[-1][1], strict=True):
+            notes.setdefault(run.name, [])
+            for w in res.warnings:
+                if w not in notes[run.name]:
+                    notes[run.name].append(w)
+        print(f"\n## mode = {mode}   MPE [m] / MOE [%] over the 11 non-anchor landmarks")
+        print(f"{'run':<16}{'centroid':>9}" + "".join(f"{label:>24}" for label, _ in cols))
+        for r, run in enumerate(runs):
+            line = f"{run.name:<16}{cols[0][1][r].centroid_mpe:>9.2f}"
+            line += "".join(f"{res[r].mpe:>17.2f} /{res[r].moe:>5.1f}" for _, res in cols)
             print(line)
-    print("\n(mean (spread) = the three spread-out layouts DS1-3; DS6 is the clustered one)")
-    print("\nwarnings per run (default method):")
+        groups = [("mean (all)", list(range(len(runs))))]
+        spread = [k for k, run in enumerate(runs) if not run.name.endswith("Dataset6")]
+        if len(spread) != len(runs):
+            groups.append(("mean (DS1-3)", spread))
+        for label, idx in groups:
+            line = f"{label:<16}{np.mean([cols[0][1][k].centroid_mpe for k in idx]):>9.2f}"
+            line += "".join(f"{np.mean([res[k].mpe for k in idx]):>17.2f} /{np.mean([res[k].moe for k in idx]):>5.1f}" for _, res in cols)
+            print(line)
+        for method, picks in chosen.items():
+            print(f"LOO settings chosen for {method}: " + "; ".join(
+                f"{run.name[-1]}: {p}" for run, p in zip(runs, picks, strict=True)))
+    print("\nwarnings per run:")
     for name, ws in notes.items():
         for w in ws:
-            print(f"  {name}: {w[:160]}{'...' if len(w) > 160 else ''}")
+            print(f"  {name}: {w[:200]}{'...' if len(w) > 200 else ''}")
     print(f"\n[{time.perf_counter() - t_start:.0f} s]")
 
 

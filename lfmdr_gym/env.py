@@ -27,7 +27,8 @@ class VisibilityObservation:
         self.visual_angle = math.radians(env.visual_angle_deg)
         self.occlusion = env.occlusion
         self.n_objects = env.world.n_objects
-        self.reach = sensors.visibility_distance(self.radius, self.visual_angle) + self.radius
+        # Targets lie within d_vis; their occluders within sqrt(d_vis^2 + r^2) (see sensors).
+        self.reach = math.hypot(sensors.visibility_distance(self.radius, self.visual_angle), self.radius)
         self.space = spaces.MultiBinary(env.world.n_objects)
 
     def observe(self, rel, d2, heading, cand, rc, dc2) -> np.ndarray:
@@ -114,9 +115,10 @@ class LFMDREnv(gym.Env):
     - ``"proximity"``: ``Box(0, proximity_range, (n_proximity_rays,), float32)``: ray k points at
       ``heading + 2 pi k / n_proximity_rays`` (CCW, ray 0 straight ahead); its value is the
       distance from the robot's centre to the first obstacle (object surface or wall), capped at
-      ``proximity_range``. Enough for a policy to avoid obstacles from the observation alone:
-      a move along ray k collides iff its reading is below ``step_length + robot_radius``
-      (within the ray's angular resolution).
+      ``proximity_range``. It lets a policy avoid obstacles from the observation alone: a
+      reading below ``step_length + robot_radius`` on the ray a move follows means that move
+      hits something. Rays are thin and the robot is not, so an object lying between rays can
+      still block a move; the physics then stops the robot short (``info["blocked"]``).
 
     ## Action Space
 
@@ -156,8 +158,9 @@ class LFMDREnv(gym.Env):
     Lengths in metres. ``object_clearance``/``wall_clearance``: least gap between two objects'
     surfaces / between an object and a wall in random layouts. ``anchors``: ``"corners"`` (the
     objects nearest ``n_anchors`` points spread along the walls from a corner; the four corners
-    by default) or ``"random"``; ``n_anchors >= 3``. Every argument is checked on construction
-    (``ValueError`` naming it).
+    by default) or ``"random"``; ``n_anchors >= 3``. ``visual_angle_deg`` and ``occlusion``
+    shape the visibility sensor, ``max_range`` the range sensor; the others ignore them. Every
+    argument is checked on construction (``ValueError`` naming it).
 
     ## Version History
 

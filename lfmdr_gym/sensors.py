@@ -71,8 +71,8 @@ def ray_directions(n_rays: int) -> np.ndarray:
 def candidates(d2: np.ndarray, reach: float) -> np.ndarray:
     """Indices of the objects nearer than ``reach`` (squared distances ``d2``): a cheap prefilter.
 
-    Each sensor below only needs objects within a known distance (visibility: ``d_vis + r``;
-    proximity: ``max_range + r``), so the per-step work scales with the few objects nearby
+    Each sensor below only needs objects within a known distance (visibility:
+    ``hypot(d_vis, r)``; proximity: ``max_range + r``), so the per-step work scales with the few objects nearby
     rather than with M.
     """
     return (d2 < reach * reach).nonzero()[0]
@@ -89,11 +89,11 @@ def visibility_from_candidates(
 ) -> np.ndarray:
     """Kernel of :func:`visibility` on a candidate subset.
 
-    ``cand`` indexes every object nearer than ``visibility_distance(radius, visual_angle) +
-    radius`` (more is fine); ``rc`` (K, 2) and ``dc2`` (K,) are their offsets from the robot and
-    squared distances. Targets are the candidates nearer than the visibility distance; an
-    occluder of a target is nearer than ``sqrt(d_vis^2 + r^2) < d_vis + r``, so among the
-    candidates too.
+    ``cand`` indexes every object nearer than ``hypot(d_vis, radius)`` with ``d_vis =
+    visibility_distance(radius, visual_angle)`` (more is fine); ``rc`` (K, 2) and ``dc2`` (K,)
+    are their offsets from the robot and squared distances. Targets are the candidates nearer
+    than ``d_vis``; an occluder k of target j has ``d_k^2 = t^2 + h^2 < d_j^2 + r^2``, so it is
+    among the candidates too.
     """
     out = np.zeros(n_objects, dtype=np.int8)
     d_vis = visibility_distance(radius, visual_angle)
@@ -149,7 +149,7 @@ def visibility(
     """
     radius, visual_angle = float(radius), float(visual_angle)
     _, _, _, rel, d2 = _pose_and_rel(pose, objects)
-    cand = candidates(d2, visibility_distance(radius, visual_angle) + radius)
+    cand = candidates(d2, math.hypot(visibility_distance(radius, visual_angle), radius))
     return visibility_from_candidates(
         d2.shape[0], cand, rel[cand], d2[cand], radius, visual_angle, bool(occlusion)
     )

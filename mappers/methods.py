@@ -307,7 +307,7 @@ def _hlle(n_neighbors: int = 8, random_state=None) -> LocallyLinear:
 
 
 def _sde(
-    n_neighbors: int = 7, solver: str = "SCS", tol: float = 1e-3, n_basis: int | None = None
+    n_neighbors: int = 7, solver: str = "auto", tol: float = 1e-3, n_basis: int | None = None
 ) -> MaximumVarianceUnfolding:
     return MaximumVarianceUnfolding(
         n_neighbors=n_neighbors, solver=solver, tol=tol, n_basis=n_basis

@@ -18,6 +18,15 @@ assumptions they add:
     or two); over the run some viewpoints are nearly collinear with each observed pair
     (robots roam the whole area); ranges are calibrated (unbiased, metric).
 
+``"range-bounds"`` (range sensor)
+    ``range-quantile`` plus an upper bound from the field of view: two landmarks in one image
+    are at most ``fov`` apart in bearing, so ``d_ij <= sqrt(r_i^2 + r_j^2 - 2 r_i r_j cos(fov))``
+    (the ``upper_quantile`` of that over the shared steps). Starting from the range-quantile map,
+    SMACOF iterates with each pair's target clipped to ``[L_ij, min(U_ij, (1 + slack) L_ij)]``
+    (``L`` = the range-quantile estimate, which is a lower bound in nature: robots are rarely
+    exactly collinear with far-apart pairs). *Assumes* additionally: the camera's full field of
+    view ``fov`` (MRCLAM: |bearing| <= 0.61 rad, so 1.22 rad).
+
 ``"covis-nonmetric"`` (any sensor; uses only the pattern of what was observed)
     Co-observation counts ``C_ij`` (steps in which both were sensed) normalised by how often
     each was sensed (Ochiai / cosine, the missing-data analogue of the paper's L2-normalised
@@ -61,7 +70,9 @@ __all__ = [
     "co_observation_counts",
     "covisibility_dissimilarity",
     "masked_embedding",
+    "bounded_smacof",
     "masked_euclidean_dissimilarity",
+    "range_pair_bounds",
     "nonmetric_smacof",
     "range_pair_distances",
     "step_observations",
@@ -69,6 +80,8 @@ __all__ = [
 
 MASKED_METHODS: dict[str, dict[str, Any]] = {
     "range-quantile": {"quantile": 0.98, "min_pairs": 5, "weight_cap": 50},
+    "range-bounds": {"quantile": 0.98, "min_pairs": 5, "weight_cap": 50, "slack": 1.0,
+                     "fov": 1.22, "upper_quantile": 0.02},
     "covis-nonmetric": {"min_co": 3},
     "masked-euclidean": {"min_pairs": 5},
 }
@@ -165,6 +178,29 @@ def range_pair_distances(
     counts[counts < min_pairs] = 0
     np.fill_diagonal(counts, 0)
     return delta, counts
+
+
+def range_pair_bounds(
+    ranges: np.ndarray, seen: np.ndarray, *, fov: float = 1.22, upper_quantile: float = 0.02,
+    min_pairs: int = 5,
+) -> np.ndarray:
+    """Upper bounds on pair distances from same-step ranges and a field of view ``fov`` [rad]:
+    the ``upper_quantile`` of ``sqrt(r_i^2 + r_j^2 - 2 r_i r_j cos(fov))``; inf where missing."""
+    if not 0 < fov <= np.pi:
+        raise ValueError(f"fov must be in (0, pi] radians, got {fov}")
+    if not 0 <= upper_quantile <= 1:
+        raise ValueError(f"upper_quantile must be in [0, 1], got {upper_quantile}")
+    M = seen.shape[0]
+    upper = np.full((M, M), np.inf)
+    for i in range(M):
+        for j in range(i + 1, M):
+            both = seen[i] & seen[j]
+            if both.sum() >= min_pairs:
+                ri, rj = ranges[i, both], ranges[j, both]
+                u = np.sqrt(np.maximum(ri**2 + rj**2 - 2 * ri * rj * np.cos(fov), 0.0))
+                upper[i, j] = upper[j, i] = np.quantile(u, upper_quantile)
+    np.fill_diagonal(upper, 0.0)
+    return upper
 
 
 def masked_euclidean_dissimilarity(
@@ -275,6 +311,37 @@ def nonmetric_smacof(
     return X
 
 
+def bounded_smacof(
+    lower: np.ndarray,
+    upper: np.ndarray,
+    weights: np.ndarray,
+    init: np.ndarray,
+    *,
+    fixed: np.ndarray | None = None,
+    fixed_positions: np.ndarray | None = None,
+    max_iter: int = 500,
+    tol: float = 1e-7,
+) -> np.ndarray:
+    """Weighted SMACOF on distance *intervals*: each iteration's target for a pair is its current
+    distance clipped to ``[lower, upper]`` (zero stress inside the interval), then one Guttman
+    step of :func:`mappers.smacof.weighted_smacof` (box-constrained stress; sklearn has none)."""
+    lower = np.asarray(lower, dtype=float)
+    upper = np.maximum(np.asarray(upper, dtype=float), lower)
+    X = np.array(init, dtype=float)
+    if fixed is not None and fixed_positions is not None:
+        X[np.asarray(fixed)] = fixed_positions
+    for _ in range(max_iter):
+        D = np.linalg.norm(X[:, None] - X[None], axis=2)
+        T = np.clip(D, lower, upper)
+        np.fill_diagonal(T, 0.0)
+        X_new, _, _ = weighted_smacof(T, weights, X, fixed=fixed, max_iter=1, tol=0.0)
+        step = np.abs(X_new - X).max()
+        X = X_new
+        if step <= tol * max(np.abs(X).max(), 1e-12):
+            break
+    return X
+
+
 # ---------------------------------------------------------------------------- entry points
 @dataclass(frozen=True, eq=False)
 class MaskedMap:
@@ -326,8 +393,8 @@ def masked_embedding(
     unknown = set(params) - set(MASKED_METHODS[method])
     if unknown:
         raise ValueError(f"unknown parameter(s) {sorted(unknown)} for method {method!r}")
-    if method == "range-quantile" and sensor != "range":
-        raise ValueError(f"method 'range-quantile' needs a range history, got sensor {sensor!r}")
+    if method.startswith("range-") and sensor != "range":
+        raise ValueError(f"method {method!r} needs a range history, got sensor {sensor!r}")
     p = {**MASKED_METHODS[method], **params}
     seen, values = step_observations(X, mask, sensor)
     M = seen.shape[0]
@@ -353,7 +420,7 @@ def masked_embedding(
 
     s, v = seen[keep], values[keep]
     censored = None
-    if method == "range-quantile":
+    if method.startswith("range-"):
         delta, counts = range_pair_distances(v, s, quantile=p["quantile"], min_pairs=p["min_pairs"])
         W = np.minimum(counts, p["weight_cap"]) / p["weight_cap"]
     elif method == "masked-euclidean":
@@ -387,6 +454,14 @@ def masked_embedding(
         Y, _, _ = weighted_smacof(
             delta, W, start, fixed=sub_anchor, fixed_positions=anchor_positions, max_iter=max_iter
         )
+        if method == "range-bounds":
+            if p["slack"] < 0:
+                raise ValueError(f"slack must be >= 0, got {p['slack']}")
+            upper = range_pair_bounds(v, s, fov=p["fov"], upper_quantile=p["upper_quantile"],
+                                      min_pairs=p["min_pairs"])
+            upper = np.minimum(upper, (1.0 + p["slack"]) * delta)
+            Y = bounded_smacof(delta, upper, W, Y, fixed=sub_anchor,
+                               fixed_positions=anchor_positions, max_iter=max(max_iter, 500))
         if method == "masked-euclidean" and sub_anchor is not None:
             # a history difference has no metric scale: the anchors can only fix an affine frame
             free, _, _ = weighted_smacof(delta, W, start, max_iter=max_iter)

@@ -137,7 +137,11 @@ def _check_anchors(anchor_ids: Any, anchor_positions: Any, m: int) -> tuple[np.n
 
 
 def _embed(
-    method: str, est: Any, X: np.ndarray, fit_params: dict[str, Any] | None = None
+    method: str,
+    est: Any,
+    X: np.ndarray,
+    fit_params: dict[str, Any] | None = None,
+    allow_nan_rows: bool = False,
 ) -> tuple[np.ndarray, list[str]]:
     n = X.shape[0]
     with warnings.catch_warnings(record=True) as caught, _thread_limit(n):
@@ -149,13 +153,31 @@ def _embed(
         except Exception as exc:  # any failure inside a method becomes one clear error
             raise MappingError(f"method {method!r} failed: {type(exc).__name__}: {exc}") from exc
     Y = np.asarray(Y, dtype=float)
-    if Y.shape != (n, 2) or not np.all(np.isfinite(Y)):
+    finite_rows = np.all(np.isfinite(Y), axis=1) if Y.shape == (n, 2) else None
+    if finite_rows is None or not (finite_rows.all() or (allow_nan_rows and finite_rows.any())):
         raise MappingError(
             f"method {method!r} failed: returned an embedding of shape {Y.shape} "
             f"{'with NaN/inf' if Y.size and not np.all(np.isfinite(Y)) else ''}".rstrip()
         )
     notes = list(dict.fromkeys(f"{method}: {w.category.__name__}: {w.message}" for w in caught))
     return Y, notes
+
+
+def _usable_anchors(
+    ids: np.ndarray, pos: np.ndarray, ok: np.ndarray, why: str, notes: list[str]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Drop anchors that are not ``ok`` (with a note); ValueError if fewer than 3 remain."""
+    if ok.all():
+        return ids, pos
+    lost = ids[~ok].tolist()
+    if ok.sum() < 3:
+        raise ValueError(
+            f"anchors {lost} {why} (unmapped): only {int(ok.sum())} anchors remain, "
+            "at least 3 are needed"
+        )
+    check_not_collinear(pos[ok], "remaining anchor positions (world)")
+    notes.append(f"anchors {lost} {why} and were not used for the fit")
+    return ids[ok], pos[ok]
 
 
 def build_map(
@@ -239,17 +261,7 @@ def build_map(
     has_data = np.any((X != 0) if mask is None else (mask & (X != 0)), axis=1)
     unmapped = tuple(int(i) for i in np.flatnonzero(~has_data))
     notes: list[str] = []
-    anchor_ok = has_data[ids]
-    if not anchor_ok.all():
-        lost = ids[~anchor_ok].tolist()
-        if anchor_ok.sum() < 3:
-            raise ValueError(
-                f"anchors {lost} have empty histories (unmapped): only {int(anchor_ok.sum())} "
-                "anchors remain, at least 3 are needed"
-            )
-        check_not_collinear(pos[anchor_ok], "remaining anchor positions (world)")
-        notes.append(f"anchors {lost} have empty histories and were not used for the fit")
-        ids, pos = ids[anchor_ok], pos[anchor_ok]
+    ids, pos = _usable_anchors(ids, pos, has_data[ids], "have empty histories", notes)
     mapped = np.flatnonzero(has_data)
     n = mapped.size
     k = merged.get("n_neighbors")
@@ -282,8 +294,16 @@ def build_map(
     fit_params = None
     if mask is None and spec.uses_anchors:
         fit_params = {"anchor_ids": np.searchsorted(mapped, ids), "anchor_positions": pos}
-    Y, caught = _embed(method, est, Xm, fit_params)
+    Y, caught = _embed(method, est, Xm, fit_params, allow_nan_rows=mask is not None)
     notes.extend(caught)
+    placed = np.all(np.isfinite(Y), axis=1)
+    if not placed.all():  # the masked path may leave objects it could not place
+        lost = mapped[~placed]
+        notes.append(f"objects {lost.tolist()} could not be placed from their masked histories")
+        unmapped = tuple(sorted({*unmapped, *(int(i) for i in lost)}))
+        ok = np.isin(ids, mapped[placed])
+        ids, pos = _usable_anchors(ids, pos, ok, "could not be placed", notes)
+        Y, mapped = Y[placed], mapped[placed]
 
     local = np.searchsorted(mapped, ids)
     try:

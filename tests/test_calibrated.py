@@ -225,6 +225,6 @@ def test_rejects_bad_histories(world):
 
 
 @pytest.mark.filterwarnings("ignore::mappers.calibrated.FoldWarning")
-@parametrize_with_checks([CalibratedSMACOF(n_rounds=3, n_init=0, max_iter=30)])
+@parametrize_with_checks([CalibratedSMACOF(n_rounds=1, n_init=0, max_iter=10)])
 def test_sklearn_compatible(estimator, check):
     check(estimator)

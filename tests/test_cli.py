@@ -108,7 +108,8 @@ def _interrupt_then_resume(tmp_path: Path, sig: int, extra: list[str]) -> tuple[
         # As if the kill had struck in the middle of a write: a torn last line.
         with open(journal, "ab") as fh:
             fh.write(b"visibility,0,2,ISOMAP,K=")
-    resume = _lfmdr("reproduce", *LONGER, *extra, "--out", str(tmp_path))
+    # Resume in one process (the worker count is not a setting, so it may change).
+    resume = _lfmdr("reproduce", *LONGER, "--out", str(tmp_path))
     out, err = resume.communicate(timeout=120)
     assert resume.returncode == 0, err
     return proc.returncode, rows_at_stop
@@ -121,8 +122,10 @@ def test_sigkill_then_rerun_gives_the_rows_of_a_clean_run(clean_longer, tmp_path
     assert _comparable(read_results(tmp_path / "results.csv")) == clean_longer
 
 
-def test_ctrl_c_then_rerun_gives_the_rows_of_a_clean_run(clean_longer, tmp_path):
-    code, stopped = _interrupt_then_resume(tmp_path, signal.SIGINT, ["--jobs", "2"])
+@pytest.mark.parametrize(("sig", "jobs"), [(signal.SIGINT, "2"), (signal.SIGTERM, "1")],
+                         ids=["ctrl-c-2-workers", "sigterm"])
+def test_ctrl_c_then_rerun_gives_the_rows_of_a_clean_run(clean_longer, tmp_path, sig, jobs):
+    code, stopped = _interrupt_then_resume(tmp_path, sig, ["--jobs", jobs])
     assert code == 130
     assert 0 < stopped < len(clean_longer), "Ctrl-C did not land in the middle of the run"
     assert _comparable(read_results(tmp_path / "results.csv")) == clean_longer
@@ -248,7 +251,6 @@ def test_mrclam_bad_robots_is_an_argparse_error(capsys):
 MRCLAM_DATA = Path("/work/shared/data/mrclam")
 
 
-@pytest.mark.slow
 def test_mrclam_on_a_real_run(tmp_path, capsys):
     runs = sorted(p for p in MRCLAM_DATA.glob("*") if p.is_dir()) if MRCLAM_DATA.is_dir() else []
     if not runs:

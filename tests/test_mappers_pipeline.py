@@ -132,19 +132,34 @@ def test_partial_mask_calls_the_missing_data_hook(monkeypatch):
 
     calls = []
 
+    H, P, a = world()
+
     def fake(X, mask, method, sensor, **params):
         calls.append((X.shape, mask.shape, method, sensor, params))
-        return X[:, :2] + 0.01 * np.arange(len(X))[:, None] ** 1.5 * [1, -1]
+        return 2.0 * np.delete(P, 9, axis=0) + 1.0  # an exact (affine) embedding of the others
 
     monkeypatch.setitem(sys.modules, "mappers.missing", types.SimpleNamespace(build_masked_embedding=fake))
-    H, P, a = world()
     H[9] = 0.0  # unmapped: not handed to the hook
     mask = np.ones(H.shape, dtype=bool)
     mask[5, :10] = False
     H[5, :10] = np.nan  # unobserved entries may hold anything
     m = build_map(H, a, P[a], "SMA(WGT)", mask=mask, n_neighbors=6)
     assert calls == [((39, 1200), (39, 1200), "SMA(WGT)", "visibility", {"n_neighbors": 6})]
-    assert m.unmapped == (9,) and np.all(np.isfinite(np.delete(m.positions, 9, axis=0)))
+    assert m.unmapped == (9,)
+    np.testing.assert_allclose(np.delete(m.positions, 9, axis=0), np.delete(P, 9, axis=0), atol=1e-9)
+
+    # NaN rows from the hook: those objects (here object 5 and anchor 2) become unmapped
+    def fake_nan(X, mask, method, sensor, **params):
+        Y = fake(X, mask, method, sensor, **params)
+        Y[[2, 5]] = np.nan  # rows of mapped objects 2 and 5 (9 is not handed over)
+        return Y
+
+    monkeypatch.setitem(sys.modules, "mappers.missing", types.SimpleNamespace(build_masked_embedding=fake_nan))
+    a5 = np.array([0, 1, 2, 3, 20])
+    m = build_map(H, a5, P[a5], "SMA(WGT)", mask=mask)
+    assert m.unmapped == (2, 5, 9) and m.anchor_ids == (0, 1, 3, 20)
+    assert np.all(np.isnan(m.positions[[2, 5, 9]]))
+    assert any("could not be placed" in w for w in m.warnings)
 
 
 def test_method_failure_is_a_mapping_error_naming_method():

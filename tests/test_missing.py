@@ -164,3 +164,48 @@ def test_bad_arguments_raise_value_error():
         masked_embedding(X, seen, "range", anchor_ids=np.array([0, 1]),
                          anchor_positions=P[:2])
     assert set(MASKED_METHODS) >= {"range-quantile", "covis-nonmetric", "masked-euclidean"}
+
+
+def test_build_map_hands_masked_histories_to_this_module():
+    from mappers import build_map
+
+    P, seen, r, _ = _simulate(noise=0.01, seed=8)
+    X = np.where(seen, r, 0.0)
+    anchors = _corners(P)
+    m = build_map(X, anchors, P[anchors], sensor="range", mask=seen)
+    assert _score(m.positions, P, anchors) < 0.3
+
+
+def test_range_bounds_bracket_the_truth_and_map_well():
+    from mappers.missing import range_pair_bounds
+
+    P, seen, r, _ = _simulate(fov=0.6, seed=9)
+    upper = range_pair_bounds(r, seen, fov=1.2, upper_quantile=0.0)
+    lower, counts = range_pair_distances(r, seen, quantile=1.0)
+    D = np.linalg.norm(P[:, None] - P[None], axis=2)
+    ok = counts > 0
+    assert np.all(lower[ok] <= D[ok] + 1e-9) and np.all(D[ok] <= upper[ok] + 1e-9)
+    assert np.all(np.isinf(upper[~ok & ~np.eye(len(P), dtype=bool)]))
+    with pytest.raises(ValueError, match="fov"):
+        range_pair_bounds(r, seen, fov=0.0)
+    X = np.where(seen, r + 0.02 * np.random.default_rng(0).standard_normal(r.shape), 0.0)
+    anchors = _corners(P)
+    mm = masked_embedding(X, seen, "range", "range-bounds", anchor_ids=anchors,
+                          anchor_positions=P[anchors], fov=1.2)
+    assert _score(mm.positions, P, anchors) < 0.15
+
+
+def test_bounded_smacof_has_no_stress_inside_the_intervals():
+    from mappers.missing import bounded_smacof
+
+    rng = np.random.default_rng(10)
+    P = rng.uniform(0, 3, size=(8, 2))
+    D = np.linalg.norm(P[:, None] - P[None], axis=2)
+    W = 1.0 - np.eye(8)
+    # the truth satisfies the intervals: started there, nothing moves
+    X = bounded_smacof(0.8 * D, 1.2 * D, W, P, fixed=np.array([0, 1, 2]))
+    assert np.allclose(X, P)
+    # tight intervals pull a perturbed start back to the truth
+    X = bounded_smacof(D, D, W, P + rng.normal(scale=0.2, size=P.shape),
+                       fixed=np.array([0, 1, 2]), fixed_positions=P[:3])
+    assert np.allclose(X, P, atol=1e-3)

@@ -115,9 +115,18 @@ def test_synthetic_files_have_crlf_and_header(tmp_path):
 
 
 def test_loader_filters_and_counts(tmp_path):
-    with pytest.warns(MRCLAMDataWarning, match="never observed"):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
         h, rep = load_mrclam(_tiny_run(tmp_path), "visibility", robots=(1, 2), bin_width=1.0,
                              anchors=(6, 8, 9))
+    said = [str(w.message) for w in caught if w.category is MRCLAMDataWarning]
+    assert any("[10, 11] were never observed" in m for m in said)
+    assert any("falls apart" in m for m in said)
+    assert h.meta["warnings"] == said
+    from lfmdr_gym.history import History
+
+    back = History.load(h.save(tmp_path / "tiny.npz"))
+    assert back.meta == h.meta and np.array_equal(back.matrix, h.matrix)
     assert (rep.rows, rep.robot_rows, rep.unknown_barcode_rows, rep.repeat_rows) == (9, 1, 1, 1)
     assert rep.landmark_rows == 6 and rep.per_robot_landmark_rows == {1: 4, 2: 2}
     for key in ("robot_rows", "unknown_barcode_rows", "repeat_rows", "landmark_rows"):

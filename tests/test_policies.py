@@ -215,3 +215,21 @@ def test_coverage_policy_example_runs_and_meets_the_contract(tmp_path, capsys):
         assert env.action_space.contains(action)
         obs, *_ = env.step(action)
     assert policy(_obs(batch=3)).shape == (3, 1)
+
+
+def test_random_walk_fast_path_decides_like_the_vectorised_plan():
+    # _first_choice (plain Python for the first draws) must agree with _plan (numpy, all draws)
+    env = gym.make("LFMDR-Visibility-v0")
+    walker = RandomWalkPolicy.for_env(env, seed=0)
+    obs, _ = env.reset(seed=2)
+    rng = np.random.default_rng(0)
+    crowded = 0
+    for _ in range(400):
+        prox = obs["proximity"].astype(np.float64)
+        turns = rng.uniform(-math.pi / 4, math.pi / 4, (1, 16))
+        free, safe = walker._plan(prox[None], turns)
+        expected = safe[0].argmax() if safe.any() else (free[0].argmax() if free.any() else -1)
+        assert walker._first_choice(prox, turns[0]) == expected
+        crowded += not safe[0, :3].any()
+        obs, *_ = env.step(walker(obs))
+    assert crowded > 10  # the vectorised fallback inside _first_choice was exercised too

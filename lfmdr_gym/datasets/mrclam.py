@@ -670,7 +670,8 @@ def _plot(path: Path, result: MRCLAMMap) -> None:
     title = (f"{result.run} {result.mode} ({result.method}): MPE {result.mpe:.2f} m, "
              f"MOE {result.moe:.1f} %")
     if result.warnings:
-        title += f"\n{len(result.warnings)} warning(s): see map.csv's run output"
+        first = result.warnings[0]
+        title += f"\nWARNING ({len(result.warnings)}): {first[:80]}{'...' if len(first) > 80 else ''}"
     ax.set_title(title, fontsize=9)
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")

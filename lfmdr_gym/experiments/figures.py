@@ -109,6 +109,20 @@ def best_params(rows: Sequence[Mapping[str, Any]], n_steps: int) -> dict[str, di
     return best
 
 
+_PAPER_NAMES = (("n_neighbors=", "K="), ("degree=", "d="), ("sigma2=", "σ²="))
+
+
+def paper_notation(param: str) -> str:
+    """``"n_neighbors=5"`` -> ``"K=5"``: parameter labels in the paper's notation, for tables."""
+    for ours, theirs in _PAPER_NAMES:
+        param = param.replace(ours, theirs)
+    return param
+
+
+def _legend(method: str, param: str) -> str:
+    return method if param == "-" else f"{method} ({paper_notation(param)})"
+
+
 def _pm(mean: float, std: float, digits: int) -> str:
     if not math.isfinite(mean):
         return "failed"
@@ -166,7 +180,8 @@ def write_table(
     for r in table:
         pm = r["paper_mpe"] if r["paper_mpe"] != "" else r["paper_note"]
         lines.append(
-            f"| {r['method']} | {r['param']} | {_pm(r['mpe_mean'], r['mpe_std'], 3)} "
+            f"| {r['method']} | {paper_notation(r['param'])} "
+            f"| {_pm(r['mpe_mean'], r['mpe_std'], 3)} "
             f"| {_pm(r['moe_mean'], r['moe_std'], 2)} "
             f"| {_pm(r['mpe_nonanchor_mean'], r['mpe_nonanchor_std'], 3)} "
             f"| {r['runs']} ({r['failed']}) | {r['paper_param'] or '—'} | {pm or '—'} "
@@ -207,7 +222,7 @@ def plot_curves(
             ns = sorted(series[m])
             stats = [_mean_std(series[m][n]) for n in ns]
             ax.errorbar(ns, [s[0] for s in stats], yerr=[s[1] for s in stats], marker="o",
-                        capsize=3, label=f"{m} ({curve_params.get(m, '-')})")
+                        capsize=3, label=_legend(m, curve_params.get(m, "-")))
         ax.set_xlabel("N (steps)")
         ax.set_ylabel("mean position error [m]")
         ax.set_ylim(bottom=0)
@@ -257,4 +272,5 @@ def plot_map(positions: np.ndarray, history: History, path: Path, *, title: str 
     return Path(path)
 
 
-__all__ = ["PAPER", "best_params", "plot_curves", "plot_map", "slug", "summarise", "write_table"]
+__all__ = ["PAPER", "best_params", "paper_notation", "plot_curves", "plot_map", "slug", "summarise",
+           "write_table"]

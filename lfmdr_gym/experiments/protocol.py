@@ -21,6 +21,7 @@ too: they are the protocol's building blocks used one at a time.
 from __future__ import annotations
 
 import csv
+import inspect
 import itertools
 import math
 import os
@@ -38,11 +39,8 @@ import numpy as np
 from lfmdr_gym.experiments.store import RESULTS, ResultStore, ensure_writable_dir
 from lfmdr_gym.history import History, HistoryFileError
 
-MODES: dict[str, tuple[str, int]] = {
-    "visibility": ("LFMDR-Visibility-v0", 500),
-    "bearing": ("LFMDR-Bearing-v0", 200),
-}
-"""Protocol mode -> (environment id, default checkpoint interval of SPEC §5)."""
+MODES: dict[str, str] = {"visibility": "LFMDR-Visibility-v0", "bearing": "LFMDR-Bearing-v0"}
+"""Protocol mode -> the environment id its episodes run in."""
 
 DEFAULT_EVERY: dict[str, int] = {"visibility": 500, "bearing": 200, "range": 200}
 """Default checkpoint interval per sensor (SPEC §5; range follows bearing)."""
@@ -82,14 +80,16 @@ def resolve_methods(names: Iterable[str] | None) -> tuple[str, ...]:
 
 
 def param_label(params: Mapping[str, Any]) -> str:
-    """The ``param`` column of a parameter set: ``"K=5"``, ``"sigma2=0.5"``, or ``"-"`` for none."""
+    """The ``param`` column of a parameter set: ``"n_neighbors=5"``, ``"sigma2=0.5"``, or ``"-"``
+    for none (names sorted, values as Python prints them, so :func:`parse_params` reads it back)."""
     if not params:
         return "-"
     return ",".join(f"{k}={params[k]}" for k in sorted(params))
 
 
 def parse_params(items: Iterable[str] | None) -> dict[str, Any]:
-    """``["K=5", "sigma2=0.5"]`` (or ``"K=5,sigma2=0.5"`` items) -> ``{"K": 5, "sigma2": 0.5}``."""
+    """``["K=5", "sigma2=0.5"]`` (or ``"K=5,sigma2=0.5"`` items) -> ``{"K": 5, "sigma2": 0.5}``;
+    values become int, else float, else stay text."""
     out: dict[str, Any] = {}
     for item in items or ():
         for part in str(item).split(","):
@@ -138,10 +138,17 @@ def grid_params(method: str) -> list[dict[str, Any]]:
 
 
 def default_params(method: str) -> dict[str, Any]:
-    """``method``'s default (the paper's optimum), restricted to the parameters its grid sweeps."""
+    """``method``'s default for each parameter its grid sweeps: the spec's default (the paper's
+    optimum) or else the factory's own keyword default, so the label names a real value."""
     spec = _methods()[method]
-    grid = dict(spec.grid)
-    return {k: v for k, v in dict(spec.defaults).items() if k in grid}
+    signature = inspect.signature(spec.factory).parameters
+    out: dict[str, Any] = {}
+    for name in sorted(spec.grid):
+        if name in spec.defaults:
+            out[name] = spec.defaults[name]
+        elif name in signature and signature[name].default not in (inspect.Parameter.empty, None):
+            out[name] = signature[name].default
+    return out  # a method choosing its own value (default None) runs with no parameter: "-"
 
 
 def _seed(*parts: int) -> int:
@@ -208,7 +215,7 @@ class ProtocolConfig:
             value = getattr(self, name)
             if not isinstance(value, int | np.integer) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        every = MODES[self.mode][1] if self.every is None else self.every
+        every = DEFAULT_EVERY[self.mode] if self.every is None else self.every
         if not isinstance(every, int | np.integer) or every < 1:
             raise ValueError(f"every must be a positive integer, got {every!r}")
         if self.steps % every:
@@ -223,7 +230,7 @@ class ProtocolConfig:
 
     @property
     def env_id(self) -> str:
-        return MODES[self.mode][0]
+        return MODES[self.mode]
 
     @property
     def checkpoints(self) -> tuple[int, ...]:
@@ -262,7 +269,6 @@ class ProtocolConfig:
 
     def settings(self) -> dict[str, Any]:
         """What ``manifest.json`` records: a run directory is resumed only with equal settings."""
-        methods = _methods()
         return {
             "format": "lfmdr-protocol",
             "version": 1,
@@ -275,7 +281,7 @@ class ProtocolConfig:
             "seed": self.seed,
             "methods": list(self.methods),
             "grids": {m: [param_label(p) for p in self._grids[m]] for m in self.methods},
-            "defaults": {m: param_label(dict(methods[m].defaults)) for m in self.methods},
+            "defaults": {m: param_label(default_params(m)) for m in self.methods},
         }
 
     def sort_key(self, row: Mapping[str, Any]) -> tuple[Any, ...]:
@@ -415,6 +421,7 @@ class _Task:
 
 
 _HISTORY_CACHE: OrderedDict[str, History] = OrderedDict()
+_CACHE_BYTES = 256 * 2**20
 _THREADS_LIMITED = False
 
 
@@ -439,7 +446,9 @@ def _episode_history(episode: Episode, path: str) -> History:
     except (FileNotFoundError, HistoryFileError):
         history = collect_episode(episode)
     _HISTORY_CACHE[path] = history
-    while len(_HISTORY_CACHE) > 8:
+    # Tasks run slowest-first across episodes, so keep many histories (a 50 x 2000 bearing
+    # history is 1.6 MB; loading it again costs ~7 ms per task).
+    while len(_HISTORY_CACHE) > 1 and sum(h.matrix.nbytes for h in _HISTORY_CACHE.values()) > _CACHE_BYTES:
         _HISTORY_CACHE.popitem(last=False)
     return history
 
@@ -519,7 +528,10 @@ def _parallel(
     if jobs == 1:
         yield lambda calls: (fn(*args, **kwargs) for fn, args, kwargs in calls)
         return
-    with parallel_config(backend="loky", n_jobs=jobs, inner_max_num_threads=1):
+    with parallel_config(backend="loky", n_jobs=jobs, inner_max_num_threads=1), \
+            warnings.catch_warnings():
+        # On Ctrl-C joblib warns that running tasks were cancelled: expected, they are redone.
+        warnings.filterwarnings("ignore", message=".*still being processed by the workers")
         yield lambda calls: Parallel(return_as="generator_unordered", batch_size=1)(calls)
 
 
@@ -568,6 +580,7 @@ def run_protocol(
     computes only what is missing. ``jobs`` worker processes (-1: all cores) or a Dask
     ``scheduler`` address run the tasks; the main process is the only writer.
     """
+    from joblib import delayed
     from tqdm.auto import tqdm
 
     jobs = _check_jobs(jobs)
@@ -586,29 +599,20 @@ def run_protocol(
             needed.add(config.episodes()[0])  # the example maps are drawn from the first run
         missing = [ep for ep in config.episodes() if ep in needed and not _readable(paths[ep])]
         computed = 0
+        bars = {"disable": not progress or None, "dynamic_ncols": True}
         try:
             with _parallel(jobs, scheduler, scheduler_timeout) as run:
-                if missing:
-                    from joblib import delayed
-
-                    bar = tqdm(total=len(missing), desc=f"{config.mode}: episodes", unit="ep",
-                               disable=not progress or None, leave=False)
-                    calls = [delayed(_collect_task)(ep, limit) for ep in missing]
-                    for history in run(calls):
-                        ep = _episode_of(history, missing)
-                        history.save(paths[ep])
+                with tqdm(total=len(missing), desc=f"{config.mode}: episodes", unit="ep",
+                          leave=False, **bars) as bar:
+                    for history in run([delayed(_collect_task)(ep, limit) for ep in missing]):
+                        history.save(paths[_episode_of(history, missing)])
                         bar.update(1)
-                    bar.close()
-                if todo:
-                    from joblib import delayed
-
-                    tasks = _make_tasks(todo, paths, config.mode)
-                    bar = tqdm(total=len(todo), desc=f"{config.mode}: maps", unit="map",
-                               disable=not progress or None, smoothing=0.05)
+                tasks = _make_tasks(todo, paths, config.mode)
+                with tqdm(total=len(todo), desc=f"{config.mode}: maps", unit="map",
+                          smoothing=0.05, **bars) as bar:
                     for rows in run([delayed(_run_task)(t, limit) for t in tasks]):
-                        computed += store.add(rows)
+                        computed += store.add(rows)  # durable before the next result is awaited
                         bar.update(len(rows))
-                    bar.close()
         finally:
             store.write_results()
         rows = store.rows()
@@ -708,15 +712,17 @@ def describe_history(history: History) -> str:
         lines.append(f"observed entries: {100 * history.mask.mean():.1f} %")
     if history.robot_poses is not None and history.n_steps > 1:
         moves = np.linalg.norm(np.diff(history.robot_poses[:, :2], axis=0), axis=1)
+        blocked = history.meta.get("blocked_moves")
         lines.append(f"robot path: {moves.sum():.1f} m over {history.n_steps} steps "
-                     f"(mean move {moves.mean():.3f} m)")
+                     f"(mean move {moves.mean():.3f} m"
+                     + (f"; {blocked} moves blocked by an obstacle)" if blocked is not None else ")"))
     meta = {k: v for k, v in history.meta.items() if k in ("env_id", "seed", "layout", "pose")}
     if meta:
         lines.append("from " + ", ".join(f"{k}={v}" for k, v in meta.items()))
     return "\n".join(lines)
 
 
-def checkpoints_for(steps: int, every: int | None, sensor: str) -> tuple[int, ...]:
+def checkpoints_for(steps: int, every: int | None, sensor: str | None) -> tuple[int, ...]:
     """Checkpoints of a single run: multiples of ``every`` up to ``steps`` (which is always one).
 
     With ``every`` None the sensor's default interval is used and ``steps`` is appended when it
@@ -725,7 +731,7 @@ def checkpoints_for(steps: int, every: int | None, sensor: str) -> tuple[int, ..
     if not isinstance(steps, int | np.integer) or steps < 1:
         raise ValueError(f"steps must be a positive integer, got {steps!r}")
     if every is None:
-        step = min(DEFAULT_EVERY.get(sensor, 200), int(steps))
+        step = min(DEFAULT_EVERY.get(sensor or "", 200), int(steps))
         points = list(range(step, steps + 1, step))
         if points[-1] != steps:
             points.append(int(steps))
@@ -777,11 +783,10 @@ def run_episode(
     return rows
 
 
-def _sensor_of(env_id: str) -> str:
-    for sensor in ("visibility", "bearing", "range"):
-        if sensor in env_id.lower():
-            return sensor
-    return "visibility"
+def _sensor_of(env_id: str) -> str | None:
+    from lfmdr_gym import ENV_IDS
+
+    return ENV_IDS.get(env_id)
 
 
 def map_history_file(
