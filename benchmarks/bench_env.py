@@ -11,7 +11,7 @@ Prints medians over several repeats (single process) for:
 
 The issue's goal: >= 10,000 steps/s at M = 50 on one core.
 
-    PYTHONPATH=. python benchmarks/bench_env.py            # full run (about a minute)
+    PYTHONPATH=. python benchmarks/bench_env.py            # full run (1-3 minutes)
     PYTHONPATH=. python benchmarks/bench_env.py --quick    # fewer steps and repeats
 """
 

@@ -118,10 +118,14 @@ class RandomWalkPolicy:
     could not advance ``step_length + margin`` along it without touching an obstacle a ray
     reported (:meth:`clearance`); it then draws again (up to ``n_tries`` candidates, so the
     accepted direction is uniform over the free ones). With ``plan_ahead`` it prefers, among
-    the draws, the first one after which some heading within ``max_turn`` is still free (so it
-    does not walk into a corner it cannot turn out of in one step). If none is free it turns, by at most
-    ``max_turn``, toward the direction with the most room; the physics stops the robot short of
-    contact anyway.
+    the draws, the first after which some heading within ``max_turn`` is still free, so that it
+    does not walk into a corner it cannot turn out of in one step. If no draw is free it turns,
+    by at most ``max_turn``, toward the direction with the most room; the physics stops the
+    robot short of contact anyway.
+
+    Measured in ``LFMDR-Visibility-v0`` (4 seeds x 2000 steps): blocked on about 22 % of moves
+    with the default 16 proximity rays (a 48 mm cylinder can hide between rays 22.5 degrees
+    apart), 9 % with 32 rays and 6 % with 64; a blind uniform walk is blocked on 86 %.
 
     The proximity range must exceed ``step_length + robot_radius`` for the check to see far
     enough. Randomness comes from the policy's own generator, fixed by ``seed`` or

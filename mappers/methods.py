@@ -374,6 +374,9 @@ DEFAULT_METHODS: dict[str, str] = {
     "bearing": "CAL-SMA",
     "range": "SMA(WGT)",
 }
-"""Method build_map uses when none is given, per sensor: the best (lowest non-anchor MPE) of the
-ten at their default parameters on synthetic random-walk histories (M = 50, N = 2000, 6 layouts;
-see benchmarks/bench_mappers.py). Issue 6 updates it with its calibrated method."""
+"""Method build_map uses when none is given, per sensor. Measured on simulated random-walk
+histories (lfmdr_gym, M = 50, N = 2000, 5 layouts, default parameters, non-anchor MPE;
+``benchmarks/bench_mappers.py --sections methods``): SMA(WGT) is best of the paper's ten for
+bearing (0.051 m) and range (0.195 m) and second for visibility (0.134 m, behind HLLE's
+0.114 m, which the paper reports "often failed to run"), so it is the default for all three.
+Issue 6 updates this dict with its calibrated method."""

@@ -228,3 +228,22 @@ def test_rejects_bad_histories(world):
 @parametrize_with_checks([CalibratedSMACOF(n_rounds=1, n_init=0, max_iter=10)])
 def test_sklearn_compatible(estimator, check):
     check(estimator)
+
+
+def test_example_runs(capsys):
+    import runpy
+    import sys
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "calibrated_map.py"
+    old = sys.argv
+    sys.argv = [str(path), "--steps", "800"]
+    try:
+        runpy.run_path(str(path), run_name="__main__")
+    finally:
+        sys.argv = old
+    rows = [line.split() for line in capsys.readouterr().out.splitlines()[1:]]
+    err = {(r[0], r[1]): float(r[2]) for r in rows}
+    assert set(err) == {(s, m) for s in ("visibility", "bearing") for m in ("CAL-SMA", "SMA(WGT)")}
+    for sensor in ("visibility", "bearing"):
+        assert err[(sensor, "CAL-SMA")] < err[(sensor, "SMA(WGT)")]

@@ -174,7 +174,7 @@ def test_dask_cluster_gives_the_same_rows(clean_run, tmp_path):
     # Thread workers start in a fraction of the time of processes; the tasks still go through
     # the scheduler and joblib's dask backend (process pickling is covered by the loky test).
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
-                                  dashboard_address=None) as cluster:
+                                  dashboard_address=":0") as cluster:
         summary = run_protocol(ProtocolConfig(**SMALL), tmp_path,
                                scheduler=cluster.scheduler_address, progress=False, report=False)
     assert summary.computed == len(rows)

@@ -45,6 +45,12 @@ PAPER_SOURCE = {
     "bearing": "Yairi 2007, Table 2 (numbers lost in the seed's conversion; remarks from §4.4.2)",
 }
 
+PAPER_EXAMPLES: dict[str, tuple[str, ...]] = {
+    "visibility": ("LPCA", "SDE"),  # figures 6 and 7
+    "bearing": ("SMA(WGT)",),  # figure 9
+}
+"""Methods of the paper's example maps per mode."""
+
 # The paper's split of its curves: figure 4 (global methods + ISOMAP), figure 5 (local methods).
 _PANELS = (
     ("LPCA", "SMA(UNWGT)", "SMA(WGT)", "KPCA(GAUS)", "KPCA(POLY)", "ISOMAP"),
@@ -272,5 +278,5 @@ def plot_map(positions: np.ndarray, history: History, path: Path, *, title: str 
     return Path(path)
 
 
-__all__ = ["PAPER", "best_params", "paper_notation", "plot_curves", "plot_map", "slug", "summarise",
+__all__ = ["PAPER", "PAPER_EXAMPLES", "best_params", "paper_notation", "plot_curves", "plot_map", "slug", "summarise",
            "write_table"]

@@ -653,9 +653,8 @@ def write_report(config: ProtocolConfig, out: Path, rows: Sequence[Mapping[str, 
     best = figures.best_params(rows, n_steps=config.steps)
     first = config.episodes()[0]
     history = History.load(out / HISTORIES / f"{first.name}.npz")
-    examples = []
-    if "LPCA" in config.methods:
-        examples.append("LPCA")
+    # The paper's example maps (figures 6, 7 / 9), then our best method if it is another one.
+    examples = [m for m in figures.PAPER_EXAMPLES.get(config.mode, ()) if m in best]
     ranked = sorted((b["mpe_mean"], m) for m, b in best.items() if math.isfinite(b["mpe_mean"]))
     if ranked and ranked[0][1] not in examples:
         examples.append(ranked[0][1])
