@@ -151,7 +151,7 @@ class LFMDREnv(gym.Env):
     LFMDREnv(sensor="visibility", n_objects=50, arena_size=2.5, object_diameter=0.048,
              robot_radius=0.05, step_length=0.2, max_turn=pi/4, visual_angle_deg=5.0,
              occlusion=True, anchors="corners", n_anchors=4, object_clearance=0.15,
-             wall_clearance=0.15, n_proximity_rays=16, proximity_range=0.5, max_range=None,
+             wall_clearance=0.15, n_proximity_rays=32, proximity_range=0.5, max_range=None,
              render_mode=None)
     ```
 
@@ -185,7 +185,7 @@ class LFMDREnv(gym.Env):
         n_anchors: int = 4,
         object_clearance: float = 0.15,
         wall_clearance: float = 0.15,
-        n_proximity_rays: int = 16,
+        n_proximity_rays: int = 32,
         proximity_range: float = 0.5,
         max_range: float | None = None,
         render_mode: str | None = None,

@@ -117,7 +117,7 @@ def test_observation_is_the_sensor_function_of_the_true_pose(sensor):
             expect = sensors.ranges(pose, objects, 0.8).astype(np.float32)
         np.testing.assert_array_equal(obs[sensor], expect)
         np.testing.assert_allclose(
-            obs["proximity"], sensors.proximity(pose, objects, 0.024, 1.25, 16, 0.5), rtol=1e-6
+            obs["proximity"], sensors.proximity(pose, objects, 0.024, 1.25, env.n_proximity_rays, 0.5), rtol=1e-6
         )
         obs, _, _, _, info = env.step(rng.uniform(-0.8, 0.8, 1).astype(np.float32))
     if sensor == "range":
@@ -273,7 +273,7 @@ def test_vector_envs(mode):
     envs = gym.make_vec("LFMDR-Visibility-v0", num_envs=2, vectorization_mode=mode)
     try:
         obs, info = envs.reset(seed=[0, 1])
-        assert obs["visibility"].shape == (2, 50) and obs["proximity"].shape == (2, 16)
+        assert obs["visibility"].shape == (2, 50) and obs["proximity"].shape == (2, 32)
         assert info["robot_pose"].shape == (2, 3)
         for _ in range(5):
             obs, reward, terminated, truncated, info = envs.step(envs.action_space.sample())

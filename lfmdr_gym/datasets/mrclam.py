@@ -27,7 +27,6 @@ the straightforward baseline. Measured figures: ``python benchmarks/bench_mrclam
 from __future__ import annotations
 
 import os
-import tempfile
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -36,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from lfmdr_gym.atomic import atomic_savefig, atomic_write_text
 from lfmdr_gym.history import History
 
 __all__ = [
@@ -646,17 +646,7 @@ def _write_csv(path: Path, subjects: np.ndarray, positions: np.ndarray) -> None:
     lines = ["subject,x,y"]
     for s, (x, y) in zip(subjects, positions, strict=True):
         lines.append(f"{int(s)},{'' if np.isnan(x) else f'{x:.6f}'},{'' if np.isnan(y) else f'{y:.6f}'}")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", newline="\n") as fh:
-            fh.write("\n".join(lines) + "\n")
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_write_text(path, "\n".join(lines) + "\n")
 
 
 def _plot(path: Path, result: MRCLAMMap) -> None:
@@ -689,15 +679,10 @@ def _plot(path: Path, result: MRCLAMMap) -> None:
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.legend(fontsize=7, loc="best")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent)
-    os.close(fd)
     try:
-        fig.savefig(tmp, dpi=120, bbox_inches="tight")
-        os.replace(tmp, path)
+        atomic_savefig(fig, path, dpi=120, bbox_inches="tight")
     finally:
         plt.close(fig)
-        Path(tmp).unlink(missing_ok=True)
 
 
 def map_mrclam_run(

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from lfmdr_gym.atomic import atomic_savefig, atomic_write, atomic_write_text
 from lfmdr_gym.history import History
 
 # The paper's figures as far as the seed's text conversion keeps them (SPEC §6). Parameters are
@@ -165,7 +166,7 @@ def write_table(
             "paper_moe": p.get("moe", ""), "paper_note": p.get("note", ""),
         })
     csv_path = out / "table.csv"
-    with open(csv_path, "w", newline="", encoding="utf-8") as fh:
+    with atomic_write(csv_path) as fh:
         writer = csv.DictWriter(fh, fieldnames=cols, lineterminator="\n")
         writer.writeheader()
         for row in table:
@@ -195,7 +196,7 @@ def write_table(
         )
     lines += ["", f"Paper: {PAPER_SOURCE.get(mode, 'no published figures')}.", ""]
     md_path = out / "table.md"
-    md_path.write_text("\n".join(lines), encoding="utf-8")
+    atomic_write_text(md_path, "\n".join(lines))
     return [csv_path, md_path]
 
 
@@ -235,7 +236,7 @@ def plot_curves(
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
     fig.suptitle(f"{mode.capitalize()}-only mapping: MPE against the number of observations")
-    fig.savefig(path)
+    atomic_savefig(fig, path)
     return Path(path)
 
 
@@ -274,7 +275,7 @@ def plot_map(positions: np.ndarray, history: History, path: Path, *, title: str 
     ax.legend(fontsize=8, loc="upper right")
     if title:
         ax.set_title(title, fontsize=9)
-    fig.savefig(path)
+    atomic_savefig(fig, path)
     return Path(path)
 
 

@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from lfmdr_gym.atomic import atomic_write
 from lfmdr_gym.experiments.store import RESULTS, ResultStore, ensure_writable_dir
 from lfmdr_gym.history import History, HistoryFileError
 
@@ -826,7 +827,7 @@ def map_history_file(
 
 
 def _write_csv(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
-    with open(path, "w", newline="", encoding="utf-8") as fh:
+    with atomic_write(path) as fh:
         writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
@@ -834,7 +835,7 @@ def _write_csv(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
 
 def _write_map_csv(path: Path, positions: np.ndarray, history: History) -> None:
     anchors = {int(i) for i in history.anchor_ids}
-    with open(path, "w", newline="", encoding="utf-8") as fh:
+    with atomic_write(path) as fh:
         writer = csv.writer(fh)
         writer.writerow(["object", "x", "y", "true_x", "true_y", "anchor"])
         for j, (est, tru) in enumerate(zip(positions, history.object_positions, strict=True)):

@@ -25,6 +25,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from lfmdr_gym.atomic import atomic_write_text
+
 try:  # advisory locking is POSIX-only; elsewhere the store simply runs unlocked
     import fcntl
 except ImportError:  # pragma: no cover - Windows
@@ -112,26 +114,6 @@ def _parse_journal_line(line: bytes) -> Row | None:
         return None
 
 
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-def _atomic_write_text(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        os.fchmod(fd, 0o666 & ~_umask())  # mkstemp's 0600 would make results private
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def _canonical(settings: Mapping[str, Any]) -> dict[str, Any]:
     """Settings as they read back from JSON (tuples become lists, keys strings)."""
     return json.loads(json.dumps(settings, sort_keys=True))
@@ -213,7 +195,7 @@ class ResultStore:
                     f"{self.directory} holds a journal but no {MANIFEST}; refusing to mix results "
                     "(choose another output directory)"
                 )
-            _atomic_write_text(path, json.dumps(self.settings, indent=2, sort_keys=True) + "\n")
+            atomic_write_text(path, json.dumps(self.settings, indent=2, sort_keys=True) + "\n")
 
     def _lock(self) -> None:
         if fcntl is None:  # pragma: no cover
@@ -319,7 +301,7 @@ class ResultStore:
         for row in self.rows():
             writer.writerow([_format(row[c]) for c in COLUMNS])
         path = self.directory / RESULTS
-        _atomic_write_text(path, buf.getvalue())
+        atomic_write_text(path, buf.getvalue())
         return path
 
 
