@@ -51,7 +51,7 @@ class ReferenceWorld:
         self.step_length = 0.2
         self.min_angle = math.radians(5.0)
         self.sensor = sensor
-        self.ray_angles = 2 * np.pi * np.arange(16) / 16
+        self.ray_angles = 2 * np.pi * np.arange(32) / 32  # the env's default ray count
         self.proximity_range = 0.5
         pts: list[np.ndarray] = []
         lim = self.half - 0.15 - self.r
