@@ -137,6 +137,8 @@ def test_warns_on_structureless_histories(world):
     with pytest.warns(FoldWarning, match="folded"):
         est = CalibratedSMACOF(n_init=1).fit(X, anchor_ids=ids, anchor_positions=pts[ids])
     assert est.folded_ and est.fold_score_ > est.fold_threshold
+    # both deterministic starts looked folded, so the random start was tried too
+    assert [s[0] for s in est.starts_] == ["unweighted", "geodesic", "random0"]
 
 
 def test_without_anchors_embeds_in_own_units(world):
