@@ -281,7 +281,12 @@ def build_map(
                 "masked histories (mask with False entries) need mappers.missing, "
                 f"which is not available: {exc}"
             ) from exc
-        est = _MaskedEmbedding(build_masked_embedding, mask[mapped], method, sensor, merged)
+        # the masked methods hold the anchors fixed (rows of Xm); the affine fit below is then
+        # the identity
+        anchors = {"anchor_ids": np.searchsorted(mapped, ids), "anchor_positions": pos}
+        est = _MaskedEmbedding(
+            build_masked_embedding, mask[mapped], method, sensor, {**merged, **anchors}
+        )
         method = method if method is not None else f"masked default ({sensor})"
     else:
         if normalize:

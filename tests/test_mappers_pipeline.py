@@ -144,7 +144,13 @@ def test_partial_mask_calls_the_missing_data_hook(monkeypatch):
     mask[5, :10] = False
     H[5, :10] = np.nan  # unobserved entries may hold anything
     m = build_map(H, a, P[a], "SMA(WGT)", mask=mask, n_neighbors=6)
-    assert calls == [((39, 1200), (39, 1200), "SMA(WGT)", "visibility", {"n_neighbors": 6})]
+    (xs, ms, meth, sens, params), = calls
+    assert (xs, ms, meth, sens) == ((39, 1200), (39, 1200), "SMA(WGT)", "visibility")
+    assert params.pop("n_neighbors") == 6
+    # anchors go to the hook as rows of the mapped objects (object 9 is not handed over)
+    np.testing.assert_array_equal(params.pop("anchor_ids"), np.searchsorted(np.delete(np.arange(40), 9), a))
+    np.testing.assert_array_equal(params.pop("anchor_positions"), P[a])
+    assert params == {}
     assert m.unmapped == (9,)
     np.testing.assert_allclose(np.delete(m.positions, 9, axis=0), np.delete(P, 9, axis=0), atol=1e-9)
 
