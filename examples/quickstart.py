@@ -1,4 +1,4 @@
-"""Quickstart: one episode of the paper's random walk, recorded as a History and saved.
+"""Quickstart: one episode of the paper's random walk, recorded, saved, mapped and scored.
 
     PYTHONPATH=. python examples/quickstart.py [--steps 2000] [--seed 0] [--out history.npz]
 """
@@ -11,6 +11,7 @@ import gymnasium as gym
 import numpy as np
 
 import lfmdr_gym  # noqa: F401  (registers LFMDR-Visibility-v0, LFMDR-Bearing-v0, LFMDR-Range-v0)
+import mappers
 from lfmdr_gym.history import History, collect
 from lfmdr_gym.policies import RandomWalkPolicy
 
@@ -37,6 +38,17 @@ def main(argv: list[str] | None = None) -> History:
         print(f"objects seen at least once: {int(seen.sum())} of {history.n_objects}")
     print(f"saved to {path}; reload with History.load({str(path)!r})")
     assert np.array_equal(History.load(path).matrix, history.matrix)
+
+    # The mapper sees the histories and the anchors only; ground truth is used to score.
+    for method in ("SMA(WGT)", None):  # None: the best method for this kind of history
+        result = mappers.build_map(
+            history.matrix, history.anchor_ids, history.anchor_positions, method=method
+        )
+        mpe = mappers.mean_position_error(
+            result.positions, history.object_positions, exclude=history.anchor_ids
+        )
+        moe = mappers.mean_orientation_error(result.positions, history.object_positions)
+        print(f"{result.method:>10}: MPE {mpe:.3f} m (non-anchor objects), MOE {moe:.2f} %")
     return history
 
 
