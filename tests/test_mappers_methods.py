@@ -48,7 +48,7 @@ def test_registry_labels_defaults_grids():
     assert METHODS["SDE"].grid == {"n_neighbors": [4, 5, 6, 7, 8, 9, 10, 11, 12]}
     assert METHODS["KPCA(GAUS)"].grid == {"sigma2": [0.25, 0.5, 1.0, 2.0, 4.0, 8.0]}
     assert METHODS["KPCA(POLY)"].grid == {"degree": [2, 4, 8]}
-    assert METHODS["HLLE"].grid == {"n_neighbors": [6, 7, 8, 9, 10]}  # K > 5 needed in 2-D
+    assert METHODS["HLLE"].grid == {"n_neighbors": [6, 7, 8, 9, 10, 11, 12]}  # K > 5 needed in 2-D
     assert set(DEFAULT_METHODS) == {"visibility", "bearing", "range"}
     assert all(m in METHODS for m in DEFAULT_METHODS.values())
 
