@@ -13,7 +13,11 @@ For each run and mode (4 corner anchors, all 5 robots, scores over the 11 non-an
 * ``<method> LOO``: the method with the setting chosen *without* the run (lowest mean MPE over
   the other runs in a small grid), i.e. a score on a run the setting was not tuned on.
 
+* ``covis-ensemble`` (visibility, bearing; the default of both): the mean of the covis-nonmetric
+  maps over bin widths {1, 1.5, 2, 3, 4, 5} s x min_co {3, 5} (anchors fixed, one frame).
+
 Settings grids: covis-nonmetric (visibility, bearing): bin width {1, 2, 3, 5} s x min_co {3, 5};
+covis-ensemble: the set of bin widths, {1, 2, 3, 5} / {1, 1.5, 2, 3, 4, 5} / {0.5, ..., 8} s;
 range-quantile: bin width {0.25, 0.5, 1} s x quantile {0.95, 0.98, 0.99}; range-bounds: the same
 x slack {0.5, 1}.
 """
@@ -42,11 +46,16 @@ GRIDS = {
         {"bin_width": bw, "quantile": q, "slack": sl}
         for bw, q, sl in itertools.product([0.25, 0.5, 1.0], [0.95, 0.98, 0.99], [0.5, 1.0])
     ],
+    "covis-ensemble": [
+        {"bin_widths": bws}
+        for bws in [(1.0, 2.0, 3.0, 5.0), (1.0, 1.5, 2.0, 3.0, 4.0, 5.0),
+                    (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 8.0)]
+    ],
     "masked-euclidean": [],
 }
 CANDIDATES = {
-    "visibility": ["covis-nonmetric"],
-    "bearing": ["masked-euclidean", "covis-nonmetric"],
+    "visibility": ["covis-nonmetric", "covis-ensemble"],
+    "bearing": ["masked-euclidean", "covis-nonmetric", "covis-ensemble"],
     "range": ["masked-euclidean", "range-quantile", "range-bounds"],
 }
 

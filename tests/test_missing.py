@@ -209,3 +209,37 @@ def test_bounded_smacof_has_no_stress_inside_the_intervals():
     X = bounded_smacof(D, D, W, P + rng.normal(scale=0.2, size=P.shape),
                        fixed=np.array([0, 1, 2]), fixed_positions=P[:3])
     assert np.allclose(X, P, atol=1e-3)
+
+
+def test_ensemble_is_the_mean_of_its_members_and_no_worse_than_them_on_average():
+    from mappers.missing import ensemble_embedding
+
+    P, seen, _, _ = _simulate(n_obj=14, n_steps=3000, seed=11)
+    anchors = _corners(P)
+
+    def binned(k):  # steps grouped k at a time: a coarser "bin width"
+        n = seen.shape[1] // k * k
+        return seen[:, :n].reshape(len(P), -1, k).any(axis=2).astype(float)
+
+    hists = [(binned(k), None) for k in (1, 2, 3)]
+    sets = [{"min_co": 3}, {"min_co": 5}]
+    ens = ensemble_embedding(hists, "visibility", "covis-nonmetric", anchor_ids=anchors,
+                             anchor_positions=P[anchors], param_sets=sets)
+    members = [masked_embedding(X, m, "visibility", "covis-nonmetric", anchor_ids=anchors,
+                                anchor_positions=P[anchors], **ps).positions
+               for X, m in hists for ps in sets]
+    assert np.allclose(ens.positions, np.mean(members, axis=0))
+    assert np.allclose(ens.positions[anchors], P[anchors])
+    assert len(ens.params["members"]) == 6
+    err = _score(ens.positions, P, anchors)
+    # mean position error is convex in the map: the mean map is never worse than the mean member
+    assert err <= np.mean([_score(m, P, anchors) for m in members]) + 1e-12
+    centroid = _score(np.repeat(P[anchors].mean(0)[None], len(P), 0), P, anchors)
+    assert err < 0.4 * centroid
+    with pytest.raises(ValueError, match="anchor"):
+        ensemble_embedding(hists, "visibility", anchor_ids=None, anchor_positions=None)
+    with pytest.raises(ValueError, match="histories"):
+        ensemble_embedding([], "visibility", anchor_ids=anchors, anchor_positions=P[anchors])
+    with pytest.raises(ValueError, match="same objects"):
+        ensemble_embedding([hists[0], (hists[1][0][:-1], None)], "visibility",
+                           anchor_ids=anchors, anchor_positions=P[anchors])

@@ -258,6 +258,7 @@ def test_map_synthetic_run_writes_csv_and_png(tmp_path):
     assert res.png_path.is_file() and res.png_path.read_bytes()[:4] == b"\x89PNG"
     vis = map_mrclam_run(run, "visibility", robots=(1, 2, 3), anchors=(6, 7, 8, 9))
     assert vis.anchor_subjects == (6, 7, 8, 9) and vis.mpe < vis.centroid_mpe
+    assert vis.method == "covis-ensemble" and vis.params["min_co"] == [3, 5]
     with pytest.raises(ValueError, match="method"):
         map_mrclam_run(run, "range", robots=(1, 2, 3), method="LLE?")
 
@@ -289,3 +290,20 @@ def test_real_clustered_run_warns():
     with pytest.warns(MRCLAMDataWarning, match="falls apart"):
         res = map_mrclam_run(DATA / "MRCLAM_Dataset6", "visibility")
     assert any("falls apart" in w for w in res.warnings)
+
+
+def test_covis_ensemble_is_the_visibility_default_and_checks_its_arguments(tmp_path):
+    rng = np.random.default_rng(8)
+    truth = {s: tuple(rng.uniform([0, 0], [5, 10])) for s in range(6, 18)}
+    run = _write_run(tmp_path / "Ens", truth, _simulate_rows(truth, n_images=1200, seed=9))
+    small = {"bin_widths": (1.0, 2.0), "min_co": (3,)}
+    ens = map_mrclam_run(run, "bearing", robots=(1, 2, 3), plot=False, **small)
+    assert ens.method == "covis-ensemble" and ens.params == {"bin_widths": [1.0, 2.0], "min_co": [3]}
+    singles = [map_mrclam_run(run, "bearing", robots=(1, 2, 3), method="covis-nonmetric",
+                              bin_width=w, min_co=3) for w in (1.0, 2.0)]
+    assert np.allclose(ens.positions, np.mean([s.positions for s in singles], axis=0))
+    assert ens.mpe < ens.centroid_mpe / 2
+    with pytest.raises(ValueError, match="bin_width"):
+        map_mrclam_run(run, "visibility", robots=(1, 2, 3), method="covis-ensemble", bin_width=2.0)
+    with pytest.raises(ValueError, match="unknown parameter"):
+        map_mrclam_run(run, "visibility", robots=(1, 2, 3), method="covis-ensemble", quantile=0.9)

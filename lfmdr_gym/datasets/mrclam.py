@@ -20,8 +20,9 @@ co-observation graph falls apart (the clustered DS6) gets a warning.
 
 Ground truth (landmark positions) is used only to place the anchors and to score. Mapping uses
 the masked methods of :mod:`mappers.missing` (their assumptions are listed there): by default
-``range-quantile`` for range and ``covis-nonmetric`` for visibility and bearing; ``"naive"`` is
-the straightforward baseline. Measured figures: ``python benchmarks/bench_mrclam.py``.
+``range-quantile`` for range and ``covis-ensemble`` (the mean of covis-nonmetric maps over
+several bin widths, :data:`ENSEMBLE_METHOD`) for visibility and bearing; ``"naive"`` is the
+straightforward baseline. Measured figures: ``python benchmarks/bench_mrclam.py``.
 """
 
 from __future__ import annotations
@@ -41,6 +42,8 @@ from lfmdr_gym.history import History
 __all__ = [
     "KNOWN_GROUNDTRUTH_SWAPS",
     "MODES",
+    "DEFAULT_MODE_METHOD",
+    "ENSEMBLE_METHOD",
     "MRCLAMDataWarning",
     "MRCLAMMap",
     "MRCLAMReport",
@@ -583,6 +586,25 @@ def load_mrclam(
 
 
 # ------------------------------------------------------------------------------ mapping
+ENSEMBLE_METHOD = "covis-ensemble"
+"""The mean of ``covis-nonmetric`` maps (anchors fixed) over the run binned at every width of
+:data:`ENSEMBLE_BIN_WIDTHS` and each ``min_co`` of :data:`ENSEMBLE_MIN_CO` (see
+:func:`mappers.missing.ensemble_embedding`). A single covis-nonmetric map moves by +-0.3 m with
+the bin width, and the width that is best on one run is not on another; the mean over a fixed
+spread needs no setting choice. Assumptions: those of ``covis-nonmetric`` (the chance of seeing
+two landmarks in one bin falls monotonically with their distance, the same way everywhere)."""
+ENSEMBLE_BIN_WIDTHS: tuple[float, ...] = (1.0, 1.5, 2.0, 3.0, 4.0, 5.0)
+ENSEMBLE_MIN_CO: tuple[int, ...] = (3, 5)
+
+DEFAULT_MODE_METHOD: dict[str, str] = {
+    "visibility": ENSEMBLE_METHOD,
+    "bearing": ENSEMBLE_METHOD,
+    "range": "range-quantile",
+}
+"""Method used by :func:`map_mrclam_run` when none is given (best measured, leave-one-run-out,
+benchmarks/bench_mrclam.py). Bearing uses only the pattern of what was seen: no bearing-specific
+dissimilarity measured better than it (see the module docstring of mappers/missing.py)."""
+
 NAIVE_METHOD = "naive"
 """The straightforward baseline: zero-filled history, rows L2-normalised, unweighted SMACOF from
 classical MDS, affine fit to the anchors (the paper's pipeline applied to the binned log)."""
@@ -708,24 +730,45 @@ def map_mrclam_run(
         mode: ``"visibility"``, ``"bearing"`` or ``"range"``.
         robots: robot subject numbers whose logs to use.
         method: a masked method of :data:`mappers.missing.MASKED_METHODS`
-            (``"covis-nonmetric"``, ``"range-quantile"``, ``"masked-euclidean"``) or
-            ``"naive"`` (the baseline); None = the mode's default (``range-quantile`` for
-            range, ``covis-nonmetric`` otherwise).
+            (``"covis-nonmetric"``, ``"range-quantile"``, ``"masked-euclidean"``, ...),
+            ``"covis-ensemble"`` (:data:`ENSEMBLE_METHOD`; parameters ``bin_widths`` and
+            ``min_co``, sequences) or ``"naive"`` (the baseline); None = the mode's default
+            (:data:`DEFAULT_MODE_METHOD`: ``range-quantile`` for range, ``covis-ensemble``
+            for visibility and bearing).
         anchors: anchor landmark subject numbers; None = the 4 nearest the bounding-box corners.
         out: directory for ``map.csv`` (subject, x, y of every landmark, anchors included, in
             the ground-truth frame; written atomically) and ``map.png``; None writes nothing.
-        bin_width: seconds per bin; None = the mode's default (:data:`DEFAULT_BIN_WIDTH`).
+        bin_width: seconds per bin; None = the mode's default (:data:`DEFAULT_BIN_WIDTH`);
+            must be None for ``covis-ensemble`` (it uses ``bin_widths``).
         groundtruth_fixes: ``"known"`` / ``"detect"`` / ``"none"`` (see :func:`read_run`).
         plot: write ``map.png`` (needs matplotlib) when ``out`` is given.
         **params: the masked method's parameters (e.g. ``quantile=0.95``, ``min_co=5``).
     """
-    from mappers.missing import MASKED_METHODS, masked_embedding
+    from mappers.missing import MASKED_METHODS, ensemble_embedding, masked_embedding
     from mappers.scores import mean_orientation_error, mean_position_error
 
-    if method is not None and method != NAIVE_METHOD and method not in MASKED_METHODS:
-        raise ValueError(
-            f"method must be one of {[NAIVE_METHOD, *MASKED_METHODS]} or None, got {method!r}"
-        )
+    choices = [NAIVE_METHOD, ENSEMBLE_METHOD, *MASKED_METHODS]
+    if method is not None and method not in choices:
+        raise ValueError(f"method must be one of {choices} or None, got {method!r}")
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    if method is None:
+        method = DEFAULT_MODE_METHOD[mode]
+    ensemble = method == ENSEMBLE_METHOD
+    if ensemble:
+        if bin_width is not None:
+            raise ValueError(
+                f"method {ENSEMBLE_METHOD!r} bins the run at several widths (bin_widths=...); "
+                "bin_width must be None"
+            )
+        unknown = set(params) - {"bin_widths", "min_co"}
+        if unknown:
+            raise ValueError(f"unknown parameter(s) {sorted(unknown)} for method {method!r}")
+        widths = tuple(float(w) for w in np.atleast_1d(params.get("bin_widths", ENSEMBLE_BIN_WIDTHS)))
+        min_cos = tuple(int(m) for m in np.atleast_1d(params.get("min_co", ENSEMBLE_MIN_CO)))
+        if not widths or not min_cos:
+            raise ValueError("bin_widths and min_co must not be empty")
+        bin_width = widths[0]
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", MRCLAMDataWarning)
         history, report = load_mrclam(
@@ -744,6 +787,21 @@ def map_mrclam_run(
             raise ValueError(f"method 'naive' takes no parameters, got {sorted(params)}")
         positions = naive_map(history)
         used_method, used_params = NAIVE_METHOD, {}
+    elif ensemble:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", MRCLAMDataWarning)  # already issued by load_mrclam
+            run = read_run(run_dir, robots, groundtruth_fixes=groundtruth_fixes)
+        hists = [(history.matrix, history.mask)]
+        for w in widths[1:]:
+            matrix, mask, _ = bin_run(run, mode, w)
+            hists.append((matrix, mask))
+        mm = ensemble_embedding(
+            hists, mode, "covis-nonmetric", anchor_ids=history.anchor_ids,
+            anchor_positions=history.anchor_positions,
+            param_sets=[{"min_co": m} for m in min_cos],
+        )
+        positions, used_method = mm.positions, ENSEMBLE_METHOD
+        used_params = {"bin_widths": list(widths), "min_co": list(min_cos)}
     else:
         mm = masked_embedding(
             history.matrix, history.mask, mode, method,
@@ -751,7 +809,7 @@ def map_mrclam_run(
         )
         positions, used_method, used_params = mm.positions, mm.method, mm.params
         for m in mm.warnings:
-            _warn(f"{history.meta['run']} ({mode}, {mm.method}): {m}", msgs)
+            _warn(f"{history.meta['run']} ({mode}, {used_method}): {m}", msgs)
     anchor_ids = history.anchor_ids
     truth = history.object_positions
     scored = [i for i in range(len(subjects)) if i not in set(anchor_ids.tolist())
