@@ -174,6 +174,8 @@ class RandomWalkPolicy:
         probes = np.linspace(-self.max_turn, self.max_turn, 5)  # headings tried after a move
         self._probes = list(zip(np.cos(probes).tolist(), np.sin(probes).tolist(), strict=True))
         self._ray_cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._probe_turn = math.nan  # max_turn the cached _probe_rot was made for
+        self._probe_rot = np.zeros((5, 1), dtype=complex)
 
     @classmethod
     def for_env(cls, env: Any, **kwargs: Any) -> RandomWalkPolicy:
@@ -259,7 +261,8 @@ class RandomWalkPolicy:
 
         free: the move itself is clear. safe: free, and from where it ends some heading within
         +-max_turn (five probes) is clear for the next move too, so the walk does not run into
-        a corner or a wall it cannot turn away from in one step.
+        a corner or a wall it cannot turn away from in one step. (The reference for
+        :meth:`_plan_choice`, which the policy runs instead: same decisions, fewer numpy calls.)
         """
         need = self.step_length + self.margin
         z = self._rotate(self._obstacles(proximity), turns)  # (B, T, n)
@@ -279,46 +282,92 @@ class RandomWalkPolicy:
             safe[rows] = free[rows] & (self._travel(z2) >= need).any(axis=-1)
         return free, safe
 
+    def _plan_choice(self, proximity: np.ndarray, turns: np.ndarray) -> int:
+        """For one ring (n,) and draws (T,): the draw :meth:`_plan` picks (first safe, else
+        first free, else -1), computed with the same floating-point operations on less data.
+
+        Speed (this runs on about a quarter of the steps of a random walk, the crowded ones):
+        only rays nearer than ``need + step_length + robot_radius`` (plus 1e-6 of slack for
+        rounding) can matter: a reading at distance |p| leaves at least ``|p| - robot_radius -
+        obstacle_radius`` of room, so the others never bring a draw below ``need + step_length``
+        nor a probe below ``need``, and dropping them from a minimum changes no comparison.
+        Probes are run only for the free draws (``safe`` is ``free & probe``). numpy's complex
+        products are elementwise, so each kept value is bit-identical to :meth:`_plan`'s.
+        """
+        step = self.step_length
+        need = step + self.margin
+        keep = (proximity < need + step + self.robot_radius + 1e-6).nonzero()[0]
+        _, ray = self._rays(proximity.size)
+        z = (proximity.take(keep) + self.obstacle_radius) * ray.take(keep)
+        z = z * np.exp(-1j * turns)[:, None]  # (T, m): the obstacles seen along each draw
+        room = self._travel(z)
+        free = room >= need
+        if not free.any():
+            return -1
+        first = int(free.argmax())
+        if not self.plan_ahead or room[first] >= need + step:
+            return first  # safe implies free, so the first free draw is the first safe one
+        if self._probe_turn != self.max_turn:  # cached: np.linspace costs microseconds
+            self._probe_turn = self.max_turn
+            self._probe_rot = np.exp(-1j * np.linspace(-self.max_turn, self.max_turn, 5))[:, None]
+        cand = free.nonzero()[0]
+        moved = z.take(cand, axis=0) - step  # the obstacles seen from where each move ends
+        ok = (self._travel(moved[:, None, :] * self._probe_rot) >= need).any(axis=-1)
+        return int(cand[ok.argmax()]) if ok.any() else first
+
     def _first_choice(self, proximity: np.ndarray, turns: np.ndarray) -> int:
         """Index of the first safe draw in ``turns``, else of the first free one, else -1.
 
         The same decision as :meth:`_plan`, made lazily in plain Python for the first three draws
         (usually the first settles it) looking only at the few rays near enough to matter, which
         costs a fraction of the vectorised version's numpy calls (the policy runs once per env
-        step); when those three do not settle it, :meth:`_plan` decides over all the draws.
+        step); when those three do not settle it, :meth:`_plan_choice` decides over all the draws.
         A reading can only block a move if it is nearer than ``need + robot_radius``, or spoil
         the move after it if nearer than ``need + step_length + robot_radius``.
         """
         step = self.step_length
         need = step + self.margin
-        near = np.flatnonzero(proximity < need + step + self.robot_radius)
+        near = (proximity < need + step + self.robot_radius).nonzero()[0]
         if near.size == 0:
             return 0
         _, ray = self._rays(proximity.size)
-        points = ((proximity[near] + self.obstacle_radius) * ray[near]).tolist()
+        points = [(p.real, p.imag) for p in
+                  ((proximity.take(near) + self.obstacle_radius) * ray.take(near)).tolist()]
         rr2 = (self.robot_radius + self.obstacle_radius) ** 2
+        # A point farther than this from where a move ends cannot block a probe (it leaves room
+        # >= |p| - sqrt(rr2) > need); the 1e-6 slack covers rounding, so skipping it is exact.
+        probe_reach2 = (need + math.sqrt(rr2) + 1e-6) ** 2
         sqrt, inf = math.sqrt, math.inf
         first_free = -1
         for i, turn in enumerate(turns[:3].tolist()):
             c, s = math.cos(turn), math.sin(turn)
-            frame = []  # obstacle centres in the candidate's frame
             room = inf
-            for p in points:
-                x = p.real * c + p.imag * s
-                y = p.imag * c - p.real * s
-                frame.append((x, y))
-                if x > 0.0 and y * y < rr2:
-                    room = min(room, x - sqrt(rr2 - y * y))
+            for px, py in points:  # obstacle centres in the candidate's frame
+                x = px * c + py * s
+                if x > 0.0:
+                    y = py * c - px * s
+                    if y * y < rr2:
+                        v = x - sqrt(rr2 - y * y)
+                        if v < room:
+                            room = v
             if room < need:
                 continue
             if first_free < 0:
                 first_free = i
             if not self.plan_ahead or room >= need + step:
                 return i
-            for pc, ps in self._probes:  # is some heading clear from where this move ends?
-                for x, y in frame:
-                    x2 = (x - step) * pc + y * ps
-                    y2 = y * pc - (x - step) * ps
+            # Is some heading clear from where this move ends? (the same arithmetic as before,
+            # on the points near enough to matter, each shifted by the step once)
+            frame = []
+            for px, py in points:
+                xm = (px * c + py * s) - step
+                y = py * c - px * s
+                if xm * xm + y * y < probe_reach2:
+                    frame.append((xm, y))
+            for pc, ps in self._probes:
+                for xm, y in frame:
+                    x2 = xm * pc + y * ps
+                    y2 = y * pc - xm * ps
                     if x2 > 0.0 and y2 * y2 < rr2 and x2 - sqrt(rr2 - y2 * y2) < need:
                         break
                 else:
@@ -326,10 +375,7 @@ class RandomWalkPolicy:
         if turns.size <= 3:
             return first_free
         # Crowded: decide over all the draws at once (vectorised) rather than one by one.
-        free, safe = self._plan(proximity[None, :], turns[None, :])
-        if safe.any():
-            return int(safe[0].argmax())
-        return int(free[0].argmax()) if free.any() else -1
+        return self._plan_choice(proximity, turns)
 
     def _act(self, proximity: np.ndarray) -> np.ndarray:
         batch = proximity.shape[0]

@@ -166,8 +166,9 @@ class World:
                 f"about {self.capacity} fit; enlarge the arena or reduce the clearances"
             )
         self._grown_filter = pymunk.ShapeFilter(group=ROBOT_GROUP, mask=GROWN)
-        self.space: pymunk.Space | None = None
-        self.body: pymunk.Body | None = None
+        self._space: pymunk.Space | None = None
+        self._body: pymunk.Body | None = None
+        self._body_stale = False  # the robot's pymunk body lags (x, y, heading); see `space`
         self.object_positions = np.zeros((0, 2))
         self.anchor_ids = np.zeros(0, dtype=np.int64)
         self.x = self.y = self.heading = 0.0
@@ -360,17 +361,37 @@ class World:
         disc = pymunk.Circle(body, rr)
         disc.filter = pymunk.ShapeFilter(group=ROBOT_GROUP, categories=PHYSICAL)
         space.add(body, disc)
-        self.space, self.body = space, body
+        self._space, self._body = space, body
         self.object_positions = layout.object_positions
         self.anchor_ids = layout.anchor_ids
         x, y, h = (float(v) for v in layout.robot_pose)
         self._place(x, y, h)
 
     def _place(self, x: float, y: float, heading: float) -> None:
+        # Speed: moving the pymunk body (two property setters and a reindex) costs as much as the
+        # move's query, and no query of ours can see the robot's own shape (ROBOT_GROUP). So the
+        # body is only brought up to date when someone asks for `space` or `body`.
         self.x, self.y, self.heading = x, y, heading
-        self.body.position = (x, y)
-        self.body.angle = heading
-        self.space.reindex_shapes_for_body(self.body)
+        self._body_stale = True
+
+    def _sync_body(self) -> None:
+        if self._body_stale and self._body is not None:
+            self._body.position = (self.x, self.y)
+            self._body.angle = self.heading
+            self._space.reindex_shapes_for_body(self._body)
+        self._body_stale = False
+
+    @property
+    def space(self) -> pymunk.Space | None:
+        """The pymunk space (None before :meth:`build`), with the robot's body at its pose."""
+        self._sync_body()
+        return self._space
+
+    @property
+    def body(self) -> pymunk.Body | None:
+        """The robot's kinematic pymunk body (None before :meth:`build`), at the robot's pose."""
+        self._sync_body()
+        return self._body
 
     @property
     def pose(self) -> np.ndarray:
@@ -389,14 +410,15 @@ class World:
         x0, y0 = self.x, self.y
         x1, y1 = x0 + distance * c, y0 + distance * s
         # Thin segment against the grown obstacles == the robot's disc swept along the move.
-        hit = self.space.segment_query_first((x0, y0), (x1, y1), 0.0, self._grown_filter)
+        space = self._space  # the robot's body may be stale here: the query never sees it
+        hit = space.segment_query_first((x0, y0), (x1, y1), 0.0, self._grown_filter)
         if hit is not None:
             travel = hit.alpha * distance - BACKOFF
             if travel > 0.0:
                 x1, y1 = x0 + travel * c, y0 + travel * s
                 # A grazing contact gains almost no gap from backing off along the path: stay
                 # put rather than end within rounding error of an obstacle.
-                near = self.space.point_query_nearest((x1, y1), CONTACT_MARGIN, self._grown_filter)
+                near = space.point_query_nearest((x1, y1), CONTACT_MARGIN, self._grown_filter)
                 if near is not None:
                     x1, y1 = x0, y0
             else:

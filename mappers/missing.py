@@ -39,6 +39,21 @@ assumptions they add:
     distance, the same way everywhere (roughly uniform viewpoints and headings; one field of
     view for all robots).
 
+``"covis-power"`` (any sensor; uses only the pattern of what was observed)
+    ``covis-nonmetric``'s dissimilarity, weights and lower bounds, but with a *metric* link:
+    the map's distances are fitted to ``a * delta**power`` (``delta = -log`` Ochiai
+    co-observation coefficient; the scale ``a`` re-fitted by weighted least squares after every
+    few Guttman steps, the anchors held fixed), started from the ``covis-nonmetric`` map. Why:
+    the order of the co-observation rates leaves a 15-landmark map under-determined (the
+    non-metric fit reaches near-zero stress far from the truth); one global link with a single
+    exponent is far more constrained. MRCLAM (leave-one-run-out over power in {0.35, 0.5, 0.7,
+    1}): 0.5 is chosen in every fold. *Assumes* additionally: one power law links distance and
+    ``-log`` co-observation rate over the whole layout. Such a link is calibrated only across
+    pairs that are measured together, so when the graph of usable pairs falls apart (a
+    clustered layout) the method keeps the ``covis-nonmetric`` map and says so in a warning
+    (MRCLAM DS6: the link fitted across the two groups inflates the 10-30 cm clusters, 0.96 m
+    instead of 0.49 m; this fallback rule was written after seeing that run).
+
 Ensembles (:func:`ensemble_embedding`; MRCLAM's ``"covis-ensemble"``)
     The mean of several masked maps of the *same* objects with the anchors held fixed (so all
     maps share the anchors' frame), e.g. ``covis-nonmetric`` on one run binned at several bin
@@ -54,6 +69,17 @@ Ensembles (:func:`ensemble_embedding`; MRCLAM's ``"covis-ensemble"``)
     that have it, anchors fixed. *Assumes*: a history difference is comparable across pairs —
     false for a narrow field of view, where co-observed bearings always differ by less than
     the field of view (measured: worse than ``covis-nonmetric``).
+
+Bearing-specific statistics measured on MRCLAM (DS1-3) without gain, so bearing histories are
+mapped from their pattern of what was seen: subtended angles of same-image pairs (quantiles: the
++-33 deg field of view saturates them beyond about 1.5 m and lined-up pairs look close; the
+lower bounds ``d >= 2 r0 tan(alpha / 2)`` with r0 = 0.8 m are never active), ratios of
+subtended angles within an image, betweenness of triples (fraction "k between i and j" vs the
+triangle's angle at k), which side of each pair the viewpoints were on (fitted with a uniform
+viewpoint model: consistent with the covisibility map already), adding the mean subtended angle
+to the dissimilarity, and inverse-probability weighting of co-observations by the field-of-view
+overlap. A forward model of co-observation under uniform viewpoints scores the ground truth worse
+than the covisibility map.
 
 Every method returns positions in the anchors' frame when anchors are given (the anchors are
 held at their positions, so the affine fit that follows is the identity), else a free embedding.
@@ -78,6 +104,7 @@ __all__ = [
     "MaskedMap",
     "build_masked_embedding",
     "co_observation_counts",
+    "end_on_penalty",
     "ensemble_embedding",
     "covisibility_dissimilarity",
     "masked_embedding",
@@ -85,6 +112,7 @@ __all__ = [
     "masked_euclidean_dissimilarity",
     "range_pair_bounds",
     "nonmetric_smacof",
+    "power_link_smacof",
     "range_pair_distances",
     "step_observations",
 ]
@@ -94,6 +122,7 @@ MASKED_METHODS: dict[str, dict[str, Any]] = {
     "range-bounds": {"quantile": 0.98, "min_pairs": 5, "weight_cap": 50, "slack": 1.0,
                      "fov": 1.22, "upper_quantile": 0.02},
     "covis-nonmetric": {"min_co": 3},
+    "covis-power": {"min_co": 3, "power": 0.5, "n_rounds": 60, "angle_weight": 0.0},
     "masked-euclidean": {"min_pairs": 5},
 }
 """Label -> default parameters of each masked method. The defaults were picked by measurement on
@@ -164,6 +193,28 @@ def covisibility_dissimilarity(seen: np.ndarray) -> tuple[np.ndarray, np.ndarray
     delta = -np.log(np.clip(och, 1e-6, 1.0))
     np.fill_diagonal(delta, 0.0)
     return delta, C
+
+
+def end_on_penalty(bearings: np.ndarray, seen: np.ndarray) -> np.ndarray:
+    """``max_kl a_kl - a_ij``: how much smaller the mean subtended angle ``a_ij`` of a pair
+    (mean over the steps that saw both of ``|wrap(b_i - b_j)|``) is than the largest one.
+
+    A pair seen mostly end-on (lined up from where the robots were) is co-observed from far
+    along its line, so its co-observation rate overstates its closeness; its subtended angle
+    is small. Pairs never seen together get 0 (they are censored anyway)."""
+    M = seen.shape[0]
+    a = np.full((M, M), np.nan)
+    for i in range(M):
+        for j in range(i + 1, M):
+            both = seen[i] & seen[j]
+            if both.any():
+                a[i, j] = a[j, i] = np.mean(np.abs(np.angle(
+                    np.exp(1j * (bearings[i, both] - bearings[j, both])))))
+    if np.all(np.isnan(a)):
+        return np.zeros((M, M))
+    pen = np.nan_to_num(np.nanmax(a) - a, nan=0.0)
+    np.fill_diagonal(pen, 0.0)
+    return pen
 
 
 def range_pair_distances(
@@ -323,6 +374,61 @@ def nonmetric_smacof(
     return X
 
 
+def power_link_smacof(
+    delta: np.ndarray,
+    weights: np.ndarray,
+    init: np.ndarray,
+    *,
+    power: float = 0.5,
+    censored: np.ndarray | None = None,
+    fixed: np.ndarray | None = None,
+    fixed_positions: np.ndarray | None = None,
+    n_rounds: int = 60,
+    steps_per_round: int = 5,
+) -> tuple[np.ndarray, float]:
+    """Weighted SMACOF on targets ``a * delta**power`` with the scale ``a`` re-fitted each round.
+
+    Each round sets ``a`` to the weighted least-squares fit of the current distances on
+    ``delta**power`` over the measured (weighted, uncensored) pairs, gives each censored pair
+    the target ``clip(d, t, max(2 t, 1.5 x fixed points' diameter))`` (t = largest measured
+    target: a lower bound, as in :func:`nonmetric_smacof`), then takes ``steps_per_round``
+    Guttman steps of :func:`mappers.smacof.weighted_smacof`. Returns ``(X, a)``. A monotone
+    link with one free exponent instead of the isotonic one of :func:`nonmetric_smacof`
+    (sklearn's MDS has neither weights, fixed points nor a parametric link).
+    """
+    if not power > 0:
+        raise ValueError(f"power must be > 0, got {power}")
+    if n_rounds < 1 or steps_per_round < 1:
+        raise ValueError("n_rounds and steps_per_round must be >= 1")
+    delta = np.asarray(delta, dtype=float)
+    W = np.asarray(weights, dtype=float).copy()
+    np.fill_diagonal(W, 0.0)
+    n = len(delta)
+    cens = np.zeros((n, n), bool) if censored is None else np.asarray(censored, bool)
+    meas = (W > 0) & ~cens
+    if meas.sum() < 4:
+        raise ValueError("power_link_smacof needs at least 2 measured (weighted, uncensored) pairs")
+    X = np.array(init, dtype=float)
+    if fixed is not None and fixed_positions is not None:
+        X[np.asarray(fixed)] = fixed_positions
+    span = 0.0
+    if fixed is not None and len(np.atleast_1d(fixed)) > 1:
+        F = X[np.asarray(fixed)]
+        span = float(np.max(np.linalg.norm(F[:, None] - F[None], axis=2)))
+    dp = np.maximum(delta, 0.0) ** power
+    a = 1.0
+    for _ in range(n_rounds):
+        D = np.linalg.norm(X[:, None] - X[None], axis=2)
+        den = np.sum(W[meas] * dp[meas] ** 2)
+        a = float(np.sum(W[meas] * D[meas] * dp[meas]) / den) if den > 0 else 1.0
+        T = a * dp
+        t = T[meas].max()
+        T = np.where(cens, np.clip(D, t, max(2 * t, 1.5 * span)), T)
+        np.fill_diagonal(T, 0.0)
+        X, _, _ = weighted_smacof(T, W, X, fixed=fixed, max_iter=steps_per_round, tol=0.0)
+    return X, a
+
+
 def bounded_smacof(
     lower: np.ndarray,
     upper: np.ndarray,
@@ -440,6 +546,12 @@ def masked_embedding(
         W = (counts > 0).astype(float)
     else:
         delta, C = covisibility_dissimilarity(s)
+        if p.get("angle_weight", 0.0):
+            if sensor != "bearing":
+                raise ValueError(f"angle_weight needs a bearing history, got sensor {sensor!r}")
+            if p["angle_weight"] < 0:
+                raise ValueError(f"angle_weight must be >= 0, got {p['angle_weight']}")
+            delta = delta + p["angle_weight"] * end_on_penalty(v, s)
         Cn = C.copy()
         np.fill_diagonal(Cn, 0)
         W = np.sqrt(np.maximum(Cn, 1.0))
@@ -448,7 +560,7 @@ def masked_embedding(
         censored = Cn < p["min_co"]
         counts = np.where(censored, 0, Cn)
     comps = _components(counts)
-    if method == "covis-nonmetric":
+    if method in ("covis-nonmetric", "covis-power"):
         start = _initial(
             np.where(censored, 0, delta), counts.astype(float), sub_anchor, anchor_positions
         )
@@ -461,6 +573,16 @@ def masked_embedding(
             fixed_positions=anchor_positions,
             max_iter=max_iter,
         )
+        if method == "covis-power" and len(comps) > 1:
+            msgs.append(
+                "covis-power: the usable pairs fall apart, so one distance link cannot be "
+                "calibrated across the groups; kept the covis-nonmetric map"
+            )
+        elif method == "covis-power":
+            Y, _ = power_link_smacof(
+                delta, W, Y, power=p["power"], censored=censored, fixed=sub_anchor,
+                fixed_positions=anchor_positions, n_rounds=p["n_rounds"],
+            )
     else:
         start = _initial(delta, W, sub_anchor, anchor_positions)
         Y, _, _ = weighted_smacof(

@@ -14,6 +14,7 @@ import pytest
 
 from lfmdr_gym.cli import build_parser, main
 from lfmdr_gym.experiments.store import JOURNAL, read_results
+from mappers import METHODS
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ["--mode", "visibility", "--layouts", "1", "--poses", "2", "--steps", "200",
@@ -76,8 +77,10 @@ def clean(tmp_path_factory):
 
 def test_reproduce_end_to_end(clean, capsys):
     rows = read_results(clean / "results.csv")
-    # per run: LPCA at N=100, 200; SMA(WGT), ISOMAP: K=4..10 at N=200 + the default at N=100
-    assert len(rows) == 2 * (2 + 8 + 8)
+    # per run: LPCA at N=100, 200; SMA(WGT), ISOMAP: their K grid at N=200 + the default at N=100
+    n_k = len(METHODS["SMA(WGT)"].grid["n_neighbors"])
+    assert n_k == len(METHODS["ISOMAP"].grid["n_neighbors"])
+    assert len(rows) == 2 * (2 + 2 * (n_k + 1))
     assert {r["method"] for r in rows} == {"LPCA", "SMA(WGT)", "ISOMAP"}
     for name in ("table.md", "table.csv", "mpe_vs_n.png", "map_lpca.png"):
         assert (clean / name).stat().st_size > 200

@@ -243,3 +243,47 @@ def test_ensemble_is_the_mean_of_its_members_and_no_worse_than_them_on_average()
     with pytest.raises(ValueError, match="same objects"):
         ensemble_embedding([hists[0], (hists[1][0][:-1], None)], "visibility",
                            anchor_ids=anchors, anchor_positions=P[anchors])
+
+
+def test_power_link_smacof_recovers_a_layout_from_a_power_of_its_distances():
+    from mappers.missing import power_link_smacof
+
+    rng = np.random.default_rng(12)
+    P = rng.uniform(0, 5, size=(12, 2))
+    D = np.linalg.norm(P[:, None] - P[None], axis=2)
+    W = 1.0 - np.eye(12)
+    fixed = np.array([0, 1, 2, 3])
+    start = P + rng.normal(scale=0.4, size=P.shape)
+    # delta = 7 d^2: with power 0.5 the link a * delta**0.5 is linear in d (a = 1/sqrt(7))
+    X, a = power_link_smacof(7 * D**2, W, start, power=0.5, fixed=fixed,
+                             fixed_positions=P[fixed], n_rounds=200)
+    assert np.mean(np.linalg.norm(X - P, axis=1)) < 0.02
+    assert a == pytest.approx(1 / np.sqrt(7), rel=0.02)
+    # the wrong exponent cannot fit the same data as well
+    Y, _ = power_link_smacof(7 * D**2, W, start, power=1.0, fixed=fixed,
+                             fixed_positions=P[fixed], n_rounds=200)
+    assert np.mean(np.linalg.norm(Y - P, axis=1)) > 0.05
+    with pytest.raises(ValueError, match="power"):
+        power_link_smacof(D, W, start, power=0.0)
+
+
+def test_covis_power_maps_a_simulated_camera_and_falls_back_on_a_split_layout():
+    P, seen, _, _ = _simulate(n_steps=4000, max_range=5.0, seed=13)
+    anchors = _corners(P)
+    mm = masked_embedding(seen.astype(float), None, "visibility", "covis-power",
+                          anchor_ids=anchors, anchor_positions=P[anchors])
+    centroid = _score(np.repeat(P[anchors].mean(0)[None], len(P), 0), P, anchors)
+    assert mm.params["power"] == 0.5 and not mm.warnings
+    assert _score(mm.positions, P, anchors) < 0.35 * centroid
+    # two groups never seen together: no common link, so the non-metric map is kept (and said)
+    split = seen.copy()
+    left = P[:, 1] < 5
+    split[left, : seen.shape[1] // 2] = False
+    split[~left, seen.shape[1] // 2:] = False
+    a2 = np.array([np.flatnonzero(left)[0], np.flatnonzero(left)[1],
+                   np.flatnonzero(~left)[0], np.flatnonzero(~left)[1]])
+    kw = {"anchor_ids": a2, "anchor_positions": P[a2]}
+    pw = masked_embedding(split.astype(float), None, "visibility", "covis-power", **kw)
+    nm = masked_embedding(split.astype(float), None, "visibility", "covis-nonmetric", **kw)
+    assert any("kept the covis-nonmetric map" in w for w in pw.warnings)
+    assert np.allclose(pw.positions, nm.positions)

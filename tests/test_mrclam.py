@@ -298,8 +298,10 @@ def test_covis_ensemble_is_the_visibility_default_and_checks_its_arguments(tmp_p
     run = _write_run(tmp_path / "Ens", truth, _simulate_rows(truth, n_images=1200, seed=9))
     small = {"bin_widths": (1.0, 2.0), "min_co": (3,)}
     ens = map_mrclam_run(run, "bearing", robots=(1, 2, 3), plot=False, **small)
-    assert ens.method == "covis-ensemble" and ens.params == {"bin_widths": [1.0, 2.0], "min_co": [3]}
-    singles = [map_mrclam_run(run, "bearing", robots=(1, 2, 3), method="covis-nonmetric",
+    assert ens.method == "covis-ensemble"
+    assert ens.params == {"bin_widths": [1.0, 2.0], "min_co": [3], "member": "covis-power",
+                          "power": 0.5}
+    singles = [map_mrclam_run(run, "bearing", robots=(1, 2, 3), method="covis-power",
                               bin_width=w, min_co=3) for w in (1.0, 2.0)]
     assert np.allclose(ens.positions, np.mean([s.positions for s in singles], axis=0))
     assert ens.mpe < ens.centroid_mpe / 2
@@ -307,3 +309,7 @@ def test_covis_ensemble_is_the_visibility_default_and_checks_its_arguments(tmp_p
         map_mrclam_run(run, "visibility", robots=(1, 2, 3), method="covis-ensemble", bin_width=2.0)
     with pytest.raises(ValueError, match="unknown parameter"):
         map_mrclam_run(run, "visibility", robots=(1, 2, 3), method="covis-ensemble", quantile=0.9)
+    with pytest.raises(ValueError, match="member"):
+        map_mrclam_run(run, "visibility", robots=(1, 2, 3), member="covis-range")
+    with pytest.raises(ValueError, match="power"):
+        map_mrclam_run(run, "visibility", robots=(1, 2, 3), member="covis-nonmetric", power=0.5)

@@ -587,14 +587,18 @@ def load_mrclam(
 
 # ------------------------------------------------------------------------------ mapping
 ENSEMBLE_METHOD = "covis-ensemble"
-"""The mean of ``covis-nonmetric`` maps (anchors fixed) over the run binned at every width of
-:data:`ENSEMBLE_BIN_WIDTHS` and each ``min_co`` of :data:`ENSEMBLE_MIN_CO` (see
-:func:`mappers.missing.ensemble_embedding`). A single covis-nonmetric map moves by +-0.3 m with
-the bin width, and the width that is best on one run is not on another; the mean over a fixed
-spread needs no setting choice. Assumptions: those of ``covis-nonmetric`` (the chance of seeing
-two landmarks in one bin falls monotonically with their distance, the same way everywhere)."""
+"""The mean of ``covis-power`` maps (or ``member="covis-nonmetric"``; anchors fixed) over the
+run binned at every width of :data:`ENSEMBLE_BIN_WIDTHS` and each ``min_co`` of
+:data:`ENSEMBLE_MIN_CO` (see :func:`mappers.missing.ensemble_embedding`). A single map moves by
++-0.3 m with the bin width, and the width that is best on one run is not on another; the mean
+over a fixed spread needs no setting choice. Parameters: ``bin_widths``, ``min_co``
+(sequences), ``member`` (``"covis-power"`` or ``"covis-nonmetric"``), ``power`` (covis-power's
+exponent). Assumptions: those of the member method (mappers/missing.py): the chance of seeing
+two landmarks in one bin falls with their distance the same way everywhere (covis-power: as
+one power law)."""
 ENSEMBLE_BIN_WIDTHS: tuple[float, ...] = (1.0, 1.5, 2.0, 3.0, 4.0, 5.0)
 ENSEMBLE_MIN_CO: tuple[int, ...] = (3, 5)
+ENSEMBLE_MEMBERS = ("covis-power", "covis-nonmetric")
 
 DEFAULT_MODE_METHOD: dict[str, str] = {
     "visibility": ENSEMBLE_METHOD,
@@ -761,9 +765,21 @@ def map_mrclam_run(
                 f"method {ENSEMBLE_METHOD!r} bins the run at several widths (bin_widths=...); "
                 "bin_width must be None"
             )
-        unknown = set(params) - {"bin_widths", "min_co"}
+        unknown = set(params) - {"bin_widths", "min_co", "member", "power", "angle_weight"}
         if unknown:
             raise ValueError(f"unknown parameter(s) {sorted(unknown)} for method {method!r}")
+        member = params.get("member", ENSEMBLE_MEMBERS[0])
+        if member not in ENSEMBLE_MEMBERS:
+            raise ValueError(f"member must be one of {ENSEMBLE_MEMBERS}, got {member!r}")
+        extra = {}
+        if "power" in params:
+            if member != "covis-power":
+                raise ValueError("power applies to member='covis-power' only")
+            extra["power"] = float(params["power"])
+        if "angle_weight" in params:
+            if member != "covis-power":
+                raise ValueError("angle_weight applies to member='covis-power' only")
+            extra["angle_weight"] = float(params["angle_weight"])
         widths = tuple(float(w) for w in np.atleast_1d(params.get("bin_widths", ENSEMBLE_BIN_WIDTHS)))
         min_cos = tuple(int(m) for m in np.atleast_1d(params.get("min_co", ENSEMBLE_MIN_CO)))
         if not widths or not min_cos:
@@ -796,18 +812,21 @@ def map_mrclam_run(
             matrix, mask, _ = bin_run(run, mode, w)
             hists.append((matrix, mask))
         mm = ensemble_embedding(
-            hists, mode, "covis-nonmetric", anchor_ids=history.anchor_ids,
+            hists, mode, member, anchor_ids=history.anchor_ids,
             anchor_positions=history.anchor_positions,
-            param_sets=[{"min_co": m} for m in min_cos],
+            param_sets=[{"min_co": m, **extra} for m in min_cos],
         )
         positions, used_method = mm.positions, ENSEMBLE_METHOD
-        used_params = {"bin_widths": list(widths), "min_co": list(min_cos)}
+        used_params = {"bin_widths": list(widths), "min_co": list(min_cos), "member": member,
+                       **({k: mm.params["members"][0][k] for k in ("power", "angle_weight")}
+                          if member == "covis-power" else {})}
     else:
         mm = masked_embedding(
             history.matrix, history.mask, mode, method,
             anchor_ids=history.anchor_ids, anchor_positions=history.anchor_positions, **params,
         )
         positions, used_method, used_params = mm.positions, mm.method, mm.params
+    if method != NAIVE_METHOD:
         for m in mm.warnings:
             _warn(f"{history.meta['run']} ({mode}, {used_method}): {m}", msgs)
     anchor_ids = history.anchor_ids
