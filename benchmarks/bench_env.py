@@ -38,7 +38,7 @@ class ReferenceWorld:
     Same geometry as the env's defaults: square arena, cylinders of 48 mm laid out by rejection
     sampling with 0.15 m clearances, a 0.05 m disc robot that turns, then advances 0.2 m unless it
     would touch an object or a wall (it stops short), then observes visibility (visual angle
-    > 5 degrees and line of sight clear of every other cylinder) or bearing, plus a ring of 16
+    > 5 degrees and line of sight clear of every other cylinder) or bearing, plus a ring of 32
     proximity rays.
     """
 

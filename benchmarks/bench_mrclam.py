@@ -19,9 +19,14 @@ For each run and mode (4 corner anchors, all 5 robots, scores over the 11 non-an
   members (metric link distance = a * (-log co-observation rate) ** 0.5; a run whose usable
   pairs fall apart keeps the covis-nonmetric members, with a warning).
 
+* ``covis-ensemble/angle`` (bearing): covis-ensemble with the end-on penalty of
+  mappers.missing.end_on_penalty added to the dissimilarity (``angle_weight``, default column
+  0.25).
+
 Settings grids: covis-nonmetric (visibility, bearing): bin width {1, 2, 3, 5} s x min_co {3, 5};
 covis-ensemble/nonmetric: the set of bin widths, {1, 2, 3, 5} / {1, 1.5, 2, 3, 4, 5} /
-{0.5, ..., 8} s; covis-ensemble: power {0.35, 0.5, 0.7, 1};
+{0.5, ..., 8} s; covis-ensemble: power {0.35, 0.5, 0.7, 1}; covis-ensemble/angle: angle_weight
+{0, 0.25, 0.5, 0.75};
 range-quantile: bin width {0.25, 0.5, 1} s x quantile {0.95, 0.98, 0.99}; range-bounds: the same
 x slack {0.5, 1}.
 """
@@ -56,12 +61,13 @@ GRIDS = {
         for bws in [(1.0, 2.0, 3.0, 5.0), (1.0, 1.5, 2.0, 3.0, 4.0, 5.0),
                     (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 8.0)]
     ],
+    "covis-ensemble/angle": [{"angle_weight": a} for a in (0.0, 0.25, 0.5, 0.75)],
     "masked-euclidean": [],
 }
 CANDIDATES = {
     "visibility": ["covis-nonmetric", "covis-ensemble/nonmetric", "covis-ensemble"],
     "bearing": ["masked-euclidean", "covis-nonmetric", "covis-ensemble/nonmetric",
-                "covis-ensemble"],
+                "covis-ensemble", "covis-ensemble/angle"],
     "range": ["masked-euclidean", "range-quantile", "range-bounds"],
 }
 
@@ -69,6 +75,8 @@ CANDIDATES = {
 def _run(run_dir: Path, mode: str, method: str | None, **kw):
     if method == "covis-ensemble/nonmetric":
         method, kw = "covis-ensemble", {**kw, "member": "covis-nonmetric"}
+    elif method == "covis-ensemble/angle":
+        method, kw = "covis-ensemble", {"angle_weight": 0.25, **kw}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MRCLAMDataWarning)
         return map_mrclam_run(run_dir, mode, method=method, **kw)
@@ -110,10 +118,10 @@ def main(argv: list[str] | None = None) -> None:
                 if w not in notes[run.name]:
                     notes[run.name].append(w)
         print(f"\n## mode = {mode}   MPE [m] / MOE [%] over the 11 non-anchor landmarks")
-        print(f"{'run':<16}{'centroid':>9}" + "".join(f"{label:>24}" for label, _ in cols))
+        print(f"{'run':<16}{'centroid':>9}" + "".join(f"{label:>30}" for label, _ in cols))
         for r, run in enumerate(runs):
             line = f"{run.name:<16}{cols[0][1][r].centroid_mpe:>9.2f}"
-            line += "".join(f"{res[r].mpe:>17.2f} /{res[r].moe:>5.1f}" for _, res in cols)
+            line += "".join(f"{res[r].mpe:>23.2f} /{res[r].moe:>5.1f}" for _, res in cols)
             print(line)
         groups = [("mean (all)", list(range(len(runs))))]
         spread = [k for k, run in enumerate(runs) if not run.name.endswith("Dataset6")]
@@ -121,7 +129,7 @@ def main(argv: list[str] | None = None) -> None:
             groups.append(("mean (DS1-3)", spread))
         for label, idx in groups:
             line = f"{label:<16}{np.mean([cols[0][1][k].centroid_mpe for k in idx]):>9.2f}"
-            line += "".join(f"{np.mean([res[k].mpe for k in idx]):>17.2f} /{np.mean([res[k].moe for k in idx]):>5.1f}" for _, res in cols)
+            line += "".join(f"{np.mean([res[k].mpe for k in idx]):>23.2f} /{np.mean([res[k].moe for k in idx]):>5.1f}" for _, res in cols)
             print(line)
         for method, picks in chosen.items():
             print(f"LOO settings chosen for {method}: " + "; ".join(

@@ -174,6 +174,7 @@ class RandomWalkPolicy:
         probes = np.linspace(-self.max_turn, self.max_turn, 5)  # headings tried after a move
         self._probes = list(zip(np.cos(probes).tolist(), np.sin(probes).tolist(), strict=True))
         self._ray_cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._unstick_cache: dict[int, np.ndarray] = {}
         self._probe_turn = math.nan  # max_turn the cached _probe_rot was made for
         self._probe_rot = np.zeros((5, 1), dtype=complex)
 
@@ -236,8 +237,11 @@ class RandomWalkPolicy:
         """
         x, y = z.real, z.imag
         reach2 = (self.robot_radius + self.obstacle_radius) ** 2 - y * y
-        travel = np.where((x > 0.0) & (reach2 > 0.0), x - np.sqrt(np.abs(reach2)), np.inf)
-        return np.maximum(travel.min(axis=-1), 0.0)
+        travel = x - np.sqrt(np.abs(reach2))
+        # Speed: copyto(where=) and ufunc.reduce skip np.where's and ndarray.min's overheads.
+        # (The mask is ~(a & b), not (x <= 0) | (reach2 <= 0): a NaN reading must block nothing.)
+        np.copyto(travel, np.inf, where=~((x > 0.0) & (reach2 > 0.0)))
+        return np.maximum(np.minimum.reduce(travel, axis=-1), 0.0)
 
     @staticmethod
     def _rotate(z: np.ndarray, turns: np.ndarray) -> np.ndarray:
@@ -302,9 +306,9 @@ class RandomWalkPolicy:
         z = z * np.exp(-1j * turns)[:, None]  # (T, m): the obstacles seen along each draw
         room = self._travel(z)
         free = room >= need
-        if not free.any():
+        first = int(free.argmax())  # argmax of a bool array: the first True (0 if none)
+        if not free[first]:
             return -1
-        first = int(free.argmax())
         if not self.plan_ahead or room[first] >= need + step:
             return first  # safe implies free, so the first free draw is the first safe one
         if self._probe_turn != self.max_turn:  # cached: np.linspace costs microseconds
@@ -312,8 +316,11 @@ class RandomWalkPolicy:
             self._probe_rot = np.exp(-1j * np.linspace(-self.max_turn, self.max_turn, 5))[:, None]
         cand = free.nonzero()[0]
         moved = z.take(cand, axis=0) - step  # the obstacles seen from where each move ends
-        ok = (self._travel(moved[:, None, :] * self._probe_rot) >= need).any(axis=-1)
-        return int(cand[ok.argmax()]) if ok.any() else first
+        # A draw is safe if some probe is clear, i.e. if its best probe is.
+        best = np.maximum.reduce(self._travel(moved[:, None, :] * self._probe_rot), axis=-1)
+        ok = best >= need
+        k = int(ok.argmax())  # the first safe draw, if any
+        return int(cand[k]) if ok[k] else first
 
     def _first_choice(self, proximity: np.ndarray, turns: np.ndarray) -> int:
         """Index of the first safe draw in ``turns``, else of the first free one, else -1.
@@ -399,10 +406,14 @@ class RandomWalkPolicy:
         previous = self._stuck_sign[row]
         if previous != 0:
             return previous * self.max_turn
-        wrapped, _ = self._rays(proximity.size)
-        order = np.argsort(np.abs(wrapped), kind="stable")
-        room = self.clearance(proximity[None, :], wrapped[order][None, :])[0]
-        turn = float(np.clip(wrapped[order][room.argmax()], -self.max_turn, self.max_turn))
+        n = proximity.size
+        if n not in self._unstick_cache:  # ray directions, smallest turn first (cached)
+            wrapped, _ = self._rays(n)
+            self._unstick_cache[n] = wrapped[np.argsort(np.abs(wrapped), kind="stable")][None, :]
+        by_turn = self._unstick_cache[n]
+        room = self.clearance(proximity[None, :], by_turn)[0]
+        mt = self.max_turn
+        turn = min(max(float(by_turn[0, room.argmax()]), -mt), mt)  # as np.clip, without its cost
         self._stuck_sign[row] = 1.0 if turn >= 0 else -1.0
         return turn
 

@@ -130,7 +130,7 @@ def visibility_kernel(
         blk &= p >= 0.0
         blk &= p <= dt2
         blk[tk, _arange(tk.size)] = False  # a target does not hide itself
-        tk = tk[~blk.any(axis=0)]
+        tk = tk[~np.logical_or.reduce(blk, axis=0)]  # == ~blk.any(axis=0), minus its wrapper
     out[cand.take(tk)] = 1
     return out
 

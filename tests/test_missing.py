@@ -287,3 +287,26 @@ def test_covis_power_maps_a_simulated_camera_and_falls_back_on_a_split_layout():
     nm = masked_embedding(split.astype(float), None, "visibility", "covis-nonmetric", **kw)
     assert any("kept the covis-nonmetric map" in w for w in pw.warnings)
     assert np.allclose(pw.positions, nm.positions)
+
+
+def test_end_on_penalty_is_largest_for_pairs_seen_lined_up():
+    from mappers.missing import end_on_penalty
+
+    seen = np.array([[1, 1, 1, 0], [1, 1, 0, 0], [1, 0, 1, 0], [0, 0, 0, 1]], bool)
+    b = np.array([[0.0, 0.1, 0.2, 0.0], [0.02, 0.11, 0.0, 0.0], [0.8, 0.0, 0.9, 0.0],
+                  [0.0, 0.0, 0.0, 0.3]])
+    pen = end_on_penalty(b, seen)
+    # mean subtended angles: (0,1) 0.015 (lined up), (0,2) 0.75 (broadside), (1,2) 0.78
+    assert pen[0, 1] == pytest.approx(0.78 - 0.015) and pen[1, 2] == pytest.approx(0.0)
+    assert pen[0, 2] == pytest.approx(0.03) and pen[0, 3] == 0.0 and np.allclose(pen, pen.T)
+    P, seen_s, _, bear = _simulate(n_obj=10, n_steps=800, seed=14)
+    X = np.zeros((10, 2 * seen_s.shape[1]))
+    X[:, 0::2], X[:, 1::2] = np.cos(bear) * seen_s, np.sin(bear) * seen_s
+    anchors = _corners(P)
+    kw = {"anchor_ids": anchors, "anchor_positions": P[anchors]}
+    mm = masked_embedding(X, np.repeat(seen_s, 2, axis=1), "bearing", "covis-power",
+                          angle_weight=0.5, **kw)
+    assert np.all(np.isfinite(mm.positions))
+    with pytest.raises(ValueError, match="angle_weight"):
+        masked_embedding(seen_s.astype(float), None, "visibility", "covis-power",
+                         angle_weight=0.5, **kw)

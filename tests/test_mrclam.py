@@ -300,13 +300,15 @@ def test_covis_ensemble_is_the_visibility_default_and_checks_its_arguments(tmp_p
     ens = map_mrclam_run(run, "bearing", robots=(1, 2, 3), plot=False, **small)
     assert ens.method == "covis-ensemble"
     assert ens.params == {"bin_widths": [1.0, 2.0], "min_co": [3], "member": "covis-power",
-                          "power": 0.5}
+                          "power": 0.5, "angle_weight": 0.0}
     singles = [map_mrclam_run(run, "bearing", robots=(1, 2, 3), method="covis-power",
                               bin_width=w, min_co=3) for w in (1.0, 2.0)]
     assert np.allclose(ens.positions, np.mean([s.positions for s in singles], axis=0))
     assert ens.mpe < ens.centroid_mpe / 2
     with pytest.raises(ValueError, match="bin_width"):
         map_mrclam_run(run, "visibility", robots=(1, 2, 3), method="covis-ensemble", bin_width=2.0)
+    one = map_mrclam_run(run, "visibility", robots=(1, 2, 3), bin_width=2.0)  # one width asked
+    assert one.method == "covis-power" and one.history_meta["bin_width"] == 2.0
     with pytest.raises(ValueError, match="unknown parameter"):
         map_mrclam_run(run, "visibility", robots=(1, 2, 3), method="covis-ensemble", quantile=0.9)
     with pytest.raises(ValueError, match="member"):

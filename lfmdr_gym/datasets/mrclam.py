@@ -743,7 +743,9 @@ def map_mrclam_run(
         out: directory for ``map.csv`` (subject, x, y of every landmark, anchors included, in
             the ground-truth frame; written atomically) and ``map.png``; None writes nothing.
         bin_width: seconds per bin; None = the mode's default (:data:`DEFAULT_BIN_WIDTH`);
-            must be None for ``covis-ensemble`` (it uses ``bin_widths``).
+            must be None for ``covis-ensemble`` (it uses ``bin_widths``); given with
+            ``method=None`` in visibility/bearing mode, the ensemble's member method
+            (``covis-power``) maps the run binned at that one width.
         groundtruth_fixes: ``"known"`` / ``"detect"`` / ``"none"`` (see :func:`read_run`).
         plot: write ``map.png`` (needs matplotlib) when ``out`` is given.
         **params: the masked method's parameters (e.g. ``quantile=0.95``, ``min_co=5``).
@@ -758,6 +760,8 @@ def map_mrclam_run(
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
     if method is None:
         method = DEFAULT_MODE_METHOD[mode]
+        if method == ENSEMBLE_METHOD and bin_width is not None:
+            method = ENSEMBLE_MEMBERS[0]  # one bin width asked for: one member at that width
     ensemble = method == ENSEMBLE_METHOD
     if ensemble:
         if bin_width is not None:
