@@ -194,9 +194,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--robots", type=_int_list, default=None, metavar="1,2,3,4,5",
                    help="robot subject numbers whose logs are used (default: all five)")
     p.add_argument("--method", default=None,
-                   help="masked mapping method of mappers.missing.MASKED_METHODS, or 'naive' "
-                        "(the baseline) (default: the mode's best: range-quantile for range, "
-                        "covis-nonmetric otherwise)")
+                   help="masked mapping method of mappers.missing.MASKED_METHODS, "
+                        "'covis-ensemble', or 'naive' (the baseline) (default: the mode's best: "
+                        "range-quantile for range, covis-ensemble otherwise)")
     p.add_argument("--anchors", type=_int_list, default=None, metavar="S1,S2,S3,S4",
                    help="landmark subject numbers used as anchors (default: the 4 nearest the "
                         "corners of the landmarks' bounding box)")

@@ -20,7 +20,7 @@ co-observation graph falls apart (the clustered DS6) gets a warning.
 
 Ground truth (landmark positions) is used only to place the anchors and to score. Mapping uses
 the masked methods of :mod:`mappers.missing` (their assumptions are listed there): by default
-``range-quantile`` for range and ``covis-ensemble`` (the mean of covis-nonmetric maps over
+``range-quantile`` for range and ``covis-ensemble`` (the mean of covis-power maps over
 several bin widths, :data:`ENSEMBLE_METHOD`) for visibility and bearing; ``"naive"`` is the
 straightforward baseline. Measured figures: ``python benchmarks/bench_mrclam.py``.
 """
