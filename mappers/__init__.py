@@ -5,7 +5,7 @@ data as well as the simulator.
 """
 
 from mappers.align import apply_affine, fit_affine
-from mappers.calibrated import CalibratedSMACOF, FoldWarning  # issue 6 (D): registers CAL-SMA
+from mappers.calibrated import CalibratedSMACOF, FoldWarning  # registers CAL-SMA
 from mappers.graph import GraphRepairWarning
 from mappers.methods import (
     DEFAULT_METHODS,

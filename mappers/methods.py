@@ -69,7 +69,7 @@ class MethodSpec:
     defaults: Mapping[str, Any] = field(default_factory=dict)
     grid: Mapping[str, Sequence[Any]] = field(default_factory=dict)
     description: str = ""
-    # issue 6 (helper D): True when the estimator takes the anchors itself, as
+    # True when the estimator takes the anchors itself, as
     # ``fit_transform(X, anchor_ids=..., anchor_positions=...)`` (ids index the rows of X), and
     # holds them fixed; build_map then passes them and the affine fit is the identity.
     uses_anchors: bool = False
@@ -372,7 +372,7 @@ for _spec in (
 del _spec
 
 DEFAULT_METHODS: dict[str, str] = {
-    # issue 6 (helper D): CAL-SMA (mappers/calibrated.py, registered on import of mappers)
+    # CAL-SMA (mappers/calibrated.py, registered on import of mappers)
     "visibility": "CAL-SMA",
     "bearing": "CAL-SMA",
     "range": "SMA(WGT)",

@@ -1,6 +1,5 @@
 """build_map: the whole pipeline, unmapped objects, sensor inference, and every bad input."""
 
-import importlib.util
 from types import SimpleNamespace
 
 import numpy as np
@@ -113,17 +112,6 @@ def test_mask_all_true_is_no_mask():
     m1 = build_map(H, a, P[a], "LEM")
     m2 = build_map(H, a, P[a], "LEM", mask=np.ones(H.shape, dtype=bool))
     np.testing.assert_array_equal(m1.positions, m2.positions)
-
-
-@pytest.mark.skipif(
-    importlib.util.find_spec("mappers.missing") is not None, reason="mappers.missing exists"
-)
-def test_partial_mask_needs_missing_module():
-    H, P, a = world()
-    mask = np.ones(H.shape, dtype=bool)
-    mask[5, :10] = False
-    with pytest.raises(ValueError, match="mappers.missing"):
-        build_map(H, a, P[a], mask=mask)
 
 
 def test_partial_mask_calls_the_missing_data_hook(monkeypatch):

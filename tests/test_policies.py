@@ -168,7 +168,7 @@ def _blocked_rate(policy_factory, n_rays: int, seeds=(0, 1), steps: int = 1000) 
 
 
 def test_random_walk_makes_blocked_moves_rare():
-    # Measured (seeds 0, 1; 1000 steps each; A1's env of 2026-11-22): a blind uniform walk is
+    # Measured (seeds 0, 1; 1000 steps each; the env of 2026-11-22): a blind uniform walk is
     # blocked on 86 % of its moves (it ends up pressed against walls); the agent on 24 % with 16
     # rays (thin cylinders hide between rays 22.5 degrees apart), about 9 % with the default 32,
     # and 6.5 % with 64 rays (8.5 % without plan_ahead), where what is left is turning in place
