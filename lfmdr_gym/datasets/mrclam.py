@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from lfmdr_gym.atomic import atomic_savefig, atomic_write_text
+from lfmdr_gym.atomic import atomic_write_text
 from lfmdr_gym.history import History
 
 __all__ = [
@@ -676,39 +676,16 @@ def _write_csv(path: Path, subjects: np.ndarray, positions: np.ndarray) -> None:
 
 
 def _plot(path: Path, result: MRCLAMMap) -> None:
-    try:
-        import matplotlib
+    from lfmdr_gym.experiments.figures import plot_estimate
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError as exc:  # pragma: no cover - depends on the install
-        raise ImportError(
-            "map.png needs matplotlib: pip install 'lfmdr[plots]' (or pip install matplotlib)"
-        ) from exc
-    fig, ax = plt.subplots(figsize=(6, 8))
-    anchors = np.isin(result.subjects, result.anchor_subjects)
-    for p, t in zip(result.positions, result.truth, strict=True):
-        if np.all(np.isfinite(p)):
-            ax.plot([t[0], p[0]], [t[1], p[1]], color="0.6", lw=0.8, zorder=1)
-    ax.scatter(*result.truth.T, marker="o", facecolors="none", edgecolors="k", label="ground truth")
-    ax.scatter(*result.positions[~anchors].T, marker="x", color="tab:red", label="estimate")
-    ax.scatter(*result.truth[anchors].T, marker="s", s=60, color="tab:blue", label="anchor")
-    for s, t in zip(result.subjects, result.truth, strict=True):
-        ax.annotate(str(int(s)), t, textcoords="offset points", xytext=(4, 4), fontsize=7)
+    anchors = np.flatnonzero(np.isin(result.subjects, result.anchor_subjects))
     title = (f"{result.run} {result.mode} ({result.method}): MPE {result.mpe:.2f} m, "
              f"MOE {result.moe:.1f} %")
     if result.warnings:
         first = result.warnings[0]
         title += f"\nWARNING ({len(result.warnings)}): {first[:80]}{'...' if len(first) > 80 else ''}"
-    ax.set_title(title, fontsize=9)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.legend(fontsize=7, loc="best")
-    try:
-        atomic_savefig(fig, path, dpi=120, bbox_inches="tight")
-    finally:
-        plt.close(fig)
+    plot_estimate(result.positions, result.truth, anchors, path, title=title,
+                  labels=result.subjects)
 
 
 def map_mrclam_run(

@@ -241,15 +241,34 @@ def plot_curves(
 
 
 def plot_map(positions: np.ndarray, history: History, path: Path, *, title: str = "") -> Path:
-    """An example map (paper figures 6, 7, 9): true positions, estimates, and a line between.
+    """An example map (paper figures 6, 7, 9) of a history: see :func:`plot_estimate`."""
+    return plot_estimate(positions, history.object_positions, history.anchor_ids, path,
+                         title=title, trail=history.robot_poses)
 
-    Anchors are drawn as squares; unmapped objects (NaN estimates) as grey crosses at the truth.
+
+def plot_estimate(
+    positions: np.ndarray,
+    truth: np.ndarray,
+    anchor_ids: Sequence[int] | np.ndarray,
+    path: Path,
+    *,
+    title: str = "",
+    labels: Sequence[int] | np.ndarray | None = None,
+    trail: np.ndarray | None = None,
+) -> Path:
+    """True positions, estimates, and a line between (paper figures 6, 7, 9), saved atomically.
+
+    Anchors are drawn as squares; unmapped objects (NaN estimates) as grey crosses at the truth;
+    objects are labelled by ``labels`` (default: their index); ``trail`` (N, >=2) draws the
+    robot's path faintly underneath, when the data has one.
     """
     est = np.asarray(positions, dtype=float)
-    truth = history.object_positions
+    truth = np.asarray(truth, dtype=float)
     anchors = np.zeros(len(truth), dtype=bool)
-    anchors[history.anchor_ids] = True
-    fig = _figure(6.0, 6.2)
+    anchors[np.asarray(anchor_ids, dtype=int)] = True
+    labels = range(len(truth)) if labels is None else labels
+    span = np.nanmax(truth, axis=0) - np.nanmin(truth, axis=0)
+    fig = _figure(6.0, float(np.clip(6.0 * span[1] / max(span[0], 1e-9), 4.0, 9.0)) + 0.2)
     ax = fig.add_subplot()
     known = np.all(np.isfinite(truth), axis=1)
     mapped = np.all(np.isfinite(est), axis=1)
@@ -262,11 +281,11 @@ def plot_map(positions: np.ndarray, history: History, path: Path, *, title: str 
                edgecolors="tab:green", label="anchor")
     if np.any(known & ~mapped):
         ax.scatter(*truth[known & ~mapped].T, s=40, marker="x", color="grey", label="unmapped")
-    if history.robot_poses is not None:
-        ax.plot(*history.robot_poses[:, :2].T, color="0.85", lw=0.4, zorder=0)
-    for j in range(len(truth)):
+    if trail is not None:
+        ax.plot(*np.asarray(trail)[:, :2].T, color="0.85", lw=0.4, zorder=0)
+    for j, label in enumerate(labels):
         if known[j]:
-            ax.annotate(str(j), truth[j], fontsize=6, color="0.4", xytext=(2, 2),
+            ax.annotate(str(label), truth[j], fontsize=6, color="0.4", xytext=(2, 2),
                         textcoords="offset points")
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
@@ -279,5 +298,5 @@ def plot_map(positions: np.ndarray, history: History, path: Path, *, title: str 
     return Path(path)
 
 
-__all__ = ["PAPER", "PAPER_EXAMPLES", "best_params", "paper_notation", "plot_curves", "plot_map", "slug", "summarise",
+__all__ = ["PAPER", "PAPER_EXAMPLES", "best_params", "paper_notation", "plot_curves", "plot_estimate", "plot_map", "slug", "summarise",
            "write_table"]
