@@ -1,4 +1,4 @@
-"""CAL-SMA (issue 6) against the best of the paper's ten, on the protocol's seeds and fresh ones.
+"""CAL-SMA against the best of the paper's ten, on the protocol's seeds and fresh ones.
 
 For each sensor (visibility, bearing) and each seed set (the paper protocol's runs, seed 0, and
 fresh runs from seeds never used to tune CAL-SMA), it collects 5 layouts x 5 start poses of
@@ -10,7 +10,7 @@ N steps with the random-walk agent and maps them with
   (``--all-ten`` adds the other nine at their defaults).
 
 It prints mean / max MPE over the non-anchor objects [m], mean MOE [%], the CPU time per map
-(one BLAS thread), and how many maps carried a FoldWarning, then the issue's goals.
+(one BLAS thread), and how many maps carried a FoldWarning, then the goals.
 
     PYTHONPATH=. python benchmarks/bench_calibrated.py               # both sensors, both seed sets
     PYTHONPATH=. python benchmarks/bench_calibrated.py --sensors bearing --fresh-seed 777
@@ -28,7 +28,7 @@ from threadpoolctl import threadpool_limits
 import mappers
 from lfmdr_gym.experiments.protocol import ProtocolConfig, collect_episode
 
-GOALS = {  # issue 6: mean MPE [m], mean MOE [%], max MPE of one run [m]
+GOALS = {  # CAL-SMA's targets: mean MPE [m], mean MOE [%], max MPE of one run [m]
     "visibility": (0.06, 1.6, 0.12),
     "bearing": (0.033, 0.6, 0.06),
 }
@@ -107,7 +107,7 @@ def main() -> None:
             for label, (mean, mx, moe, cpu, folds) in res.items():
                 print(f"  {label:34s} {mean:9.4f} {mx:8.3f} {moe:6.2f} {cpu:9.3f} {folds:5d}")
             if args.steps != 2000:
-                continue  # the issue's goals are stated for N = 2000
+                continue  # the goals are stated for N = 2000
             mean, mx, moe, cpu, _ = res["CAL-SMA"]
             ok = mean <= goal_mpe and moe <= goal_moe and mx <= goal_max and cpu <= TIME_GOAL
             print(f"  goals (MPE <= {goal_mpe}, MOE <= {goal_moe}, max <= {goal_max}, "

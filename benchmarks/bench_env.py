@@ -9,7 +9,7 @@ Prints medians over several repeats (single process) for:
 * a straightforward pure-numpy simulation of the same world written below (move checked against
   every object, visibility with occlusion tested object by object), for the ratio.
 
-The issue's goal: >= 10,000 steps/s at M = 50 on one core.
+Target: >= 10,000 steps/s at M = 50 on one core.
 
     PYTHONPATH=. python benchmarks/bench_env.py            # full run (1-3 minutes)
     PYTHONPATH=. python benchmarks/bench_env.py --quick    # fewer steps and repeats

@@ -1,4 +1,4 @@
-"""CAL-SMA, the calibrated anchored mapper (issue 6), on one episode per sensor.
+"""CAL-SMA, the calibrated anchored mapper, on one episode per sensor.
 
     PYTHONPATH=. python examples/calibrated_map.py [--steps 2000] [--seed 0] [--plot map.png]
 
@@ -16,6 +16,7 @@ import numpy as np
 
 import lfmdr_gym  # noqa: F401  (registers the env ids)
 import mappers
+from lfmdr_gym.atomic import atomic_savefig
 from lfmdr_gym.history import collect
 from lfmdr_gym.policies import RandomWalkPolicy
 
@@ -64,7 +65,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
             ax.plot(*history.anchor_positions.T, "bs", ms=6)
             ax.set_title(f"bearing, {label}")
             ax.set_aspect("equal")
-        fig.savefig(args.plot, dpi=100)
+        atomic_savefig(fig, args.plot, dpi=100)
         print(f"saved {args.plot}")
     return out
 

@@ -1,8 +1,9 @@
 """Map synthetic visibility histories with every method and print the errors.
 
 Forty-nine objects on a jittered grid in a 2.5 m square; a robot at 1500 random places sees each
-object within 0.55 m (paper §4.3, without occlusion); the four corner objects are the anchors. No simulator needed: numpy makes the histories, ``mappers``
-does the rest. Run from the project root:
+object within 0.55 m (paper §4.3, without occlusion); the four corner objects are the anchors.
+No simulator needed: numpy makes the histories, ``mappers`` does the rest. Run from the project
+root:
 
     PYTHONPATH=. python examples/map_synthetic.py
 """

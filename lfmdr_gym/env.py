@@ -261,7 +261,7 @@ class LFMDREnv(gym.Env):
         return obs, self._info(False)
 
     def step(self, action: Any) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        if self.world._space is None:  # not the `space` property: that would sync the robot's body
+        if not self.world.built:
             raise gym.error.ResetNeeded("call reset() before step()")
         try:
             turn = float(action[0])
@@ -321,7 +321,7 @@ class LFMDREnv(gym.Env):
                 "render() called without a render_mode; pass render_mode='rgb_array' to gymnasium.make"
             )
             return None
-        if self.world._space is None:
+        if not self.world.built:
             raise gym.error.ResetNeeded("call reset() before render()")
         w = self.world
         obs = self._last_obs or {}

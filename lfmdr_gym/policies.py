@@ -171,12 +171,14 @@ class RandomWalkPolicy:
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         self._stuck_sign: np.ndarray | None = None  # per row: turn direction while stuck
-        probes = np.linspace(-self.max_turn, self.max_turn, 5)  # headings tried after a move
+        # Headings tried after a move (plan_ahead), as (cos, sin) pairs for _first_choice and as
+        # frame rotations exp(-i turn) for _plan_choice: computed once, np.linspace costs
+        # microseconds.
+        probes = np.linspace(-self.max_turn, self.max_turn, 5)
         self._probes = list(zip(np.cos(probes).tolist(), np.sin(probes).tolist(), strict=True))
+        self._probe_rot = np.exp(-1j * probes)[:, None]
         self._ray_cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._unstick_cache: dict[int, np.ndarray] = {}
-        self._probe_turn = math.nan  # max_turn the cached _probe_rot was made for
-        self._probe_rot = np.zeros((5, 1), dtype=complex)
 
     @classmethod
     def for_env(cls, env: Any, **kwargs: Any) -> RandomWalkPolicy:
@@ -311,9 +313,6 @@ class RandomWalkPolicy:
             return -1
         if not self.plan_ahead or room[first] >= need + step:
             return first  # safe implies free, so the first free draw is the first safe one
-        if self._probe_turn != self.max_turn:  # cached: np.linspace costs microseconds
-            self._probe_turn = self.max_turn
-            self._probe_rot = np.exp(-1j * np.linspace(-self.max_turn, self.max_turn, 5))[:, None]
         cand = free.nonzero()[0]
         moved = z.take(cand, axis=0) - step  # the obstacles seen from where each move ends
         # A draw is safe if some probe is clear, i.e. if its best probe is.

@@ -70,14 +70,14 @@ class _Canvas:
         span = int(np.ceil(rad)) + 1
         off = np.arange(-span, span + 1)
         dc, dr = np.meshgrid(off, off)
+        # One stencil for every disc: the sub-pixel centre is ignored, the picture is a sketch
+        d2 = dc**2 + dr**2
+        stencil = d2 <= rad * rad
+        if ring:
+            stencil &= d2 >= (rad - 2.0) ** 2
         for c, r in np.rint(self.to_px(centres)).astype(np.int64):
             cols, rows = c + dc, r + dr
-            # sub-pixel centre ignored: the picture is a sketch, not a measurement
-            d2 = dc**2 + dr**2
-            mask = d2 <= rad * rad
-            if ring:
-                mask &= d2 >= (rad - 2.0) ** 2
-            mask &= (cols >= 0) & (cols < self.size) & (rows >= 0) & (rows < self.size)
+            mask = stencil & (cols >= 0) & (cols < self.size) & (rows >= 0) & (rows < self.size)
             self.img[rows[mask], cols[mask]] = color
 
 

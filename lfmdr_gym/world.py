@@ -382,6 +382,11 @@ class World:
         self._body_stale = False
 
     @property
+    def built(self) -> bool:
+        """Whether :meth:`build` has made a space (without syncing the robot's body)."""
+        return self._space is not None
+
+    @property
     def space(self) -> pymunk.Space | None:
         """The pymunk space (None before :meth:`build`), with the robot's body at its pose."""
         self._sync_body()

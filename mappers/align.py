@@ -7,9 +7,11 @@ parameters exactly; more anchors give a least-squares fit.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
-__all__ = ["apply_affine", "check_not_collinear", "fit_affine"]
+__all__ = ["apply_affine", "check_anchors", "check_not_collinear", "fit_affine"]
 
 
 def check_not_collinear(points: np.ndarray, what: str, *, rtol: float = 1e-6) -> None:
@@ -31,6 +33,37 @@ def check_not_collinear(points: np.ndarray, what: str, *, rtol: float = 1e-6) ->
             f"{what} are collinear (singular values {s[0]:.3g}, {s[1]:.3g}): "
             "an affine map cannot be fitted"
         )
+
+
+def check_anchors(
+    anchor_ids: Any, anchor_positions: Any, n_objects: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Validated anchors: (A,) int64 ids and (A, 2) float positions, else ValueError.
+
+    ``anchor_ids``: A >= 3 distinct integer object ids in [0, n_objects); ``anchor_positions``:
+    their known (A, 2) positions, finite and not collinear (an affine map needs three).
+    """
+    ids = np.asarray(anchor_ids)
+    if ids.ndim != 1 or ids.dtype == bool or not np.issubdtype(ids.dtype, np.integer):
+        raise ValueError(f"anchor_ids must be a 1-D array of integer object ids, got {ids!r}")
+    if ids.size < 3:
+        raise ValueError(f"need at least 3 anchors, got {ids.size}")
+    out = ids[(ids < 0) | (ids >= n_objects)]
+    if out.size:
+        raise ValueError(f"anchor_ids out of range [0, {n_objects - 1}]: {out.tolist()}")
+    uniq, counts = np.unique(ids, return_counts=True)
+    if np.any(counts > 1):
+        raise ValueError(f"anchor_ids must be distinct; duplicates: {uniq[counts > 1].tolist()}")
+    try:
+        pos = np.array(anchor_positions, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"anchor_positions must be a numeric (A, 2) array: {exc}") from exc
+    if pos.shape != (ids.size, 2):
+        raise ValueError(f"anchor_positions must have shape ({ids.size}, 2), got {pos.shape}")
+    if not np.all(np.isfinite(pos)):
+        raise ValueError("anchor_positions contain NaN or inf")
+    check_not_collinear(pos, "anchor positions (world)")
+    return ids.astype(np.int64), pos
 
 
 def fit_affine(src: np.ndarray, dst: np.ndarray) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Calibrated anchored SMACOF (CAL-SMA): a mapper designed for observation histories (issue 6).
+"""Calibrated anchored SMACOF (CAL-SMA): a mapper designed for observation histories.
 
 The idea in a few sentences. A history dissimilarity ``delta_ij`` grows with the true distance
 ``d_ij`` of two objects, but not linearly and not in the same way everywhere in the arena (near
@@ -56,9 +56,9 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import validate_data
 
-from mappers.align import apply_affine, check_not_collinear, fit_affine
+from mappers.align import apply_affine, check_anchors, fit_affine
 from mappers.methods import MethodSpec, register_method
-from mappers.smacof import _distances, classical_mds, weighted_smacof
+from mappers.smacof import classical_mds, euclidean_distance_matrix, weighted_smacof
 
 __all__ = [
     "CalibratedSMACOF",
@@ -96,7 +96,7 @@ def history_dissimilarity(X: np.ndarray, kind: str = "auto") -> tuple[np.ndarray
         Y = X / norms
         delta = 1.0 - np.clip(Y @ Y.T, -1.0, 1.0)
     elif kind == "euclidean":
-        delta = _distances(X) / np.sqrt(X.shape[1])
+        delta = euclidean_distance_matrix(X) / np.sqrt(X.shape[1])
     else:
         raise ValueError(f"unknown dissimilarity kind {kind!r}")
     delta = 0.5 * (delta + delta.T)
@@ -154,7 +154,7 @@ def fold_score(
     valid = _valid_pairs(delta)
     loc = _knn_mask(delta, valid, n_neighbors)
     ext = _knn_mask(delta, valid, 2 * n_neighbors)
-    Dx = _distances(X)
+    Dx = euclidean_distance_matrix(X)
     if not np.all(np.isfinite(Dx)):
         return float(m)
     med = np.array([np.median(Dx[i, loc[i]]) if loc[i].any() else 0.0 for i in range(m)])
@@ -274,25 +274,13 @@ class CalibratedSMACOF(TransformerMixin, BaseEstimator):
         self.random_state = random_state
 
     # ------------------------------------------------------------------ inputs
-    def _check_anchors(self, m: int, anchor_ids, anchor_positions):
+    @staticmethod
+    def _check_anchors(m: int, anchor_ids, anchor_positions):
         if anchor_ids is None and anchor_positions is None:
             return None, None
         if anchor_ids is None or anchor_positions is None:
             raise ValueError("anchor_ids and anchor_positions must be given together")
-        ids = np.asarray(anchor_ids)
-        if ids.ndim != 1 or (ids.size and not np.issubdtype(ids.dtype, np.integer)):
-            raise ValueError(f"anchor_ids must be a 1-D integer array, got {ids.dtype} {ids.shape}")
-        if ids.size < 3:
-            raise ValueError(f"need at least 3 anchors, got {ids.size}")
-        if ids.min() < 0 or ids.max() >= m:
-            raise ValueError(f"anchor_ids must lie in [0, {m}), got {ids.tolist()}")
-        if len(np.unique(ids)) != ids.size:
-            raise ValueError(f"anchor_ids must be distinct, got {ids.tolist()}")
-        pos = np.asarray(anchor_positions, dtype=float)
-        if pos.shape != (ids.size, 2):
-            raise ValueError(f"anchor_positions must have shape ({ids.size}, 2), got {pos.shape}")
-        check_not_collinear(pos, "anchor_positions")
-        return ids.astype(np.int64), pos
+        return check_anchors(anchor_ids, anchor_positions, m)
 
     def _dissimilarity(self, X: np.ndarray) -> tuple[np.ndarray, str]:
         if self.dissimilarity == "precomputed":
@@ -359,7 +347,7 @@ class CalibratedSMACOF(TransformerMixin, BaseEstimator):
             Dh, coef = self._calibrate(D, X, loc, lo_delta)
             R = np.where(loc, Dh, 0.0).max(axis=1)
             bound = self.far_factor * np.maximum(R[:, None], R[None, :])
-            Dx = _distances(X)
+            Dx = euclidean_distance_matrix(X)
             # targets: calibrated distance for neighbours, max(current, bound) for the rest
             T = np.where(loc, Dh, np.where(far, np.maximum(Dx, bound), 0.0))
             W = np.where(loc, 1.0, np.where(far, self.far_weight, 0.0))
@@ -369,7 +357,7 @@ class CalibratedSMACOF(TransformerMixin, BaseEstimator):
             np.fill_diagonal(W, 0.0)
             X, _, it = weighted_smacof(T, W, X, fixed=fixed, max_iter=self.max_iter, tol=self.tol)
             n_iter += it
-        Dx = _distances(X)
+        Dx = euclidean_distance_matrix(X)
         w = loc.astype(float)
         stress = float(np.sum(w * (Dx - Dh) ** 2) / max(np.sum(w * Dh**2), 1e-300))
         return X, stress, n_iter, coef, Dh
@@ -384,10 +372,7 @@ class CalibratedSMACOF(TransformerMixin, BaseEstimator):
         if np.isinf(geo).any():  # disconnected neighbour graph: fall back to the raw values
             geo = np.where(np.isinf(geo), D.max() * 2 + geo[np.isfinite(geo)].max(), geo)
         starts = [("unweighted", unweighted), ("geodesic", classical_mds(geo, 2))]
-        out = []
-        for name, S in starts:
-            out.append((name, self._place(S, ids, pos)))
-        return out
+        return [(name, self._place(S, ids, pos)) for name, S in starts]
 
     @staticmethod
     def _place(S, ids, pos):
@@ -517,7 +502,7 @@ register_method(
         _cal_sma,
         {},
         {"n_neighbors": [8, 10, 12, 14, 16]},
-        "calibrated anchored SMACOF with fold guard (issue 6)",
+        "calibrated anchored SMACOF with fold guard",
         uses_anchors=True,
     )
 )

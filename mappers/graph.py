@@ -8,6 +8,8 @@ closest pairs of points, one edge at a time, and report how many edges were adde
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
@@ -19,6 +21,7 @@ __all__ = [
     "connect_components",
     "connected_knn_graph",
     "symmetric_knn_graph",
+    "warn_if_repaired",
 ]
 
 
@@ -74,3 +77,15 @@ def connected_knn_graph(
     A = symmetric_knn_graph(D, n_neighbors, precomputed=True)
     A, added = connect_components(A, D)
     return A, D, added
+
+
+def warn_if_repaired(added: list[tuple[int, int]], n_neighbors: int, *, stacklevel: int = 2) -> None:
+    """Raise a :class:`GraphRepairWarning` when ``added`` (from :func:`connect_components`) is
+    not empty; ``stacklevel`` counts from the caller, as in :func:`warnings.warn`."""
+    if added:
+        warnings.warn(
+            f"kNN graph (K={n_neighbors}) was disconnected: joined its components by "
+            f"{len(added)} closest-pair edge(s)",
+            GraphRepairWarning,
+            stacklevel=stacklevel + 1,
+        )

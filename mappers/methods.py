@@ -3,7 +3,8 @@
 ``METHODS`` maps a label to a :class:`MethodSpec`: ``spec.factory(**params)`` builds an
 estimator whose ``fit_transform(X)`` returns the (M, 2) embedding; ``spec.defaults`` are the
 paper's optimum for visibility; ``spec.grid`` is the parameter grid of the protocol. New methods
-(yours, or issue 6's calibrated mapper) join through :func:`register_method`.
+(yours, or the calibrated mapper of :mod:`mappers.calibrated`) join through
+:func:`register_method`.
 
 scikit-learn supplies PCA, kernel PCA, Isomap, LLE / Hessian LLE and the spectral embedding;
 only weighted SMACOF (:mod:`mappers.smacof`) and SDE/MVU (:mod:`mappers.mvu`) are ours. Thin
@@ -14,7 +15,6 @@ fixing and clear errors for (Hessian) LLE.
 from __future__ import annotations
 
 import inspect
-import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from numbers import Integral, Real
@@ -30,7 +30,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.extmath import svd_flip
 from sklearn.utils.validation import validate_data
 
-from mappers.graph import GraphRepairWarning, connected_knn_graph
+from mappers.graph import connected_knn_graph, warn_if_repaired
 from mappers.mvu import MaximumVarianceUnfolding
 from mappers.smacof import WeightedSMACOF
 
@@ -84,14 +84,18 @@ class MethodSpec:
             if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
         )
 
-    def build(self, **params: Any) -> Any:
-        """The estimator with ``defaults`` updated by ``params`` (unknown names: ValueError)."""
+    def check_params(self, params: Mapping[str, Any]) -> None:
+        """ValueError naming any key of ``params`` that ``factory`` does not accept."""
         unknown = sorted(set(params) - set(self.parameters))
         if unknown:
             raise ValueError(
                 f"unknown parameter(s) {unknown} for method {self.label!r}; "
                 f"it accepts {list(self.parameters)}"
             )
+
+    def build(self, **params: Any) -> Any:
+        """The estimator with ``defaults`` updated by ``params`` (unknown names: ValueError)."""
+        self.check_params(params)
         return self.factory(**{**self.defaults, **params})
 
 
@@ -220,13 +224,7 @@ class LaplacianEigenmap(TransformerMixin, BaseEstimator):
         if self.n_neighbors >= n:
             raise ValueError(f"n_neighbors={self.n_neighbors} must be < number of points ({n})")
         A, _, added = connected_knn_graph(X, self.n_neighbors)
-        if added:
-            warnings.warn(
-                f"kNN graph (K={self.n_neighbors}) was disconnected: joined its components by "
-                f"{len(added)} closest-pair edge(s)",
-                GraphRepairWarning,
-                stacklevel=2,
-            )
+        warn_if_repaired(added, self.n_neighbors)
         self.affinity_matrix_, self.added_edges_ = A, added
         est = SpectralEmbedding(
             n_components=self.n_components, affinity="precomputed", random_state=self.random_state
@@ -372,14 +370,15 @@ for _spec in (
 del _spec
 
 DEFAULT_METHODS: dict[str, str] = {
-    # CAL-SMA (mappers/calibrated.py, registered on import of mappers)
+    # CAL-SMA is registered by mappers/calibrated.py, which ``import mappers`` always loads
     "visibility": "CAL-SMA",
     "bearing": "CAL-SMA",
     "range": "SMA(WGT)",
 }
 """Method build_map uses when none is given, per sensor. Measured on simulated random-walk
-histories (lfmdr_gym, M = 50, N = 2000, 5 layouts, default parameters, non-anchor MPE;
-``benchmarks/bench_mappers.py --sections methods``): SMA(WGT) is best of the paper's ten for
-bearing (0.051 m) and range (0.195 m) and second for visibility (0.134 m, behind HLLE's
-0.114 m, which the paper reports "often failed to run"), so it is the default for all three.
-Issue 6 updates this dict with its calibrated method."""
+histories (lfmdr_gym, M = 50, N = 2000, non-anchor MPE): CAL-SMA beats the paper's ten for
+visibility and bearing (``benchmarks/bench_calibrated.py``; see :mod:`mappers.calibrated`).
+For range, SMA(WGT) is best of the paper's ten (0.195 m, 5 layouts, default parameters;
+``benchmarks/bench_mappers.py --sections methods``); it is also best of them for bearing
+(0.051 m) and second for visibility (0.134 m, behind HLLE's 0.114 m, which the paper reports
+"often failed to run")."""

@@ -7,7 +7,7 @@
 and the embedding is the top eigenvectors of K scaled by the square roots of their eigenvalues.
 scikit-learn has no MVU, so it is written here.
 
-Choice of formulation and solver (measured, see benchmarks/bench_mappers.py and the report):
+Choice of formulation and solver (measured with ``benchmarks/bench_mappers.py --sections sde``):
 the distance constraints are one sparse linear map on vec(K), built from index arrays (no
 per-edge Python loop; compiling is ~20 ms at M = 50). Compilation was never the bottleneck: the
 interior-point solver CLARABEL spends ~0.1-0.2 s per iteration on the dense KKT system of the
@@ -23,7 +23,6 @@ m = 15-20, so it is not the default.
 
 from __future__ import annotations
 
-import warnings
 from numbers import Integral, Real
 
 import cvxpy as cp
@@ -35,7 +34,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.extmath import svd_flip
 from sklearn.utils.validation import check_symmetric, validate_data
 
-from mappers.graph import GraphRepairWarning, connected_knn_graph
+from mappers.graph import connected_knn_graph, warn_if_repaired
 
 __all__ = ["MaximumVarianceUnfolding", "mvu_constraint_matrix"]
 
@@ -142,13 +141,7 @@ class MaximumVarianceUnfolding(TransformerMixin, BaseEstimator):
         n = X.shape[0]
         k = min(self.n_neighbors, n - 1)
         A, D, added = connected_knn_graph(X, k, precomputed=self.dissimilarity == "precomputed")
-        if added:
-            warnings.warn(
-                f"kNN graph (K={k}) was disconnected: joined its components by {len(added)} "
-                "closest-pair edge(s)",
-                GraphRepairWarning,
-                stacklevel=2,
-            )
+        warn_if_repaired(added, k)
         self.graph_, self.added_edges_ = A, added
         ei, ej = sp.triu(A, 1).nonzero()
         d2 = D[ei, ej] ** 2

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
-from mappers.align import apply_affine, check_not_collinear, fit_affine
+from mappers.align import apply_affine, check_anchors, check_not_collinear, fit_affine
 from mappers.methods import DEFAULT_METHODS, METHODS, MappingError
 
 __all__ = ["SENSORS", "Map", "build_map", "infer_sensor"]
@@ -110,30 +110,6 @@ def _check_mask(mask: Any, shape: tuple[int, int]) -> np.ndarray | None:
     if mask.shape != shape:
         raise ValueError(f"mask must have the shape of histories {shape}, got {mask.shape}")
     return None if mask.all() else mask
-
-
-def _check_anchors(anchor_ids: Any, anchor_positions: Any, m: int) -> tuple[np.ndarray, np.ndarray]:
-    ids = np.asarray(anchor_ids)
-    if ids.ndim != 1 or ids.dtype == bool or not np.issubdtype(ids.dtype, np.integer):
-        raise ValueError(f"anchor_ids must be a 1-D array of integer object ids, got {ids!r}")
-    if ids.size < 3:
-        raise ValueError(f"need at least 3 anchors for the affine fit, got {ids.size}")
-    out = ids[(ids < 0) | (ids >= m)]
-    if out.size:
-        raise ValueError(f"anchor_ids out of range [0, {m - 1}]: {out.tolist()}")
-    uniq, counts = np.unique(ids, return_counts=True)
-    if np.any(counts > 1):
-        raise ValueError(f"anchor_ids has duplicates: {uniq[counts > 1].tolist()}")
-    try:
-        pos = np.array(anchor_positions, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"anchor_positions must be a numeric (A, 2) array: {exc}") from exc
-    if pos.shape != (ids.size, 2):
-        raise ValueError(f"anchor_positions must have shape ({ids.size}, 2), got {pos.shape}")
-    if not np.all(np.isfinite(pos)):
-        raise ValueError("anchor_positions contain NaN or inf")
-    check_not_collinear(pos, "anchor positions (world)")
-    return ids.astype(np.int64), pos
 
 
 def _embed(
@@ -246,17 +222,12 @@ def build_map(
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; known: {list(METHODS)}")
         spec = METHODS[method]
-        unknown = sorted(set(params) - set(spec.parameters))
-        if unknown:
-            raise ValueError(
-                f"unknown parameter(s) {unknown} for method {method!r}; "
-                f"it accepts {list(spec.parameters)}"
-            )
+        spec.check_params(params)
         merged = {**spec.defaults, **params}
         if "random_state" in spec.parameters and "random_state" not in params:
             merged["random_state"] = random_state
 
-    ids, pos = _check_anchors(anchor_ids, anchor_positions, m)
+    ids, pos = check_anchors(anchor_ids, anchor_positions, m)
 
     has_data = np.any((X != 0) if mask is None else (mask & (X != 0)), axis=1)
     unmapped = tuple(int(i) for i in np.flatnonzero(~has_data))
@@ -273,11 +244,13 @@ def build_map(
         )
 
     Xm = X[mapped]
+    # The anchors as rows of Xm, for methods that hold them fixed (the masked methods, and
+    # registered ones with ``uses_anchors``); the affine fit below is then the identity.
+    anchors = {"anchor_ids": np.searchsorted(mapped, ids), "anchor_positions": pos}
+    fit_params = None
     if mask is not None:
         from mappers.missing import build_masked_embedding  # looked up per call: tests swap it
-        # the masked methods hold the anchors fixed (rows of Xm); the affine fit below is then
-        # the identity
-        anchors = {"anchor_ids": np.searchsorted(mapped, ids), "anchor_positions": pos}
+
         est = _MaskedEmbedding(
             build_masked_embedding, mask[mapped], method, sensor, {**merged, **anchors}
         )
@@ -289,10 +262,8 @@ def build_map(
             est = spec.factory(**merged)
         except (TypeError, ValueError) as exc:
             raise ValueError(f"bad parameters for method {method!r}: {exc}") from exc
-    # methods that hold the anchors fixed get them (rows of Xm) as fit params
-    fit_params = None
-    if mask is None and spec.uses_anchors:
-        fit_params = {"anchor_ids": np.searchsorted(mapped, ids), "anchor_positions": pos}
+        if spec.uses_anchors:
+            fit_params = anchors
     Y, caught = _embed(method, est, Xm, fit_params, allow_nan_rows=mask is not None)
     notes.extend(caught)
     placed = np.all(np.isfinite(Y), axis=1)

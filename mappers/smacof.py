@@ -1,8 +1,9 @@
 """Weighted SMACOF (de Leeuw 1977; paper eq. 6), which scikit-learn's ``smacof`` lacks.
 
 scikit-learn's :func:`sklearn.manifold.smacof` minimises raw stress with equal weights only.
-SMA(WGT) needs weights (w_ij = 1 for kNN pairs, else 0), and the new calibrated mapper of
-issue 6 needs anchors held fixed, so the Guttman transform is written here:
+SMA(WGT) needs weights (w_ij = 1 for kNN pairs, else 0), and the anchored mappers
+(:mod:`mappers.calibrated`, :mod:`mappers.missing`) need anchors held fixed, so the Guttman
+transform is written here:
 
     X <- V^+ B(X) X,    V = sum_{i<j} w_ij (e_i - e_j)(e_i - e_j)^T,
     B(X)_ij = -w_ij delta_ij / d_ij(X) (i != j, d_ij > 0),   B_ii = -sum_{j != i} B_ij,
@@ -14,7 +15,6 @@ majoriser is minimised over X_f alone: V_ff X_f = [B(X) X]_f - V_fa X_a.
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable
 from numbers import Integral, Real
 
@@ -26,14 +26,23 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.extmath import svd_flip
 from sklearn.utils.validation import check_symmetric, validate_data
 
-from mappers.graph import GraphRepairWarning, connect_components, symmetric_knn_graph
+from mappers.graph import connected_knn_graph, warn_if_repaired
 
-__all__ = ["WeightedSMACOF", "classical_mds", "raw_stress", "weighted_smacof"]
+__all__ = [
+    "WeightedSMACOF",
+    "classical_mds",
+    "euclidean_distance_matrix",
+    "raw_stress",
+    "weighted_smacof",
+]
 
 
-def _distances(X: np.ndarray) -> np.ndarray:
-    # Plain numpy: sklearn's pairwise_distances validates its input on every call, which
-    # dominates a SMACOF iteration at n = 50.
+def euclidean_distance_matrix(X: np.ndarray) -> np.ndarray:
+    """(n, n) Euclidean distances between the rows of ``X`` (n, p), zero diagonal, no checks.
+
+    Plain numpy for use inside loops: sklearn's ``pairwise_distances`` validates its input on
+    every call, which dominates a SMACOF iteration at n = 50.
+    """
     sq = np.einsum("ij,ij->i", X, X)
     D2 = sq[:, None] + sq[None, :] - 2.0 * (X @ X.T)
     np.maximum(D2, 0.0, out=D2)
@@ -43,7 +52,7 @@ def _distances(X: np.ndarray) -> np.ndarray:
 
 def raw_stress(delta: np.ndarray, weights: np.ndarray, X: np.ndarray) -> float:
     """Raw stress sum_{i<j} w_ij (delta_ij - ||x_i - x_j||)^2 (paper eq. 6)."""
-    return float(0.5 * np.sum(weights * (delta - _distances(X)) ** 2))
+    return float(0.5 * np.sum(weights * (delta - euclidean_distance_matrix(X)) ** 2))
 
 
 def classical_mds(delta: np.ndarray, n_components: int = 2) -> np.ndarray:
@@ -142,7 +151,7 @@ def weighted_smacof(
         V_ff_inv = np.linalg.pinv(V[np.ix_(free, free)], hermitian=True)
         rhs_fixed = V[np.ix_(free, ~free)] @ X[~free]
     wd = W * delta
-    D = _distances(X)
+    D = euclidean_distance_matrix(X)
     stress = float(0.5 * np.sum(W * (delta - D) ** 2))
     n_iter = 0
     for n_iter in range(1, max_iter + 1):  # noqa: B007 - n_iter is returned
@@ -158,7 +167,7 @@ def weighted_smacof(
         else:
             X_new = X.copy()
             X_new[free] = V_ff_inv @ (BX[free] - rhs_fixed)
-        D = _distances(X_new)
+        D = euclidean_distance_matrix(X_new)
         X, old = X_new, stress
         stress = float(0.5 * np.sum(W * (delta - D) ** 2))
         if callback is not None:
@@ -176,7 +185,7 @@ class WeightedSMACOF(TransformerMixin, BaseEstimator):
     Parameters:
         n_neighbors: None for equal weights; K for w_ij = 1 when i is among j's K nearest
             neighbours or j among i's (the graph is made connected by joining components at
-            their closest pairs, with a :class:`GraphRepairWarning`).
+            their closest pairs, with a :class:`mappers.graph.GraphRepairWarning`).
         init: starting configuration. ``"lpca"`` = classical MDS / linear PCA (the paper's
             start). ``"unweighted"`` (default) = the equal-weight SMACOF solution started from
             LPCA: on visibility histories the LPCA start is badly bent and kNN-weighted SMACOF
@@ -236,16 +245,9 @@ class WeightedSMACOF(TransformerMixin, BaseEstimator):
         if self.n_neighbors is None:
             return 1.0 - np.eye(n)
         k = min(self.n_neighbors, n - 1)
-        A = symmetric_knn_graph(delta, k, precomputed=True)
-        A, added = connect_components(A, delta)
+        A, _, added = connected_knn_graph(delta, k, precomputed=True)
         self.added_edges_ = added
-        if added:
-            warnings.warn(
-                f"kNN graph (K={k}) was disconnected: joined its components by {len(added)} "
-                "closest-pair edge(s)",
-                GraphRepairWarning,
-                stacklevel=3,
-            )
+        warn_if_repaired(added, k, stacklevel=3)
         return A.toarray()
 
     def fit(self, X, y=None):

@@ -282,3 +282,11 @@ def test_vector_envs(mode):
         assert not np.array_equal(info["object_positions"][0], info["object_positions"][1])
     finally:
         envs.close()
+
+
+def test_step_and_render_before_reset_ask_for_a_reset():
+    env = LFMDREnv(render_mode="rgb_array")
+    with pytest.raises(gym.error.ResetNeeded):
+        env.step(np.zeros(1, np.float32))
+    with pytest.raises(gym.error.ResetNeeded):
+        env.render()

@@ -119,3 +119,30 @@ def test_fit_affine_recovers_transform():
 def test_fit_affine_bad_input(src, dst, match):
     with pytest.raises(ValueError, match=match):
         fit_affine(np.asarray(src, float), np.asarray(dst, float))
+
+
+@pytest.mark.parametrize(
+    ("ids", "pos", "match"),
+    [
+        ([0, 1], [[0, 0], [1, 0]], "at least 3 anchors"),
+        ([0, 1, 9], [[0, 0], [1, 0], [0, 1]], "out of range"),
+        ([0, 1, 1], [[0, 0], [1, 0], [0, 1]], "distinct"),
+        ([True, False, True], [[0, 0], [1, 0], [0, 1]], "integer"),
+        ([0, 1, 2], [[0, 0], [1, 0]], "shape"),
+        ([0, 1, 2], [[0, 0], [1, 0], [0, np.inf]], "NaN or inf"),
+        ([0, 1, 2], [[0, 0], [1, 0], [2, 0]], "collinear"),
+    ],
+)
+def test_check_anchors_rejects_bad_anchors(ids, pos, match):
+    from mappers.align import check_anchors
+
+    with pytest.raises(ValueError, match=match):
+        check_anchors(ids, pos, 5)
+
+
+def test_check_anchors_returns_int64_ids_and_float_positions():
+    from mappers.align import check_anchors
+
+    ids, pos = check_anchors(np.array([4, 0, 2], dtype=np.int32), [[0, 0], [1, 0], [0, 1]], 5)
+    assert ids.dtype == np.int64 and ids.tolist() == [4, 0, 2]
+    assert pos.dtype == np.float64 and pos.shape == (3, 2)

@@ -141,3 +141,26 @@ def test_default_start_unfolds_where_lpca_start_may_not():
 )
 def test_sklearn_estimator_checks(estimator, check):
     check(estimator)
+
+
+def test_euclidean_distance_matrix_matches_sklearn():
+    from sklearn.metrics import pairwise_distances
+
+    from mappers.smacof import euclidean_distance_matrix
+
+    X = np.random.default_rng(3).normal(size=(25, 4))
+    D = euclidean_distance_matrix(X)
+    np.testing.assert_allclose(D, pairwise_distances(X), atol=1e-12)
+    assert np.all(np.diag(D) == 0.0) and np.array_equal(D, D.T)
+
+
+def test_weighted_smacof_warns_when_it_joins_a_disconnected_knn_graph():
+    from mappers import GraphRepairWarning
+
+    rng = np.random.default_rng(4)
+    X = np.vstack([rng.normal(size=(10, 2)), rng.normal(size=(10, 2)) + 100.0])
+    with pytest.warns(GraphRepairWarning, match=r"K=3.*1 closest-pair edge"):
+        est = WeightedSMACOF(n_neighbors=3).fit(X)
+    assert len(est.added_edges_) == 1
+    i, j = est.added_edges_[0]
+    assert est.weights_[i, j] == est.weights_[j, i] == 1.0

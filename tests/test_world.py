@@ -196,3 +196,13 @@ def test_grazing_and_wall_moves_keep_a_gap():
     w = built(World(n_objects=3, n_anchors=3), OBJECTS, [0.0, -1.12, -0.5])
     assert w.move(0.0, 0.2) is True
     assert w.y >= -1.25 + 0.05 + CONTACT_MARGIN
+
+
+def test_built_says_whether_a_space_exists_without_syncing_the_body():
+    w = World(n_objects=3, n_anchors=3)
+    assert not w.built and w.space is None
+    built(w, [(-0.5, -0.5), (0.5, -0.5), (0.0, 0.5)], (0.0, 0.0, 0.0))
+    assert w.built
+    w.move(0.0, 0.2)
+    assert w._body_stale  # asking `built` must not have moved the pymunk body
+    assert w.body.position.x == pytest.approx(0.2)

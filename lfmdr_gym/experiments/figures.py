@@ -20,6 +20,19 @@ import numpy as np
 from lfmdr_gym.atomic import atomic_savefig, atomic_write, atomic_write_text
 from lfmdr_gym.history import History
 
+__all__ = [
+    "PAPER",
+    "PAPER_EXAMPLES",
+    "best_params",
+    "paper_notation",
+    "plot_curves",
+    "plot_estimate",
+    "plot_map",
+    "slug",
+    "summarise",
+    "write_table",
+]
+
 # The paper's figures as far as the seed's text conversion keeps them (SPEC §6). Parameters are
 # in the paper's notation; "mpe"/"moe" None where the pairing was lost.
 PAPER: dict[str, dict[str, dict[str, Any]]] = {
@@ -297,6 +310,3 @@ def plot_estimate(
     atomic_savefig(fig, path)
     return Path(path)
 
-
-__all__ = ["PAPER", "PAPER_EXAMPLES", "best_params", "paper_notation", "plot_curves", "plot_estimate", "plot_map", "slug", "summarise",
-           "write_table"]

@@ -21,6 +21,7 @@ too: they are the protocol's building blocks used one at a time.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import inspect
 import itertools
 import math
@@ -123,7 +124,7 @@ def user_params(method: str, items: Iterable[str] | Mapping[str, Any] | None) ->
     given = dict(items) if isinstance(items, Mapping) else parse_params(items)
     given = {PARAM_ALIASES.get(k, k): v for k, v in given.items()}
     spec = _methods()[method]
-    accepted = set(spec.grid) | set(spec.defaults) | set(getattr(spec, "parameters", ()))
+    accepted = set(spec.parameters)  # register_method ensures it covers grid and defaults
     unknown = sorted(set(given) - accepted)
     if unknown:
         raise ValueError(f"unknown parameter(s) {unknown} for method {method!r}; "
@@ -340,11 +341,7 @@ def collect_episode(episode: Episode) -> History:
 
 
 def _with_meta(history: History, meta: dict[str, Any]) -> History:
-    return History(
-        sensor=history.sensor, matrix=history.matrix, object_positions=history.object_positions,
-        anchor_ids=history.anchor_ids, anchor_positions=history.anchor_positions,
-        robot_poses=history.robot_poses, mask=history.mask, meta=meta,
-    )
+    return dataclasses.replace(history, meta=meta)
 
 
 def _fixed_layout(env: Any, layout: Mapping[str, np.ndarray]) -> Any:
