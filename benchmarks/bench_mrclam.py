@@ -1,6 +1,7 @@
 """MRCLAM: map every run in every mode and print MPE / MOE per run, with baselines.
 
     python benchmarks/bench_mrclam.py [--data DIR] [--modes visibility,bearing,range]
+        [--candidates covis-ensemble,covis-ensemble/parallax]
 
 For each run and mode (4 corner anchors, all 5 robots, scores over the 11 non-anchor landmarks):
 
@@ -22,11 +23,14 @@ For each run and mode (4 corner anchors, all 5 robots, scores over the 11 non-an
 * ``covis-ensemble/angle`` (bearing): covis-ensemble with the end-on penalty of
   mappers.missing.end_on_penalty added to the dissimilarity (``angle_weight``, default column
   0.25).
+* ``covis-ensemble/parallax`` (bearing): covis-ensemble with each pair's dissimilarity
+  multiplied by ``(h_i h_j) ** -nearness_weight``, ``h`` = mappers.missing.parallax_nearness
+  (bearing parallax between images of one robot 1.5-6 s apart; default column 0.08).
 
 Settings grids: covis-nonmetric (visibility, bearing): bin width {1, 2, 3, 5} s x min_co {3, 5};
 covis-ensemble/nonmetric: the set of bin widths, {1, 2, 3, 5} / {1, 1.5, 2, 3, 4, 5} /
 {0.5, ..., 8} s; covis-ensemble: power {0.35, 0.5, 0.7, 1}; covis-ensemble/angle: angle_weight
-{0, 0.25, 0.5, 0.75};
+{0, 0.25, 0.5, 0.75}; covis-ensemble/parallax: nearness_weight {0, 0.04, 0.08, 0.12, 0.25};
 range-quantile: bin width {0.25, 0.5, 1} s x quantile {0.95, 0.98, 0.99}; range-bounds: the same
 x slack {0.5, 1}.
 """
@@ -62,12 +66,13 @@ GRIDS = {
                     (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 8.0)]
     ],
     "covis-ensemble/angle": [{"angle_weight": a} for a in (0.0, 0.25, 0.5, 0.75)],
+    "covis-ensemble/parallax": [{"nearness_weight": w} for w in (0.0, 0.04, 0.08, 0.12, 0.25)],
     "masked-euclidean": [],
 }
 CANDIDATES = {
     "visibility": ["covis-nonmetric", "covis-ensemble/nonmetric", "covis-ensemble"],
     "bearing": ["masked-euclidean", "covis-nonmetric", "covis-ensemble/nonmetric",
-                "covis-ensemble", "covis-ensemble/angle"],
+                "covis-ensemble", "covis-ensemble/angle", "covis-ensemble/parallax"],
     "range": ["masked-euclidean", "range-quantile", "range-bounds"],
 }
 
@@ -77,6 +82,8 @@ def _run(run_dir: Path, mode: str, method: str | None, **kw):
         method, kw = "covis-ensemble", {**kw, "member": "covis-nonmetric"}
     elif method == "covis-ensemble/angle":
         method, kw = "covis-ensemble", {"angle_weight": 0.25, **kw}
+    elif method == "covis-ensemble/parallax":
+        method, kw = "covis-ensemble", {"nearness_weight": 0.08, **kw}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MRCLAMDataWarning)
         return map_mrclam_run(run_dir, mode, method=method, **kw)
@@ -87,6 +94,8 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", type=Path, default=here.parent / "shared" / "data" / "mrclam")
     ap.add_argument("--modes", default="visibility,bearing,range")
+    ap.add_argument("--candidates", default=None,
+                    help="comma-separated subset of the method columns (default: all)")
     args = ap.parse_args(argv)
     runs = sorted(p for p in args.data.glob("MRCLAM_Dataset*") if p.is_dir())
     if not runs:
@@ -97,7 +106,9 @@ def main(argv: list[str] | None = None) -> None:
         cols: list[tuple[str, list]] = []  # (label, per-run results)
         cols.append(("naive 1s", [_run(run, mode, "naive", bin_width=1.0) for run in runs]))
         chosen: dict[str, list[str]] = {}
-        for method in CANDIDATES[mode]:
+        wanted = CANDIDATES[mode] if args.candidates is None else [
+            c for c in CANDIDATES[mode] if c in args.candidates.split(",")]
+        for method in wanted:
             default = [_run(run, mode, method) for run in runs]
             cols.append((method, default))
             grid = GRIDS[method]

@@ -287,6 +287,10 @@ def test_covis_power_maps_a_simulated_camera_and_falls_back_on_a_split_layout():
     nm = masked_embedding(split.astype(float), None, "visibility", "covis-nonmetric", **kw)
     assert any("kept the covis-nonmetric map" in w for w in pw.warnings)
     assert np.allclose(pw.positions, nm.positions)
+    near = masked_embedding(split.astype(float), None, "visibility", "covis-power",
+                            nearness=np.linspace(0.5, 2, split.shape[0]), nearness_weight=0.5, **kw)
+    assert any("nearness_weight not applied" in w for w in near.warnings)
+    assert np.allclose(near.positions, nm.positions)
 
 
 def test_end_on_penalty_is_largest_for_pairs_seen_lined_up():
@@ -310,3 +314,66 @@ def test_end_on_penalty_is_largest_for_pairs_seen_lined_up():
     with pytest.raises(ValueError, match="angle_weight"):
         masked_embedding(seen_s.astype(float), None, "visibility", "covis-power",
                          angle_weight=0.5, **kw)
+
+
+def _parallax_log(turn=0.05, n_pairs=6):
+    """A robot photographs 4 landmarks (two 2 m ahead, two 8 m ahead, +-0.8 / +-3 m to the
+    sides), then 2 s later again after moving 0.3 m forward and turning by ``turn``; repeated
+    ``n_pairs`` times. Returns rows (robot, time, landmark, bearing) and which are near."""
+    P = np.array([[2.0, 0.8], [8.0, 3.0], [8.0, -3.0], [2.0, -0.8]])
+    rows = []
+    for k in range(n_pairs):
+        for t, (x, th) in ((10.0 * k, (0.0, 0.0)), (10.0 * k + 2.0, (0.3, turn))):
+            b = np.arctan2(P[:, 1], P[:, 0] - x) - th
+            rows += [(1, t, i, b[i]) for i in range(4)]
+    return np.array(rows), np.array([True, False, False, True])
+
+
+def test_parallax_nearness_ranks_landmarks_seen_close_higher_and_ignores_rotation():
+    from mappers.missing import parallax_nearness
+
+    rows, near = _parallax_log()
+    h = parallax_nearness(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], 4)
+    assert np.isfinite(h).all()
+    assert h[near].min() > 2.5 * h[~near].max()
+    # the robot's rotation between the images shifts every bearing equally: no effect
+    rows2, _ = _parallax_log(turn=-0.3)
+    h2 = parallax_nearness(rows2[:, 0], rows2[:, 1], rows2[:, 2], rows2[:, 3], 4)
+    assert np.allclose(h, h2)
+    # too few image pairs per landmark -> NaN; images too far apart are not paired
+    assert np.isnan(parallax_nearness(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], 4,
+                                      min_samples=7)).all()
+    assert np.isnan(parallax_nearness(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], 4,
+                                      dt_min=0.5, dt_max=1.0)).all()
+    with pytest.raises(ValueError, match="same length"):
+        parallax_nearness(rows[:, 0], rows[:-1, 1], rows[:, 2], rows[:, 3], 4)
+    with pytest.raises(ValueError, match="landmark indices"):
+        parallax_nearness(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], 3)
+    with pytest.raises(ValueError, match="dt_min"):
+        parallax_nearness(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], 4, dt_min=2, dt_max=1)
+
+
+def test_nearness_weight_shrinks_dissimilarities_of_near_seen_landmarks():
+    from mappers.missing import nearness_factor
+
+    F = nearness_factor(np.array([2.0, 1.0, 0.5, np.nan]), 0.5, 4)
+    assert np.allclose(np.diag(F), 1.0) and np.allclose(F, F.T)
+    assert F[0, 1] < 1 < F[2, 1]  # landmark 0 seen from close: its dissimilarities shrink
+    P, seen_s, _, bear = _simulate(n_obj=10, n_steps=800, seed=14)
+    X = np.zeros((10, 2 * seen_s.shape[1]))
+    X[:, 0::2], X[:, 1::2] = np.cos(bear) * seen_s, np.sin(bear) * seen_s
+    anchors = _corners(P)
+    kw = {"anchor_ids": anchors, "anchor_positions": P[anchors]}
+    mask = np.repeat(seen_s, 2, axis=1)
+    h = np.linspace(0.5, 2.0, 10)
+    base = masked_embedding(X, mask, "bearing", "covis-power", **kw)
+    zero = masked_embedding(X, mask, "bearing", "covis-power", nearness=h, nearness_weight=0.0, **kw)
+    mm = masked_embedding(X, mask, "bearing", "covis-power", nearness=h, nearness_weight=0.3, **kw)
+    assert np.allclose(base.positions, zero.positions)
+    expect = base.delta * nearness_factor(h, 0.3, 10)
+    assert np.allclose(mm.delta, expect)
+    with pytest.raises(ValueError, match="nearness"):
+        masked_embedding(X, mask, "bearing", "covis-power", nearness_weight=0.3, **kw)
+    with pytest.raises(ValueError, match="shape"):
+        masked_embedding(X, mask, "bearing", "covis-power", nearness=h[:5], nearness_weight=0.3,
+                         **kw)

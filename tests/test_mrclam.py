@@ -300,7 +300,7 @@ def test_covis_ensemble_is_the_visibility_default_and_checks_its_arguments(tmp_p
     ens = map_mrclam_run(run, "bearing", robots=(1, 2, 3), plot=False, **small)
     assert ens.method == "covis-ensemble"
     assert ens.params == {"bin_widths": [1.0, 2.0], "min_co": [3], "member": "covis-power",
-                          "power": 0.5, "angle_weight": 0.0}
+                          "power": 0.5, "angle_weight": 0.0, "nearness_weight": 0.0}
     singles = [map_mrclam_run(run, "bearing", robots=(1, 2, 3), method="covis-power",
                               bin_width=w, min_co=3) for w in (1.0, 2.0)]
     assert np.allclose(ens.positions, np.mean([s.positions for s in singles], axis=0))
@@ -315,3 +315,10 @@ def test_covis_ensemble_is_the_visibility_default_and_checks_its_arguments(tmp_p
         map_mrclam_run(run, "visibility", robots=(1, 2, 3), member="covis-range")
     with pytest.raises(ValueError, match="power"):
         map_mrclam_run(run, "visibility", robots=(1, 2, 3), member="covis-nonmetric", power=0.5)
+    # bearing parallax (images of one robot) reweights the dissimilarities; bearing mode only
+    par = map_mrclam_run(run, "bearing", robots=(1, 2, 3), plot=False, nearness_weight=0.3,
+                         **small)
+    assert par.params["nearness_weight"] == 0.3 and np.all(np.isfinite(par.positions))
+    assert not np.allclose(par.positions, ens.positions)
+    with pytest.raises(ValueError, match="nearness_weight"):
+        map_mrclam_run(run, "visibility", robots=(1, 2, 3), nearness_weight=0.3, **small)

@@ -593,7 +593,9 @@ run binned at every width of :data:`ENSEMBLE_BIN_WIDTHS` and each ``min_co`` of
 +-0.3 m with the bin width, and the width that is best on one run is not on another; the mean
 over a fixed spread needs no setting choice. Parameters: ``bin_widths``, ``min_co``
 (sequences), ``member`` (``"covis-power"`` or ``"covis-nonmetric"``), ``power`` (covis-power's
-exponent). Assumptions: those of the member method (mappers/missing.py): the chance of seeing
+exponent), ``nearness_weight`` (bearing only: scale the dissimilarities by the landmarks' relative
+nearness from bearing parallax between images of one robot,
+:func:`mappers.missing.parallax_nearness`; measured without gain, off by default). Assumptions: those of the member method (mappers/missing.py): the chance of seeing
 two landmarks in one bin falls with their distance the same way everywhere (covis-power: as
 one power law)."""
 ENSEMBLE_BIN_WIDTHS: tuple[float, ...] = (1.0, 1.5, 2.0, 3.0, 4.0, 5.0)
@@ -607,7 +609,8 @@ DEFAULT_MODE_METHOD: dict[str, str] = {
 }
 """Method used by :func:`map_mrclam_run` when none is given (best measured, leave-one-run-out,
 benchmarks/bench_mrclam.py). Bearing uses only the pattern of what was seen: no bearing-specific
-dissimilarity measured better than it (see the module docstring of mappers/missing.py)."""
+dissimilarity measured better than it, bearing parallax between images included (see the module
+docstring of mappers/missing.py; ``--candidates covis-ensemble,covis-ensemble/parallax``)."""
 
 NAIVE_METHOD = "naive"
 """The straightforward baseline: zero-filled history, rows L2-normalised, unweighted SMACOF from
@@ -746,7 +749,8 @@ def map_mrclam_run(
                 f"method {ENSEMBLE_METHOD!r} bins the run at several widths (bin_widths=...); "
                 "bin_width must be None"
             )
-        unknown = set(params) - {"bin_widths", "min_co", "member", "power", "angle_weight"}
+        unknown = set(params) - {"bin_widths", "min_co", "member", "power", "angle_weight",
+                                 "nearness_weight"}
         if unknown:
             raise ValueError(f"unknown parameter(s) {sorted(unknown)} for method {method!r}")
         member = params.get("member", ENSEMBLE_MEMBERS[0])
@@ -761,6 +765,11 @@ def map_mrclam_run(
             if member != "covis-power":
                 raise ValueError("angle_weight applies to member='covis-power' only")
             extra["angle_weight"] = float(params["angle_weight"])
+        nearness_weight = float(params.get("nearness_weight", 0.0))
+        if nearness_weight:
+            if member != "covis-power" or mode != "bearing":
+                raise ValueError("nearness_weight applies to mode='bearing' with member='covis-power' only")
+            extra["nearness_weight"] = nearness_weight
         widths = tuple(float(w) for w in np.atleast_1d(params.get("bin_widths", ENSEMBLE_BIN_WIDTHS)))
         min_cos = tuple(int(m) for m in np.atleast_1d(params.get("min_co", ENSEMBLE_MIN_CO)))
         if not widths or not min_cos:
@@ -788,6 +797,12 @@ def map_mrclam_run(
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", MRCLAMDataWarning)  # already issued by load_mrclam
             run = read_run(run_dir, robots, groundtruth_fixes=groundtruth_fixes)
+        if extra.get("nearness_weight"):
+            # bearing parallax between images of one robot (bearings + timestamps only)
+            from mappers.missing import parallax_nearness
+
+            extra["nearness"] = parallax_nearness(
+                run.obs[:, 0], run.obs[:, 1], run.obs[:, 2], run.obs[:, 4], len(run.subjects))
         hists = [(history.matrix, history.mask)]
         for w in widths[1:]:
             matrix, mask, _ = bin_run(run, mode, w)
@@ -799,7 +814,8 @@ def map_mrclam_run(
         )
         positions, used_method = mm.positions, ENSEMBLE_METHOD
         used_params = {"bin_widths": list(widths), "min_co": list(min_cos), "member": member,
-                       **({k: mm.params["members"][0][k] for k in ("power", "angle_weight")}
+                       **({k: mm.params["members"][0][k] for k in ("power", "angle_weight",
+                                                                      "nearness_weight")}
                           if member == "covis-power" else {})}
     else:
         mm = masked_embedding(
