@@ -75,6 +75,14 @@ def _method_list(values: Sequence[str] | None) -> list[str] | None:
     return [name for v in values for name in _csv_list(v)]
 
 
+def _add_method_options(p: argparse.ArgumentParser) -> None:
+    """--method and --param, shared by `run` and `map`."""
+    p.add_argument("--method", required=True, help="method label (e.g. SDE, 'SMA(WGT)')")
+    p.add_argument("--param", action="append", default=None, metavar="NAME=VALUE",
+                   help="method parameter overriding its default (repeatable), e.g. K=7 or "
+                        "n_neighbors=7, sigma2=1, d=4")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``lfmdr`` (exposed for tests and documentation)."""
     parser = argparse.ArgumentParser(prog="lfmdr", description=_DESCRIPTION, formatter_class=_Formatter)
@@ -132,10 +140,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--env", default="LFMDR-Visibility-v0", metavar="ID",
                    help="environment id (LFMDR-Visibility-v0, LFMDR-Bearing-v0, LFMDR-Range-v0)")
     p.add_argument("--steps", type=_positive_int, default=2000, help="episode length N")
-    p.add_argument("--method", required=True, help="method label (e.g. SDE, 'SMA(WGT)')")
-    p.add_argument("--param", action="append", default=None, metavar="NAME=VALUE",
-                   help="method parameter overriding its default (repeatable), e.g. K=7 or "
-                        "n_neighbors=7, sigma2=1, d=4")
+    _add_method_options(p)
     p.add_argument("--seed", type=int, default=0, help="seed of layout, start pose and walk")
     p.add_argument("--every", type=_positive_int, default=None,
                    help="checkpoint interval; must divide --steps (default: 500 for visibility, "
@@ -153,10 +158,7 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     p.add_argument("history", metavar="HISTORY.npz", help="a history saved by lfmdr collect/run")
-    p.add_argument("--method", required=True, help="method label (e.g. SDE, 'SMA(WGT)')")
-    p.add_argument("--param", action="append", default=None, metavar="NAME=VALUE",
-                   help="method parameter overriding its default (repeatable), e.g. K=7 or "
-                        "n_neighbors=7, sigma2=1, d=4")
+    _add_method_options(p)
     p.add_argument("--steps", type=_positive_int, default=None,
                    help="map only the first N steps (default: all)")
     p.add_argument("--out", default=None, metavar="DIR",

@@ -122,6 +122,17 @@ def register_method(spec: MethodSpec, *, replace: bool = False) -> MethodSpec:
     return spec
 
 
+def _validated_knn_input(est: BaseEstimator, X) -> np.ndarray:
+    """Parameter and data checks shared by the kNN-graph estimators; returns X as float."""
+    est._validate_params()
+    X = validate_data(est, X, ensure_min_samples=2, dtype=float)
+    if est.n_neighbors >= X.shape[0]:
+        raise ValueError(
+            f"n_neighbors={est.n_neighbors} must be < number of points ({X.shape[0]})"
+        )
+    return X
+
+
 class LocallyLinear(TransformerMixin, BaseEstimator):
     """scikit-learn's LLE / Hessian LLE with fixed signs and explicit errors.
 
@@ -156,11 +167,7 @@ class LocallyLinear(TransformerMixin, BaseEstimator):
 
     def fit(self, X, y=None):
         """Compute the embedding of ``X``."""
-        self._validate_params()
-        X = validate_data(self, X, ensure_min_samples=2, dtype=float)
-        n = X.shape[0]
-        if self.n_neighbors >= n:
-            raise ValueError(f"n_neighbors={self.n_neighbors} must be < number of points ({n})")
+        X = _validated_knn_input(self, X)
         if self.method == "hessian":
             need = self.n_components * (self.n_components + 3) // 2
             if self.n_neighbors <= need:
@@ -218,11 +225,7 @@ class LaplacianEigenmap(TransformerMixin, BaseEstimator):
 
     def fit(self, X, y=None):
         """Compute the embedding of ``X``."""
-        self._validate_params()
-        X = validate_data(self, X, ensure_min_samples=2, dtype=float)
-        n = X.shape[0]
-        if self.n_neighbors >= n:
-            raise ValueError(f"n_neighbors={self.n_neighbors} must be < number of points ({n})")
+        X = _validated_knn_input(self, X)
         A, _, added = connected_knn_graph(X, self.n_neighbors)
         warn_if_repaired(added, self.n_neighbors)
         self.affinity_matrix_, self.added_edges_ = A, added
