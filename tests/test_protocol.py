@@ -209,3 +209,26 @@ def test_best_param_is_lowest_mean_mpe_and_penalises_failures():
     assert best["mpe_mean"] == pytest.approx(0.3)
     assert best["mpe_std"] == pytest.approx(np.std([0.2, 0.4], ddof=1))
     assert (best["runs"], best["failed"]) == (2, 0)
+
+
+def test_a_method_registered_in_this_process_reaches_the_worker_processes(tmp_path):
+    """register_method in the user's script (the registry is per process): the protocol ships
+    the spec to its workers, so jobs=2 gives the rows of jobs=1, not 'unknown method' errors."""
+    from mappers import MethodSpec, WeightedSMACOF, register_method
+    from mappers.methods import _METHODS
+
+    def knn_smacof(*, n_neighbors: int = 6):  # a local function: workers cannot import it
+        return WeightedSMACOF(n_neighbors=n_neighbors)
+
+    spec = MethodSpec("TEST-KNN", knn_smacof, defaults={}, grid={"n_neighbors": [5, 7]})
+    register_method(spec)
+    try:
+        cfg = dict(SMALL, methods=("TEST-KNN",))
+        one = run_protocol(ProtocolConfig(**cfg), tmp_path / "one", jobs=1, progress=False,
+                           report=False)
+        two = run_protocol(ProtocolConfig(**cfg), tmp_path / "two", jobs=2, progress=False,
+                           report=False)
+        assert one.failed == two.failed == 0
+        _same_rows(read_results(one.out / "results.csv"), read_results(two.out / "results.csv"))
+    finally:
+        _METHODS.pop(spec.label)

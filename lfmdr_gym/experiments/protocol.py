@@ -416,6 +416,10 @@ class _Task:
     units: tuple[tuple[str, str, tuple[tuple[str, Any], ...]], ...]  # (method, param, params)
     mode: str
     cost: float
+    # The MethodSpecs of the task's methods. The registry is per process: a method registered in
+    # the user's script (register_method) does not exist in a fresh worker process until the
+    # task brings it (loky and Dask pickle a script's functions by value).
+    specs: tuple[Any, ...] = ()
 
 
 _HISTORY_CACHE: OrderedDict[str, History] = OrderedDict()
@@ -451,9 +455,19 @@ def _episode_history(episode: Episode, path: str) -> History:
     return history
 
 
+def _register_specs(specs: Iterable[Any]) -> None:
+    """Make this process's registry agree with the parent's for the given specs."""
+    from mappers import METHODS, register_method
+
+    for spec in specs:
+        if METHODS.get(spec.label) != spec:
+            register_method(spec, replace=True)
+
+
 def _run_task(task: _Task, limit_threads: bool) -> list[dict[str, Any]]:
     if limit_threads:
         _limit_threads()
+    _register_specs(task.specs)
     head = _episode_history(task.episode, task.path).head(task.n_steps)
     rows = []
     for method, param, params in task.units:
@@ -497,7 +511,9 @@ def _make_tasks(units: Sequence[Unit], paths: Mapping[Episode, str], mode: str) 
 
 
 def _task(ep: Episode, path: str, n: int, units: list[Unit], mode: str, cost: float) -> _Task:
-    return _Task(ep, path, n, tuple((u.method, u.param, u.params) for u in units), mode, cost)
+    methods = _methods()
+    specs = tuple(methods[m] for m in dict.fromkeys(u.method for u in units))
+    return _Task(ep, path, n, tuple((u.method, u.param, u.params) for u in units), mode, cost, specs)
 
 
 @contextmanager
