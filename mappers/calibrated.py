@@ -177,6 +177,14 @@ def fold_score(
     return float(count / m)
 
 
+def _log_floor(delta: np.ndarray) -> float:
+    """Floor of log(delta) in the calibration: the smallest positive dissimilarity of the fitted
+    pairs, at least 1e-12 (identical rows give delta = 0). One rule for every fit, so the
+    targets of the fold check and of the refinement agree."""
+    positive = delta[delta > 0]
+    return max(float(positive.min()), 1e-12) if positive.size else 1e-12
+
+
 def _features(P: np.ndarray, centre: np.ndarray, half: float, degree: int) -> np.ndarray:
     """Polynomial features (without constant) of positions, in a unit box around the map."""
     x = (P[..., 0] - centre[0]) / half
@@ -335,10 +343,7 @@ class CalibratedSMACOF(TransformerMixin, BaseEstimator):
 
     def _refine(self, D, X, loc, fixed):
         """Alternate calibration and anchored weighted SMACOF from start X."""
-        positive = D[loc]
-        lo_delta = max(
-            float(positive[positive > 0].min()) if np.any(positive > 0) else 1e-12, 1e-12
-        )
+        lo_delta = _log_floor(D[loc])
         far = ~loc
         np.fill_diagonal(far, False)
         n_iter = 0
@@ -424,8 +429,7 @@ class CalibratedSMACOF(TransformerMixin, BaseEstimator):
         def run(name, S):
             Y, stress, n_iter, coef, Dh = self._refine(D, S, loc, ids)
             if k_check != k:  # targets for the wider check: the calibration refitted on it
-                pos_d = D[loc_check][D[loc_check] > 0]
-                Dh, _ = self._calibrate(D, Y, loc_check, pos_d.min() if pos_d.size else 1e-12)
+                Dh, _ = self._calibrate(D, Y, loc_check, _log_floor(D[loc_check]))
             fs = fold_score(Y, D, k_check, Dh)
             results.append((name, Y, stress, fs, n_iter, coef))
 

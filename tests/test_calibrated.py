@@ -172,6 +172,23 @@ def test_precomputed_dissimilarity(world):
     np.testing.assert_allclose(a, b, atol=1e-9)
 
 
+def test_duplicate_objects_map_to_one_place_and_the_rest_stay_accurate(world):
+    """Identical and near-identical rows (delta 0 and ~1e-16) must not poison the log-linear
+    calibration (one floor of log delta for every fit): finite map, duplicates together."""
+    pts, ids, _ = world
+    X = _histories(pts, "bearing", 1500, np.random.default_rng(12))
+    free = [k for k in range(len(pts)) if k not in set(ids.tolist())]
+    a, b = free[0], free[1]
+    near = X[b].copy()
+    near[0] += 1e-13  # delta ~ 1e-15: below the 1e-12 floor
+    X2 = np.vstack([X, X[a], near])
+    truth = np.vstack([pts, pts[a], pts[b]])
+    Y = CalibratedSMACOF().fit_transform(X2, anchor_ids=ids, anchor_positions=pts[ids])
+    assert np.all(np.isfinite(Y))
+    assert np.hypot(*(Y[-2] - Y[a])) < 0.05 and np.hypot(*(Y[-1] - Y[b])) < 0.05
+    assert mean_position_error(Y, truth, exclude=ids) < 0.06
+
+
 def test_deterministic(world):
     pts, ids, _ = world
     X = _histories(pts, "bearing", 600, np.random.default_rng(11))
