@@ -289,6 +289,8 @@ def _cmd_collect(args: argparse.Namespace) -> int:
 def _cmd_mrclam(args: argparse.Namespace) -> int:
     import warnings
 
+    import numpy as np
+
     from lfmdr_gym.datasets.mrclam import MRCLAMDataWarning, map_mrclam_run
     from lfmdr_gym.experiments.protocol import parse_params
 
@@ -306,7 +308,11 @@ def _cmd_mrclam(args: argparse.Namespace) -> int:
           f"{list(result.anchor_subjects)}")
     for w in result.warnings:
         print(f"warning: {w}")
-    print(f"MPE {result.mpe:.3f} m, MOE {result.moe:.2f} % over the non-anchor landmarks "
+    non_anchor = ~np.isin(result.subjects, result.anchor_subjects)
+    mapped = int(np.sum(non_anchor & np.isfinite(result.positions).all(axis=1)))
+    which = ("the" if mapped == int(non_anchor.sum())
+             else f"the {mapped} mapped (of {int(non_anchor.sum())})")
+    print(f"MPE {result.mpe:.3f} m, MOE {result.moe:.2f} % over {which} non-anchor landmarks "
           f"(anchors' centroid baseline: MPE {result.centroid_mpe:.3f} m)")
     written = [str(p) for p in (result.csv_path, result.png_path) if p is not None]
     if written:

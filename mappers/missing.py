@@ -599,7 +599,8 @@ class MaskedMap:
     positions: (M, 2) map (in the anchors' frame when anchors were given), NaN rows unmapped.
     delta, weights: the dissimilarities and weights used (weight 0 = missing pair).
     components: connected components of the graph of usable pairs (one list when connected).
-    unmapped: objects never sensed.
+    unmapped: objects left NaN: never sensed, or in a group of usable pairs holding fewer than
+        2 anchors (its scale and rotation are not measured).
     """
 
     positions: np.ndarray
@@ -695,6 +696,38 @@ def masked_embedding(
         censored = Cn < p["min_co"]
         counts = np.where(censored, 0, Cn)
     comps = _components(counts)
+    comps_full = [[int(keep[i]) for i in c] for c in comps]  # the data's groups, object ids
+    all_anchors = (anchor_ids, anchor_positions)
+    if sub_anchor is not None and len(comps) > 1:
+        # A group held by fewer than 2 anchors has no measured scale or rotation in the
+        # anchors' frame (non-metric stress and lower bounds then push it off to kilometres):
+        # its objects are left unmapped (its anchor, if any, stays at its known position)
+        # rather than drawn with false confidence.
+        loose = [c for c in comps if np.isin(c, sub_anchor).sum() < 2]
+        if len(loose) == len(comps):
+            raise ValueError(
+                "the graph of usable pairs falls apart and no group holds 2 or more anchors "
+                f"(groups {[[int(keep[i]) for i in c] for c in comps]}, anchors "
+                f"{anchor_ids.tolist()}): nothing can be placed in the anchors' frame"
+            )
+        if loose:
+            drop = np.concatenate([np.asarray(c, dtype=np.int64) for c in loose])
+            msgs.append(
+                f"object(s) (rows) {sorted(int(keep[i]) for i in drop)} are unmapped: the graph of usable "
+                "pairs falls apart and their group holds fewer than 2 anchors, so its scale and "
+                "rotation are not measured (choose at least 2 anchors in every group)"
+            )
+            sel = np.setdiff1d(np.arange(len(keep)), drop)
+            ix = np.ix_(sel, sel)
+            delta, W, counts = delta[ix], W[ix], counts[ix]
+            if censored is not None:
+                censored, delta_plain = censored[ix], delta_plain[ix]
+            s, v, keep = s[sel], v[sel], keep[sel]
+            kept = np.isin(anchor_ids, keep)
+            anchor_ids, anchor_positions = anchor_ids[kept], anchor_positions[kept]
+            sub_anchor = np.searchsorted(keep, anchor_ids)
+            comps = [[int(i) for i in np.searchsorted(sel, c)] for c in comps
+                     if np.isin(c, sel).all()]
     if method == "covis-power" and len(comps) > 1 and p.get("nearness_weight", 0.0):
         # the fallback keeps the pattern-only covis-nonmetric map: no nearness factor either
         # (MRCLAM DS6: the factor moves its clustered map by up to 0.4 m; rule set after seeing it)
@@ -740,15 +773,16 @@ def masked_embedding(
             # a history difference has no metric scale: the anchors can only fix an affine frame
             free, _, _ = weighted_smacof(delta, W, start, max_iter=max_iter)
             Y = apply_affine(free, fit_affine(free[sub_anchor], anchor_positions))
-    if len(comps) > 1:
-        sizes = sorted((len(c) for c in comps), reverse=True)
+    if len(comps_full) > 1:
+        sizes = sorted((len(c) for c in comps_full), reverse=True)
         msgs.append(
-            f"the graph of usable pairs falls apart into {len(comps)} components (sizes {sizes}): "
+            f"the graph of usable pairs falls apart into {len(comps_full)} components (sizes {sizes}): "
             "the relative placement of the components is not measured"
         )
     positions = np.full((M, 2), np.nan)
     positions[keep] = Y
-    comps_full = [[int(keep[i]) for i in c] for c in comps]
+    if all_anchors[0] is not None:  # anchors of unmapped groups stay at their known positions
+        positions[all_anchors[0]] = all_anchors[1]
     D_full = np.zeros((M, M))
     W_full = np.zeros((M, M))
     D_full[np.ix_(keep, keep)] = delta
@@ -762,7 +796,7 @@ def masked_embedding(
         delta=D_full,
         weights=W_full,
         components=comps_full,
-        unmapped=tuple(int(i) for i in never),
+        unmapped=tuple(int(i) for i in np.flatnonzero(np.isnan(positions).any(axis=1))),
         warnings=tuple(msgs),
     )
 

@@ -377,3 +377,43 @@ def test_nearness_weight_shrinks_dissimilarities_of_near_seen_landmarks():
     with pytest.raises(ValueError, match="shape"):
         masked_embedding(X, mask, "bearing", "covis-power", nearness=h[:5], nearness_weight=0.3,
                          **kw)
+
+
+@pytest.mark.parametrize("method", ["covis-nonmetric", "covis-power", "range-quantile"])
+def test_a_group_held_by_fewer_than_two_anchors_is_left_unmapped_not_flung_away(method):
+    """Two groups never sensed together: the group with 2 anchors is mapped in the anchors'
+    frame; the other (1 anchor: scale and rotation unmeasured) is NaN and said so, its anchor
+    kept at its known position. (MRCLAM DS6 with anchors 10, 17, 20 put it ~100 km away.)"""
+    P, seen, r, _ = _simulate(n_steps=4000, max_range=5.0, seed=13)
+    left = P[:, 1] < 5
+    split = seen.copy()
+    split[left, : seen.shape[1] // 2] = False
+    split[~left, seen.shape[1] // 2:] = False
+    L, R = np.flatnonzero(left), np.flatnonzero(~left)
+    anchors = np.array([L[0], L[1], L[2], R[0]])
+    X, mask = (np.where(split, r, 0.0), split) if method == "range-quantile" else (
+        split.astype(float), None)
+    sensor = "range" if method == "range-quantile" else "visibility"
+    mm = masked_embedding(X, mask, sensor, method, anchor_ids=anchors, anchor_positions=P[anchors])
+    lost = np.setdiff1d(R, anchors)
+    assert np.isnan(mm.positions[lost]).all()
+    assert set(mm.unmapped) == set(lost.tolist())
+    assert np.array_equal(mm.positions[anchors], P[anchors])
+    placed = np.setdiff1d(L, anchors)
+    assert np.isfinite(mm.positions[placed]).all()
+    assert np.abs(mm.positions[placed]).max() < 20  # in the layout's frame, not flung away
+    assert any("fewer than 2 anchors" in w for w in mm.warnings)
+    assert len(mm.components) == 2  # the data's groups, as measured
+
+
+def test_no_group_with_two_anchors_is_a_clear_error():
+    P, seen, _, _ = _simulate(n_steps=4500, max_range=5.0, seed=13)
+    group = np.digitize(P[:, 1], [10 / 3, 20 / 3])  # three bands never sensed together
+    split = seen.copy()
+    third = seen.shape[1] // 3
+    for g in range(3):
+        split[group == g] &= (np.arange(seen.shape[1]) // third == g)[None, :]
+    anchors = np.array([np.flatnonzero(group == g)[0] for g in range(3)])
+    with pytest.raises(ValueError, match="no group holds 2 or more anchors"):
+        masked_embedding(split.astype(float), None, "visibility", "covis-nonmetric",
+                         anchor_ids=anchors, anchor_positions=P[anchors])

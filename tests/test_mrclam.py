@@ -237,6 +237,17 @@ def test_clustered_layout_warns_and_map_says_so(tmp_path):
     with pytest.warns(MRCLAMDataWarning):
         res = map_mrclam_run(run, "visibility", robots=(1, 2, 3))
     assert any("falls apart" in w for w in res.warnings)
+    # anchors 3 + 1: the group held by one anchor is unmapped (empty in map.csv), not guessed
+    anchors = [6, 7, 8, 12]
+    with pytest.warns(MRCLAMDataWarning, match="unmapped"):
+        res = map_mrclam_run(run, "visibility", robots=(1, 2, 3), anchors=anchors, out=tmp_path / "o",
+                             plot=False)
+    lost = [s for s in range(13, 18)]
+    assert np.isnan(res.positions[np.isin(res.subjects, lost)]).all()
+    assert np.isfinite(res.positions[~np.isin(res.subjects, lost)]).all()
+    assert np.isfinite(res.mpe)
+    rows = (tmp_path / "o" / "map.csv").read_text().splitlines()[1:]
+    assert {int(r.split(",")[0]) for r in rows if r.endswith(",,")} == set(lost)
 
 
 def test_map_synthetic_run_writes_csv_and_png(tmp_path):

@@ -828,6 +828,10 @@ def map_mrclam_run(
             _warn(f"{history.meta['run']} ({mode}, {used_method}): {m}", msgs)
     anchor_ids = history.anchor_ids
     truth = history.object_positions
+    unmapped = np.flatnonzero(~np.isfinite(positions).all(axis=1))
+    if unmapped.size:
+        _warn(f"{history.meta['run']} ({mode}): subject(s) {subjects[unmapped].tolist()} are "
+              "unmapped (empty in map.csv) and not scored", msgs)
     scored = [i for i in range(len(subjects)) if i not in set(anchor_ids.tolist())
               and np.all(np.isfinite(positions[i]))]
     exclude = [i for i in range(len(subjects)) if i not in scored]
