@@ -120,7 +120,10 @@ rate; clipping the field of view to a narrower, reliable part loses more than it
 0.67 -> 0.67-0.93 m); a per-landmark nearness from subtended angles over map distances does not
 track range (Spearman -0.34-0.83); and the weak-perspective model (an image's bearings affine in
 the positions, so the centred bearing matrix is rank 2 -- a PCA with missing data), fitted from
-the true map, drifts 1.05-2.05 m on DS1-3 (0.09 m on DS6, clusters seen from afar).
+the true map, drifts 1.05-2.05 m on DS1-3 (0.09 m on DS6, clusters seen from afar); keeping only
+the images that model fits within 3-10 mrad holds the true map on DS1-2 (0.02-0.15 m) but, started
+from the covisibility map, it stays put or gets worse on every run (DS1 0.63 -> 0.65-3.5 m, DS6
+0.49 -> 0.41-0.47 m): too few such images to pull a map out of its basin.
 
 Every method returns positions in the anchors' frame when anchors are given (the anchors are
 held at their positions, so the affine fit that follows is the identity), else a free embedding.
