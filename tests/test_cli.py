@@ -10,6 +10,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from lfmdr_gym.cli import build_parser, main
@@ -230,6 +231,7 @@ def test_mrclam_passes_its_options_to_the_loader(monkeypatch, tmp_path, capsys):
             run="MRCLAM_X", mode=kwargs["mode"], method="range-quantile", params={"quantile": 0.9},
             anchor_subjects=(6, 7, 8, 9), warnings=("clustered layout",), mpe=0.25, moe=3.5,
             centroid_mpe=3.0, csv_path=tmp_path / "o" / "map.csv", png_path=None,
+            subjects=np.arange(6, 12), positions=np.array([[0.0, 0]] * 5 + [[np.nan, np.nan]]),
         )
 
     monkeypatch.setattr(mrclam, "map_mrclam_run", fake)
@@ -242,6 +244,7 @@ def test_mrclam_passes_its_options_to_the_loader(monkeypatch, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "MPE 0.250 m, MOE 3.50 %" in out and "warning: clustered layout" in out
     assert "centroid baseline: MPE 3.000 m" in out
+    assert "over the 1 mapped (of 2) non-anchor landmarks" in out  # subject 11 unmapped
 
 
 def test_mrclam_bad_robots_is_an_argparse_error(capsys):
