@@ -5,7 +5,8 @@ import itertools
 import numpy as np
 import pytest
 
-from mappers import apply_affine, fit_affine, mean_orientation_error, mean_position_error
+from mappers import apply_affine, fit_affine, mean_orientation_error, mean_position_error, scores
+from mappers.scores import _moe_bruteforce, _moe_fast
 
 
 def test_mpe_hand_example():
@@ -95,6 +96,134 @@ def test_moe_large_m_runs_bounded():
     truth = rng.uniform(size=(300, 2))
     assert mean_orientation_error(truth, truth) == 0.0
     assert mean_orientation_error(truth * [1, -1], truth) == 100.0
+
+
+# ---- the fast MOE against the O(M^3) reference: exact integer counts --------------------------
+
+
+def _triangles(n):
+    return n * (n - 1) * (n - 2) // 6
+
+
+def test_moe_large_m_matches_brute_force_exactly():
+    rng = np.random.default_rng(4)
+    truth = rng.uniform(size=(300, 2))
+    est = truth + 0.1 * rng.normal(size=truth.shape)
+    expected = 100.0 * _moe_bruteforce(est, truth) / _triangles(300)
+    assert mean_orientation_error(est, truth) == expected
+
+
+def _rotation(theta):
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([[c, -s], [s, c]])
+
+
+def _random_estimate(rng, truth):
+    """Noise, reflection, rotation and scaling of the truth, or an unrelated layout."""
+    n = len(truth)
+    kind = rng.integers(5)
+    if kind == 0:
+        return rng.normal(size=(n, 2))
+    est = truth @ _rotation(rng.uniform(0, 2 * np.pi)) * rng.choice([0.01, 1.0, 300.0])
+    est = est * rng.choice([-1.0, 1.0], size=2) + rng.normal(size=2)
+    if kind >= 2:
+        est = est + rng.choice([1e-6, 0.05, 0.5]) * np.std(est) * rng.normal(size=(n, 2))
+    return est
+
+
+def _layouts(seed, count):
+    """(estimate, truth) pairs, many of them degenerate, M = 3..60."""
+    rng = np.random.default_rng(seed)
+    for t in range(count):
+        n = int(rng.integers(3, 61))
+        kind = t % 7
+        if kind == 0:  # general position
+            truth = rng.normal(size=(n, 2))
+            yield _random_estimate(rng, truth), truth
+        elif kind == 1:  # integer grids: many exactly collinear triples, also through the apex
+            truth = rng.integers(0, 5, size=(n, 2)).astype(float)
+            est = rng.integers(0, 5, size=(n, 2)).astype(float)
+            yield (est if rng.random() < 0.5 else truth @ _rotation(np.pi / 2)), truth
+        elif kind == 2:  # duplicates (points equal to the apex), in one map or both
+            base = rng.normal(size=(max(2, n // 4), 2))
+            truth = base[rng.integers(len(base), size=n)]
+            est = truth + (rng.random((n, 1)) < 0.5) * rng.normal(size=(n, 2))
+            yield (est, truth) if rng.random() < 0.5 else (truth, est)
+        elif kind == 3:  # a few lines through a point, plus jitter down to below one ulp
+            dirs = rng.normal(size=(int(rng.integers(1, 4)), 2))
+            pts = dirs[rng.integers(len(dirs), size=n)] * rng.normal(size=(n, 1))
+            jitter = rng.choice([0.0, 1e-17, 1e-15, 1e-13], size=(n, 1))
+            pts = pts + jitter * rng.normal(size=(n, 2))
+            yield _random_estimate(rng, pts), pts
+        elif kind == 4:  # decimal grid: collinear in the reals, only nearly so in floats
+            truth = rng.integers(-5, 6, size=(n, 2)) * 0.1
+            est = rng.integers(-5, 6, size=(n, 2)) * 0.1 + rng.choice([0.0, 1e-16, 1e-15])
+            yield est, truth
+        elif kind == 5:  # far from the origin: the differences p_j - p_i are rounded
+            u = rng.normal(size=n)
+            truth = rng.choice([1e6, 1e12]) + np.c_[u, 3 * u]
+            truth = truth + 1e-9 * (rng.random((n, 1)) < 0.5) * rng.normal(size=(n, 2))
+            yield truth + 1e-10 * rng.normal(size=(n, 2)), truth
+        else:  # directions at the fold (angle 0 / pi), signed zeros, subnormal offsets
+            ang = rng.choice([0.0, np.pi, -np.pi], size=n) + 1e-16 * rng.normal(size=n)
+            truth = rng.uniform(0.5, 2, size=(n, 1)) * np.c_[np.cos(ang), np.sin(ang)]
+            truth[rng.random(n) < 0.2, 1] = -0.0
+            est = truth.copy()
+            est[:, 1] += rng.choice([0.0, 5e-324, -1e-300, 1e-17], size=n)
+            yield est, truth
+
+
+@pytest.fixture(params=["default", "no_brute_rows_small_batches"])
+def moe_settings(request, monkeypatch):
+    """Also run with every apex on the fast path and tiny batches, so the exact checks of near
+    ties and duplicates and the batching loops are exercised on small inputs."""
+    if request.param != "default":
+        monkeypatch.setattr(scores, "_BRUTE_SHARE", 0)
+        monkeypatch.setattr(scores, "_BATCH", 150)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_moe_fast_equals_bruteforce(seed, moe_settings):
+    for est, truth in _layouts(seed, 70):
+        assert _moe_fast(est, truth) == _moe_bruteforce(est, truth)
+        assert _moe_fast(truth, est) == _moe_bruteforce(truth, est)
+
+
+def test_moe_near_ties_matter_on_these_layouts(monkeypatch):
+    # Without the exact checks (no near-tie clusters) the rank model alone gets some of the
+    # degenerate layouts above wrong, so the tests do exercise the exact checks.
+    monkeypatch.setattr(scores, "_TIE_TOL", -1.0)
+    monkeypatch.setattr(scores, "_BRUTE_SHARE", 0)
+    layouts = list(_layouts(0, 70))
+    assert any(_moe_fast(e, t) != _moe_bruteforce(e, t) for e, t in layouts)
+
+
+def test_moe_float_degenerate_triangle():
+    # (1, fl(1/3)) and (3, 1) are not exactly collinear with the origin, but fl(3 * fl(1/3)) = 1,
+    # so the reference (and hence the MOE) calls this triangle degenerate: wrong against a proper
+    # one, right against an exactly collinear one.
+    tri = np.array([[0.0, 0.0], [1.0, 1 / 3], [3.0, 1.0]])
+    assert mean_orientation_error(tri, np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])) == 100.0
+    assert mean_orientation_error(tri, np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]])) == 0.0
+
+
+def test_moe_extreme_scales_use_the_brute_force():
+    rng = np.random.default_rng(6)
+    truth = rng.normal(size=(25, 2)) * rng.choice([1e-200, 1e-160, 1.0, 1e120], size=(25, 1))
+    est = truth + rng.normal(size=truth.shape) * 1e-170
+    with np.errstate(all="ignore"):  # the reference itself under/overflows here
+        assert _moe_fast(est, truth) == _moe_bruteforce(est, truth)
+
+
+def test_moe_fast_with_exclude_and_collinear_grid():
+    g = np.stack(np.meshgrid(np.arange(7.0), np.arange(7.0)), -1).reshape(-1, 2)
+    rng = np.random.default_rng(7)
+    est = np.round(g + rng.normal(size=g.shape))
+    ex = rng.choice(len(g), size=10, replace=False)
+    keep = np.setdiff1d(np.arange(len(g)), ex)
+    expected = 100.0 * _moe_bruteforce(est[keep], g[keep]) / _triangles(len(keep))
+    assert mean_orientation_error(est, g, exclude=ex) == expected
+    assert mean_orientation_error(g, g, exclude=ex) == 0.0
 
 
 def test_fit_affine_recovers_transform():
