@@ -5,6 +5,7 @@ Run from the project root:
     PYTHONPATH=. python benchmarks/bench_mappers.py              # all sections, 5 seeds
     PYTHONPATH=. python benchmarks/bench_mappers.py --quick      # 2 seeds, SDE at M=50,100
     PYTHONPATH=. python benchmarks/bench_mappers.py --sections sde --sde-sizes 50 100 200
+    PYTHONPATH=. python benchmarks/bench_mappers.py --sections range   # UNFOLD vs SMACOF on ranges
 
 Histories come from the simulator (``lfmdr_gym.collect`` with a random walk, M objects, N =
 2000 steps) when lfmdr_gym is importable, otherwise from a numpy-only stand-in (random walk
@@ -111,6 +112,8 @@ def bench_methods(sensors, seeds, repeats):
             H, P, a, pa, src = histories(sensor, seed=seed)
             total = 0.0
             for lab in METHODS:
+                if METHODS[lab].sensors is not None and sensor not in METHODS[lab].sensors:
+                    continue  # e.g. UNFOLD maps range histories only
                 times = []
                 try:
                     for _ in range(repeats):
@@ -132,12 +135,39 @@ def bench_methods(sensors, seeds, repeats):
         print(f"\n## {sensor}: M=50, N=2000, {len(seeds)} layouts ({src}); defaults; MPE/MOE over non-anchors")
         print(f"{'method':12s} {'median ms':>10s} {'MPE m':>8s} {'MOE %':>8s} {'failed':>6s}")
         for lab, r in rows.items():
+            if not r["t"] and not r["fail"]:
+                continue  # not a method for this sensor
             if r["t"]:
                 print(f"{lab:12s} {1000 * statistics.median(r['t']):10.1f} {np.mean(r['mpe']):8.3f} "
                       f"{np.mean(r['moe']):8.2f} {r['fail']:6d}")
             else:
                 print(f"{lab:12s} {'-':>10s} {'-':>8s} {'-':>8s} {r['fail']:6d}")
         print(f"the nine paper methods other than SDE, together: median {1000 * statistics.median(nine):.0f} ms")
+
+
+def bench_range(seeds, noises=(0.0, 0.02, 0.1)):
+    """UNFOLD (the range default) against SMA(WGT) and CAL-SMA on range histories, with
+    Gaussian noise of the given standard deviations [m] added to the ranges."""
+    labels = ("UNFOLD", "SMA(WGT)", "CAL-SMA")
+    print(f"\n## range: M=50, N=2000, {len(seeds)} layouts; defaults; MPE [m] over non-anchors"
+          " (ranges + N(0, sigma^2) noise)")
+    print(f"{'sigma m':>8s} " + " ".join(f"{lab:>10s}" for lab in labels)
+          + f" {'UNFOLD ms':>10s}")
+    for sigma in noises:
+        mpe = {lab: [] for lab in labels}
+        t_unfold = []
+        for seed in seeds:
+            H, P, a, pa, _ = histories("range", seed=seed)
+            rng = np.random.default_rng(1000 + seed)
+            X = np.abs(H + sigma * rng.standard_normal(H.shape)) if sigma else H
+            for lab in labels:
+                t0 = time.perf_counter()
+                mp = build_map(X, a, pa, lab, sensor="range")
+                if lab == "UNFOLD":
+                    t_unfold.append(time.perf_counter() - t0)
+                mpe[lab].append(_scores(mp.positions, P, a)[0])
+        print(f"{sigma:8.3f} " + " ".join(f"{np.mean(mpe[lab]):10.5f}" for lab in labels)
+              + f" {1000 * statistics.median(t_unfold):10.1f}")
 
 
 def bench_smacof_start(seeds):
@@ -231,7 +261,7 @@ def main() -> None:
     p.add_argument("--quick", action="store_true", help="2 seeds, 1 repeat, SDE at M=50,100")
     p.add_argument("--seeds", type=int, default=5)
     p.add_argument("--repeats", type=int, default=3)
-    p.add_argument("--sections", nargs="+", default=["methods", "smacof", "sde"])
+    p.add_argument("--sections", nargs="+", default=["methods", "range", "smacof", "sde"])
     p.add_argument("--sensors", nargs="+", default=["visibility", "bearing", "range"])
     p.add_argument("--sde-sizes", nargs="+", type=int, default=[50, 100, 200])
     p.add_argument("--baseline-max", type=int, default=100, help="largest M for the baseline SDE")
@@ -242,6 +272,8 @@ def main() -> None:
     with threadpool_limits(limits=1):  # the machine is shared; one BLAS thread is steadier
         if "methods" in args.sections:
             bench_methods(args.sensors, seeds, args.repeats)
+        if "range" in args.sections:
+            bench_range(seeds)
         if "smacof" in args.sections:
             bench_smacof_start(list(range(max(args.seeds, 8))))
         if "sde" in args.sections:

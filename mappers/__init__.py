@@ -20,9 +20,11 @@ from mappers.mvu import MaximumVarianceUnfolding
 from mappers.pipeline import SENSORS, Map, build_map, infer_sensor
 from mappers.scores import mean_orientation_error, mean_position_error
 from mappers.smacof import WeightedSMACOF, weighted_smacof
+from mappers.unfolding import ClassicalUnfolding  # registers UNFOLD
 
 __all__ = [
     "CalibratedSMACOF",
+    "ClassicalUnfolding",
     "FoldWarning",
     "DEFAULT_METHODS",
     "METHODS",

@@ -73,6 +73,12 @@ class MethodSpec:
     # ``fit_transform(X, anchor_ids=..., anchor_positions=...)`` (ids index the rows of X), and
     # holds them fixed; build_map then passes them and the affine fit is the identity.
     uses_anchors: bool = False
+    # The sensors whose histories the method maps (None: any). build_map refuses the others, and
+    # the protocol leaves the method out of the tables of other sensors.
+    sensors: tuple[str, ...] | None = None
+    # Whether build_map divides each history by its norm first (paper eq. 7) unless told not to;
+    # False for methods whose model needs the raw values (UNFOLD: distances).
+    normalize: bool = True
 
     @property
     def parameters(self) -> tuple[str, ...]:
@@ -114,6 +120,14 @@ def register_method(spec: MethodSpec, *, replace: bool = False) -> MethodSpec:
         raise ValueError(f"spec.factory of {spec.label!r} is not callable")
     if spec.label in _METHODS and not replace:
         raise ValueError(f"method {spec.label!r} is already registered (pass replace=True)")
+    if spec.sensors is not None and (
+        isinstance(spec.sensors, str) or not spec.sensors
+        or not set(spec.sensors) <= {"visibility", "bearing", "range"}
+    ):
+        raise ValueError(
+            f"{spec.label!r}: sensors must be None or a non-empty tuple of 'visibility', "
+            f"'bearing', 'range', got {spec.sensors!r}"
+        )
     for what, names in (("defaults", spec.defaults), ("grid", spec.grid)):
         unknown = sorted(set(names) - set(spec.parameters))
         if unknown:
@@ -376,12 +390,15 @@ DEFAULT_METHODS: dict[str, str] = {
     # CAL-SMA is registered by mappers/calibrated.py, which ``import mappers`` always loads
     "visibility": "CAL-SMA",
     "bearing": "CAL-SMA",
-    "range": "SMA(WGT)",
+    # UNFOLD is registered by mappers/unfolding.py, which ``import mappers`` always loads
+    "range": "UNFOLD",
 }
 """Method build_map uses when none is given, per sensor. Measured on simulated random-walk
 histories (lfmdr_gym, M = 50, N = 2000, non-anchor MPE): CAL-SMA beats the paper's ten for
 visibility and bearing (``benchmarks/bench_calibrated.py``; see :mod:`mappers.calibrated`).
-For range, SMA(WGT) is best of the paper's ten (0.195 m, 5 layouts, default parameters;
-``benchmarks/bench_mappers.py --sections methods``); it is also best of them for bearing
-(0.051 m) and second for visibility (0.134 m, behind HLLE's 0.114 m, which the paper reports
+For range, classical metric unfolding (UNFOLD, :mod:`mappers.unfolding`) is exact on complete
+range histories (the squared ranges, double-centred, are rank 2), where SMA(WGT), the best of
+the paper's ten on range (0.195 m, 5 layouts, default parameters; ``benchmarks/bench_mappers.py
+--sections methods``), and CAL-SMA (0.18 m) are not (``--sections range``); SMA(WGT) is also
+best of the ten for bearing (0.051 m) and second for visibility (0.134 m, behind HLLE's 0.114 m, which the paper reports
 "often failed to run")."""

@@ -164,7 +164,7 @@ def build_map(
     *,
     sensor: str | None = None,
     mask: np.ndarray | None = None,
-    normalize: bool = True,
+    normalize: bool | None = None,
     random_state: int | None = 0,
     **params: Any,
 ) -> Map:
@@ -180,7 +180,8 @@ def build_map(
         sensor: "visibility", "bearing" or "range"; None = inferred (:func:`infer_sensor`).
         mask: optional (M, D) bool, True where observed; a mask with False entries is handed to
             ``mappers.missing.build_masked_embedding``; an all-True mask is no mask.
-        normalize: divide each row by its norm (paper eq. 7), on by default.
+        normalize: divide each row by its norm (paper eq. 7); None = the method's choice (on for
+            the paper's methods, off for those that need the raw values, such as UNFOLD).
         random_state: seed handed to methods that take one.
         **params: method parameters (``n_neighbors`` = K, ``sigma2``, ``degree``, ...).
 
@@ -222,6 +223,13 @@ def build_map(
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; known: {list(METHODS)}")
         spec = METHODS[method]
+        if spec.sensors is not None and sensor not in spec.sensors:
+            raise ValueError(
+                f"method {method!r} maps {' or '.join(spec.sensors)} histories only, got {sensor} "
+                f"(the default for {sensor} is {DEFAULT_METHODS[sensor]!r})"
+            )
+        if normalize and not spec.normalize:
+            raise ValueError(f"method {method!r} needs the raw histories: normalize must be False or None")
         spec.check_params(params)
         merged = {**spec.defaults, **params}
         if "random_state" in spec.parameters and "random_state" not in params:
@@ -256,7 +264,7 @@ def build_map(
         )
         method = method if method is not None else f"masked default ({sensor})"
     else:
-        if normalize:
+        if spec.normalize if normalize is None else normalize:
             Xm = Xm / np.linalg.norm(Xm, axis=1, keepdims=True)  # paper eq. 7
         try:
             est = spec.factory(**merged)

@@ -9,7 +9,10 @@ from mappers import METHODS
 def test_map_synthetic_example_runs(capsys):
     runpy.run_path(str(Path(__file__).resolve().parents[1] / "examples" / "map_synthetic.py"))
     out = capsys.readouterr().out
-    rows = [line.split() for line in out.splitlines()[1:]]
-    assert [r[0] for r in rows] == list(METHODS)
+    table, _, tail = out.partition("\n\n")
+    rows = [line.split() for line in table.splitlines()[1:]]
+    assert [r[0] for r in rows] == [m for m, spec in METHODS.items()
+                                    if spec.sensors is None or "visibility" in spec.sensors]
     assert all(0 <= float(r[1]) < 2.0 and 0 <= float(r[2]) <= 100 for r in rows)
     assert float(dict((r[0], r[1]) for r in rows)["SMA(WGT)"]) < 0.2
+    assert "range histories, UNFOLD" in tail and float(tail.split("MPE ")[1].split()[0]) < 1e-6

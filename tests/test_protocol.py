@@ -56,7 +56,9 @@ def test_config_defaults_follow_the_paper():
     assert vis.methods == ("LPCA",)  # labels matched case-insensitively
     from mappers import METHODS as ALL
 
-    assert ProtocolConfig().methods == tuple(ALL)  # all methods by default, in table order
+    # all methods that map the mode's histories by default, in table order (UNFOLD: range only)
+    assert ProtocolConfig().methods == tuple(m for m in ALL if m != "UNFOLD")
+    assert ProtocolConfig(mode="bearing").methods == tuple(m for m in ALL if m != "UNFOLD")
 
 
 @pytest.mark.parametrize(

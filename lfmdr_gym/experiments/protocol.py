@@ -63,17 +63,25 @@ def _methods() -> Mapping[str, Any]:
     return METHODS
 
 
-def resolve_methods(names: Iterable[str] | None) -> tuple[str, ...]:
-    """Canonical method labels (case-insensitive match); all of ``mappers.METHODS`` for None."""
+def resolve_methods(names: Iterable[str] | None, sensor: str | None = None) -> tuple[str, ...]:
+    """Canonical method labels (case-insensitive match); for None, every method of
+    ``mappers.METHODS`` that maps ``sensor``'s histories. A named method that does not: ValueError."""
     methods = _methods()
+
+    def fits(label: str) -> bool:
+        return sensor is None or methods[label].sensors is None or sensor in methods[label].sensors
+
     if names is None:
-        return tuple(methods)
+        return tuple(label for label in methods if fits(label))
     by_lower = {label.lower(): label for label in methods}
     out: list[str] = []
     for name in names:
         label = by_lower.get(str(name).strip().lower())
         if label is None:
             raise ValueError(f"unknown method {name!r}; choose from {', '.join(methods)}")
+        if not fits(label):
+            raise ValueError(f"method {label!r} does not map {sensor} histories "
+                             f"(it maps {', '.join(methods[label].sensors)})")
         if label not in out:
             out.append(label)
     if not out:
@@ -227,7 +235,7 @@ class ProtocolConfig:
         if not isinstance(self.seed, int | np.integer):
             raise ValueError(f"seed must be an integer, got {self.seed!r}")
         object.__setattr__(self, "every", int(every))
-        object.__setattr__(self, "methods", resolve_methods(self.methods))
+        object.__setattr__(self, "methods", resolve_methods(self.methods, self.mode))
         self._grids.update({m: grid_params(m) for m in self.methods})
 
     @property
@@ -771,7 +779,7 @@ def run_episode(
     With ``out``: writes ``history.npz``, ``scores.csv``, ``map.csv`` and ``map.png`` (the map at
     the last checkpoint) there.
     """
-    (method,) = resolve_methods([method])
+    (method,) = resolve_methods([method], _sensor_of(env_id))
     params = user_params(method, params)
     if out is not None:
         out = ensure_writable_dir(out)
@@ -815,9 +823,9 @@ def map_history_file(
     Returns a dict with ``map`` (the ``mappers.Map``), ``history`` and, when every object's true
     position is in the file, ``mpe``, ``moe``, ``mpe_nonanchor``.
     """
-    (method,) = resolve_methods([method])
-    params = user_params(method, params)
     history = History.load(path)
+    (method,) = resolve_methods([method], history.sensor)
+    params = user_params(method, params)
     if n_steps is not None:
         history = history.head(n_steps)
     out = ensure_writable_dir(out if out is not None else Path(path).with_suffix(""))
