@@ -715,10 +715,11 @@ def masked_embedding(
             )
         if loose:
             drop = np.concatenate([np.asarray(c, dtype=np.int64) for c in loose])
+            lost = sorted(int(keep[i]) for i in drop if keep[i] not in set(anchor_ids.tolist()))
             msgs.append(
-                f"object(s) (rows) {sorted(int(keep[i]) for i in drop)} are unmapped: the graph of usable "
-                "pairs falls apart and their group holds fewer than 2 anchors, so its scale and "
-                "rotation are not measured (choose at least 2 anchors in every group)"
+                f"object(s) (rows) {lost} are unmapped: the graph of usable pairs falls apart and "
+                "their group holds fewer than 2 anchors, so its scale and rotation are not "
+                "measured (choose at least 2 anchors in every group)"
             )
             sel = np.setdiff1d(np.arange(len(keep)), drop)
             ix = np.ix_(sel, sel)
