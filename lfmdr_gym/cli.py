@@ -104,8 +104,9 @@ def build_parser() -> argparse.ArgumentParser:
             "the same --out are refused. Episodes are cached in --out/histories.",
         ),
     )
-    p.add_argument("--mode", required=True, choices=["visibility", "bearing"],
-                   help="sensor: visibility (Table 1) or bearing (Table 2)")
+    p.add_argument("--mode", required=True, choices=["visibility", "bearing", "range"],
+                   help="sensor: visibility (Table 1), bearing (Table 2) or range (beyond the "
+                        "paper: the same protocol with a range sensor)")
     p.add_argument("--layouts", type=_positive_int, default=5, help="random object layouts")
     p.add_argument("--poses", type=_positive_int, default=5,
                    help="random start poses per layout (runs = layouts x poses)")

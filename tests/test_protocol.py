@@ -234,3 +234,18 @@ def test_a_method_registered_in_this_process_reaches_the_worker_processes(tmp_pa
         _same_rows(read_results(one.out / "results.csv"), read_results(two.out / "results.csv"))
     finally:
         _METHODS.pop(spec.label)
+
+
+def test_range_mode_runs_the_same_protocol_with_unfold_and_a_table_of_our_own(tmp_path):
+    cfg = ProtocolConfig(mode="range", layouts=1, poses=2, steps=200, every=100,
+                         methods=("SMA(WGT)", "UNFOLD"))
+    assert cfg.env_id == "LFMDR-Range-v0"
+    summary = run_protocol(cfg, tmp_path, progress=False)
+    rows = read_results(tmp_path / "results.csv")
+    assert summary.failed == 0 and len(rows) == summary.total_units
+    unfold = [r for r in rows if r["method"] == "UNFOLD"]
+    assert unfold and max(r["mpe"] for r in unfold) < 1e-5  # exact ranges, exact map
+    assert min(r["mpe"] for r in rows if r["method"] == "SMA(WGT)") > 0.01
+    table = (tmp_path / "table.md").read_text()
+    assert "paper MPE" not in table and "no range sensor" in table
+    assert (tmp_path / "map_unfold.png").is_file()

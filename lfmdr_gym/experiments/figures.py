@@ -194,20 +194,24 @@ def write_table(
         "triangles of mapped objects.",
         "",
         "| method | best param | MPE [m] | MOE [%] | MPE non-anchor [m] | runs (failed) "
-        "| paper param | paper MPE [m] | paper MOE [%] |",
-        "|---|---|---|---|---|---|---|---|---|",
+        + ("| paper param | paper MPE [m] | paper MOE [%] |" if mode in PAPER_SOURCE else "|"),
+        "|---|---|---|---|---|---|" + ("---|---|---|" if mode in PAPER_SOURCE else ""),
     ]
     for r in table:
         pm = r["paper_mpe"] if r["paper_mpe"] != "" else r["paper_note"]
-        lines.append(
+        line = (
             f"| {r['method']} | {paper_notation(r['param'])} "
             f"| {_pm(r['mpe_mean'], r['mpe_std'], 3)} "
             f"| {_pm(r['moe_mean'], r['moe_std'], 2)} "
             f"| {_pm(r['mpe_nonanchor_mean'], r['mpe_nonanchor_std'], 3)} "
-            f"| {r['runs']} ({r['failed']}) | {r['paper_param'] or '—'} | {pm or '—'} "
-            f"| {r['paper_moe'] or '—'} |"
+            f"| {r['runs']} ({r['failed']}) |"
         )
-    lines += ["", f"Paper: {PAPER_SOURCE.get(mode, 'no published figures')}.", ""]
+        if mode in PAPER_SOURCE:
+            line += f" {r['paper_param'] or '—'} | {pm or '—'} | {r['paper_moe'] or '—'} |"
+        lines.append(line)
+    source = PAPER_SOURCE.get(mode)
+    lines += ["", f"Paper: {source}." if source else
+              f"The paper has no {mode} sensor: this table is ours (same protocol).", ""]
     md_path = out / "table.md"
     atomic_write_text(md_path, "\n".join(lines))
     return [csv_path, md_path]

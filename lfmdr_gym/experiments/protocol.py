@@ -41,8 +41,9 @@ from lfmdr_gym.atomic import atomic_write
 from lfmdr_gym.experiments.store import RESULTS, ResultStore, ensure_writable_dir
 from lfmdr_gym.history import History, HistoryFileError
 
-MODES: dict[str, str] = {"visibility": "LFMDR-Visibility-v0", "bearing": "LFMDR-Bearing-v0"}
-"""Protocol mode -> the environment id its episodes run in."""
+MODES: dict[str, str] = {"visibility": "LFMDR-Visibility-v0", "bearing": "LFMDR-Bearing-v0",
+                         "range": "LFMDR-Range-v0"}
+"""Protocol mode -> the environment id its episodes run in (range: beyond the paper, same protocol)."""
 
 DEFAULT_EVERY: dict[str, int] = {"visibility": 500, "bearing": 200, "range": 200}
 """Default checkpoint interval per sensor (SPEC §5; range follows bearing)."""
