@@ -7,6 +7,7 @@ object. Objects never sensed are reported in ``Map.unmapped`` and never placed.
 
 from __future__ import annotations
 
+import sys
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -262,7 +263,16 @@ def build_map(
         est = _MaskedEmbedding(
             build_masked_embedding, mask[mapped], method, sensor, {**merged, **anchors}
         )
-        method = method if method is not None else f"masked default ({sensor})"
+        module = sys.modules.get("mappers.missing")
+        masked_methods = getattr(module, "MASKED_METHODS", None)
+        if method is None:
+            method = f"masked default ({sensor})"
+        elif masked_methods is not None and method not in masked_methods:
+            # mappers.missing maps it with the sensor's masked default: say so, do not misreport
+            default = getattr(module, "DEFAULT_METHOD", {}).get(sensor, "its default")
+            notes.append(f"method {method!r} needs complete histories; this masked history was "
+                         f"mapped with {default!r} (mappers.missing)")
+            method = default
     else:
         if spec.normalize if normalize is None else normalize:
             Xm = Xm / np.linalg.norm(Xm, axis=1, keepdims=True)  # paper eq. 7

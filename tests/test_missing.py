@@ -174,6 +174,11 @@ def test_build_map_hands_masked_histories_to_this_module():
     anchors = _corners(P)
     m = build_map(X, anchors, P[anchors], sensor="range", mask=seen)
     assert _score(m.positions, P, anchors) < 0.3
+    # a method for complete histories: mapped with the masked default, and the Map says so
+    u = build_map(X, anchors, P[anchors], "UNFOLD", sensor="range", mask=seen)
+    assert u.method == "range-quantile"
+    assert any("'UNFOLD' needs complete histories" in w for w in u.warnings)
+    np.testing.assert_allclose(u.positions, m.positions)
 
 
 def test_range_bounds_bracket_the_truth_and_map_well():
