@@ -56,6 +56,10 @@ class MappingError(ValueError):
     """A method could not embed the data (eigenproblem failure, solver failure, ...)."""
 
 
+SENSORS: tuple[str, ...] = ("visibility", "bearing", "range")
+"""The kinds of history: one 0/1 column per step, (cos, sin) per step, or one range per step."""
+
+
 @dataclass(frozen=True)
 class MethodSpec:
     """One mapping method: its label, how to build it, its default parameters and grid.
@@ -121,12 +125,11 @@ def register_method(spec: MethodSpec, *, replace: bool = False) -> MethodSpec:
     if spec.label in _METHODS and not replace:
         raise ValueError(f"method {spec.label!r} is already registered (pass replace=True)")
     if spec.sensors is not None and (
-        isinstance(spec.sensors, str) or not spec.sensors
-        or not set(spec.sensors) <= {"visibility", "bearing", "range"}
+        isinstance(spec.sensors, str) or not spec.sensors or not set(spec.sensors) <= set(SENSORS)
     ):
         raise ValueError(
-            f"{spec.label!r}: sensors must be None or a non-empty tuple of 'visibility', "
-            f"'bearing', 'range', got {spec.sensors!r}"
+            f"{spec.label!r}: sensors must be None or a non-empty tuple of {SENSORS}, "
+            f"got {spec.sensors!r}"
         )
     for what, names in (("defaults", spec.defaults), ("grid", spec.grid)):
         unknown = sorted(set(names) - set(spec.parameters))
@@ -400,5 +403,5 @@ For range, classical metric unfolding (UNFOLD, :mod:`mappers.unfolding`) is exac
 range histories (the squared ranges, double-centred, are rank 2), where SMA(WGT), the best of
 the paper's ten on range (0.195 m, 5 layouts, default parameters; ``benchmarks/bench_mappers.py
 --sections methods``), and CAL-SMA (0.18 m) are not (``--sections range``); SMA(WGT) is also
-best of the ten for bearing (0.051 m) and second for visibility (0.134 m, behind HLLE's 0.114 m, which the paper reports
-"often failed to run")."""
+best of the ten for bearing (0.051 m) and second for visibility (0.134 m, behind HLLE's
+0.114 m, which the paper reports "often failed to run")."""

@@ -17,11 +17,9 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from mappers.align import apply_affine, check_anchors, check_not_collinear, fit_affine
-from mappers.methods import DEFAULT_METHODS, METHODS, MappingError
+from mappers.methods import DEFAULT_METHODS, METHODS, SENSORS, MappingError
 
 __all__ = ["SENSORS", "Map", "build_map", "infer_sensor"]
-
-SENSORS: tuple[str, ...] = ("visibility", "bearing", "range")
 
 # Up to this many objects one BLAS thread is fastest: the matrices are small and the machine's
 # other threads (or processes) only add contention. Above it, the BLAS library decides.

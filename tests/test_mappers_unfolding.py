@@ -86,6 +86,12 @@ def test_registered_for_range_only_and_left_out_of_other_tables():
     with pytest.raises(ValueError, match="does not map bearing histories"):
         resolve_methods(["unfold"], "bearing")
     assert resolve_methods(["unfold"], "range") == ("UNFOLD",)
+    from mappers import MethodSpec, register_method
+
+    for bad in (("sonar",), "range", ()):
+        with pytest.raises(ValueError, match="sensors must be None or a non-empty tuple"):
+            register_method(MethodSpec("BAD-SENSORS", ClassicalUnfolding, sensors=bad))
+    assert "BAD-SENSORS" not in METHODS
 
 
 def _two_steps_are_rank_one(estimator):
