@@ -115,18 +115,12 @@ def pair_correlations(run, min_seen: int = 5, x: float = 0.3) -> tuple[float, fl
 def affine_fixed_point(run, anchors: np.ndarray, width: float = 0.25, sweeps: int = 300) -> float:
     """MPE of the weak-perspective (rank-2 after centring) model fitted from the truth."""
     M = len(run.subjects)
-    cols = []
-    obs = run.obs
-    for robot in np.unique(obs[:, 0]):
-        o = obs[obs[:, 0] == robot]
-        b = np.floor((o[:, 1] - run.t0) / width).astype(int)
-        for k in np.unique(b):
-            s = o[b == k]
-            lms, inv = np.unique(s[:, 2].astype(int), return_inverse=True)
-            if len(lms) >= 4:  # 3 unknowns per image: fewer landmarks constrain nothing
-                z = np.zeros(len(lms), complex)
-                np.add.at(z, inv, np.exp(1j * s[:, 4]))
-                cols.append((lms, np.angle(z)))
+    matrix, mask, _ = bin_run(run, "bearing", width)  # per-robot bins, circular-mean bearing
+    seen = mask[:, 0::2]
+    angle = np.arctan2(matrix[:, 1::2], matrix[:, 0::2])
+    # 3 unknowns per bin: fewer than 4 landmarks constrain nothing
+    cols = [(np.flatnonzero(seen[:, t]), angle[seen[:, t], t])
+            for t in np.flatnonzero(seen.sum(axis=0) >= 4)]
     X = run.truth.copy()
     free = np.setdiff1d(np.arange(M), anchors)
     for _ in range(sweeps):
