@@ -59,7 +59,7 @@ def _summary(rows):
 
 
 def run(sensor: str, seed: int, layouts: int, poses: int, steps: int, all_ten: bool) -> dict:
-    cfg = ProtocolConfig(mode=sensor, layouts=layouts, poses=poses, steps=steps, seed=seed,
+    cfg = ProtocolConfig(sensor=sensor, layouts=layouts, poses=poses, steps=steps, seed=seed,
                          methods=("LPCA",))
     hists = [collect_episode(ep) for ep in cfg.episodes()]
     out: dict[str, tuple] = {}

@@ -84,7 +84,7 @@ def histories(sensor: str, m: int = 50, n_steps: int = 2000, seed: int = 0):
     """(matrix, true positions, anchor ids, anchor positions, source)."""
     arena = 2.5 * np.sqrt(m / 50)  # same object density as the paper's M = 50 in 2.5 m
     try:
-        from lfmdr_gym.history import collect
+        from lfmdr_gym import collect
         from lfmdr_gym.policies import RandomWalkPolicy
     except ImportError:
         return (*_synthetic(sensor, m, n_steps, seed, arena), "synthetic")

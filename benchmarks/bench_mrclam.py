@@ -1,16 +1,16 @@
-"""MRCLAM: map every run in every mode and print MPE / MOE per run, with baselines.
+"""MRCLAM: map every run with every sensor and print MPE / MOE per run, with baselines.
 
-    python benchmarks/bench_mrclam.py [--data DIR] [--modes visibility,bearing,range]
-        [--candidates covis-ensemble,covis-ensemble/parallax]
+    python benchmarks/bench_mrclam.py [--data DIR] [--sensors visibility,bearing,range]
+        [--candidates covis-ensemble,range-quantile]
 
-For each run and mode (4 corner anchors, all 5 robots, scores over the 11 non-anchor landmarks):
+For each run and sensor (4 corner anchors, all 5 robots, scores over the 11 non-anchor landmarks):
 
 * ``centroid``: every landmark at the anchors' centroid;
 * ``naive``: the straightforward pipeline on 1 s bins (zero-filled history, L2-normalised rows,
   unweighted SMACOF from classical MDS, affine fit to the anchors);
 * ``masked-euclidean`` (bearing, range): RMS history difference over co-observed bins only,
-  weighted SMACOF over the pairs that have it (the plain SPEC §7 recipe);
-* each masked method of mappers/missing.py that suits the mode, with its default settings;
+  weighted SMACOF over the pairs that have it (the masked form of the paper's recipe);
+* each masked method (mappers/masked.py) that suits the sensor, with its default settings;
 * ``<method> LOO``: the method with the setting chosen *without* the run (lowest mean MPE over
   the other runs in a small grid), i.e. a score on a run the setting was not tuned on.
 
@@ -20,19 +20,11 @@ For each run and mode (4 corner anchors, all 5 robots, scores over the 11 non-an
   members (metric link distance = a * (-log co-observation rate) ** 0.5; a run whose usable
   pairs fall apart keeps the covis-nonmetric members, with a warning).
 
-* ``covis-ensemble/angle`` (bearing): covis-ensemble with the end-on penalty of
-  mappers.missing.end_on_penalty added to the dissimilarity (``angle_weight``, default column
-  0.25).
-* ``covis-ensemble/parallax`` (bearing): covis-ensemble with each pair's dissimilarity
-  multiplied by ``(h_i h_j) ** -nearness_weight``, ``h`` = mappers.missing.parallax_nearness
-  (bearing parallax between images of one robot 1.5-6 s apart; default column 0.08).
-
 Settings grids: covis-nonmetric (visibility, bearing): bin width {1, 2, 3, 5} s x min_co {3, 5};
 covis-ensemble/nonmetric: the set of bin widths, {1, 2, 3, 5} / {1, 1.5, 2, 3, 4, 5} /
-{0.5, ..., 8} s; covis-ensemble: power {0.35, 0.5, 0.7, 1}; covis-ensemble/angle: angle_weight
-{0, 0.25, 0.5, 0.75}; covis-ensemble/parallax: nearness_weight {0, 0.04, 0.08, 0.12, 0.25};
-range-quantile: bin width {0.25, 0.5, 1} s x quantile {0.95, 0.98, 0.99}; range-bounds: the same
-x slack {0.5, 1}.
+{0.5, ..., 8} s; covis-ensemble: power {0.35, 0.5, 0.7, 1}; range-quantile: bin width
+{0.25, 0.5, 1} s x quantile {0.95, 0.98, 0.99}; range-bounds: the same x slack {0.5, 1}.
+What was tried for bearings and lost is in docs/bearing-on-real-data.md.
 """
 
 from __future__ import annotations
@@ -45,7 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lfmdr_gym.datasets.mrclam import MRCLAMDataWarning, map_mrclam_run
+from lfmdr_gym.datasets.mrclam import MRCLAMDataWarning
+from lfmdr_gym.experiments.mrclam import map_mrclam_run
 
 GRIDS = {
     "covis-nonmetric": [
@@ -65,35 +58,29 @@ GRIDS = {
         for bws in [(1.0, 2.0, 3.0, 5.0), (1.0, 1.5, 2.0, 3.0, 4.0, 5.0),
                     (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 8.0)]
     ],
-    "covis-ensemble/angle": [{"angle_weight": a} for a in (0.0, 0.25, 0.5, 0.75)],
-    "covis-ensemble/parallax": [{"nearness_weight": w} for w in (0.0, 0.04, 0.08, 0.12, 0.25)],
     "masked-euclidean": [],
 }
 CANDIDATES = {
     "visibility": ["covis-nonmetric", "covis-ensemble/nonmetric", "covis-ensemble"],
     "bearing": ["masked-euclidean", "covis-nonmetric", "covis-ensemble/nonmetric",
-                "covis-ensemble", "covis-ensemble/angle", "covis-ensemble/parallax"],
+                "covis-ensemble"],
     "range": ["masked-euclidean", "range-quantile", "range-bounds"],
 }
 
 
-def _run(run_dir: Path, mode: str, method: str | None, **kw):
+def _run(run_dir: Path, sensor: str, method: str | None, **kw):
     if method == "covis-ensemble/nonmetric":
         method, kw = "covis-ensemble", {**kw, "member": "covis-nonmetric"}
-    elif method == "covis-ensemble/angle":
-        method, kw = "covis-ensemble", {"angle_weight": 0.25, **kw}
-    elif method == "covis-ensemble/parallax":
-        method, kw = "covis-ensemble", {"nearness_weight": 0.08, **kw}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MRCLAMDataWarning)
-        return map_mrclam_run(run_dir, mode, method=method, **kw)
+        return map_mrclam_run(run_dir, sensor, method=method, **kw)
 
 
 def main(argv: list[str] | None = None) -> None:
     here = Path(__file__).resolve().parents[1]
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", type=Path, default=here.parent / "shared" / "data" / "mrclam")
-    ap.add_argument("--modes", default="visibility,bearing,range")
+    ap.add_argument("--sensors", "--modes", default="visibility,bearing,range")
     ap.add_argument("--candidates", default=None,
                     help="comma-separated subset of the method columns (default: all)")
     args = ap.parse_args(argv)
@@ -102,24 +89,24 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit(f"no MRCLAM_Dataset* directories under {args.data}")
     t_start = time.perf_counter()
     notes: dict[str, list[str]] = {}
-    for mode in args.modes.split(","):
+    for sensor in args.sensors.split(","):
         cols: list[tuple[str, list]] = []  # (label, per-run results)
-        cols.append(("naive 1s", [_run(run, mode, "naive", bin_width=1.0) for run in runs]))
+        cols.append(("naive 1s", [_run(run, sensor, "naive", bin_width=1.0) for run in runs]))
         chosen: dict[str, list[str]] = {}
-        wanted = CANDIDATES[mode] if args.candidates is None else [
-            c for c in CANDIDATES[mode] if c in args.candidates.split(",")]
+        wanted = CANDIDATES[sensor] if args.candidates is None else [
+            c for c in CANDIDATES[sensor] if c in args.candidates.split(",")]
         for method in wanted:
-            default = [_run(run, mode, method) for run in runs]
+            default = [_run(run, sensor, method) for run in runs]
             cols.append((method, default))
             grid = GRIDS[method]
             if not grid:
                 continue
-            table = np.array([[_run(run, mode, method, **g).mpe for run in runs] for g in grid])
+            table = np.array([[_run(run, sensor, method, **g).mpe for run in runs] for g in grid])
             loo, picks = [], []
             for r, run in enumerate(runs):
                 others = [k for k in range(len(runs)) if k != r]
                 best = int(np.argmin(table[:, others].mean(axis=1)))
-                loo.append(_run(run, mode, method, **grid[best]))
+                loo.append(_run(run, sensor, method, **grid[best]))
                 picks.append(", ".join(f"{k}={v}" for k, v in grid[best].items()))
             cols.append((f"{method} LOO", loo))
             chosen[method] = picks
@@ -128,7 +115,7 @@ def main(argv: list[str] | None = None) -> None:
             for w in res.warnings:
                 if w not in notes[run.name]:
                     notes[run.name].append(w)
-        print(f"\n## mode = {mode}   MPE [m] / MOE [%] over the 11 non-anchor landmarks")
+        print(f"\n## sensor = {sensor}   MPE [m] / MOE [%] over the 11 non-anchor landmarks")
         print(f"{'run':<16}{'centroid':>9}" + "".join(f"{label:>30}" for label, _ in cols))
         for r, run in enumerate(runs):
             line = f"{run.name:<16}{cols[0][1][r].centroid_mpe:>9.2f}"

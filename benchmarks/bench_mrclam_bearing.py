@@ -115,7 +115,7 @@ def pair_correlations(run, min_seen: int = 5, x: float = 0.3) -> tuple[float, fl
 def affine_fixed_point(run, anchors: np.ndarray, width: float = 0.25, sweeps: int = 300) -> float:
     """MPE of the weak-perspective (rank-2 after centring) model fitted from the truth."""
     M = len(run.subjects)
-    matrix, mask, _ = bin_run(run, "bearing", width)  # per-robot bins, circular-mean bearing
+    matrix, mask, _, _ = bin_run(run, "bearing", width)  # per-robot bins, circular-mean bearing
     seen = mask[:, 0::2]
     angle = np.arctan2(matrix[:, 1::2], matrix[:, 0::2])
     # 3 unknowns per bin: fewer than 4 landmarks constrain nothing

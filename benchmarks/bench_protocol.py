@@ -42,7 +42,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="1 layout x 2 poses, N=400, every 100")
     parser.add_argument("--jobs", type=int, default=2, help="worker processes")
-    parser.add_argument("--modes", nargs="+", default=["visibility", "bearing"])
+    parser.add_argument("--sensors", "--modes", dest="modes", nargs="+", default=["visibility", "bearing"])
     parser.add_argument("--methods", nargs="+", default=None, help="restrict the methods")
     parser.add_argument("--keep", metavar="DIR", default=None,
                         help="write the run directories under DIR instead of a temporary one")
@@ -55,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
           f"per mode, N = {size['steps']}, out: {base}")
     total = total_cpu = 0.0
     for mode in args.modes:
-        config = ProtocolConfig(mode=mode, methods=args.methods, **size)
+        config = ProtocolConfig(sensor=mode, methods=args.methods, **size)
         out = base / mode
         t0, cpu0 = time.perf_counter(), _cpu_seconds()
         summary = run_protocol(config, out, jobs=args.jobs, progress=sys.stderr.isatty())

@@ -16,8 +16,8 @@ import numpy as np
 
 import lfmdr_gym  # noqa: F401  (registers the env ids)
 import mappers
+from lfmdr_gym import collect
 from lfmdr_gym.atomic import atomic_savefig
-from lfmdr_gym.history import collect
 from lfmdr_gym.policies import RandomWalkPolicy
 
 

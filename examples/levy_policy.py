@@ -42,7 +42,7 @@ import numpy as np
 
 import lfmdr_gym  # noqa: F401  (registers the ids)
 import mappers
-from lfmdr_gym.history import History, collect
+from lfmdr_gym import History, collect
 from lfmdr_gym.policies import RandomWalkPolicy
 
 

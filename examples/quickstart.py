@@ -12,7 +12,7 @@ import numpy as np
 
 import lfmdr_gym  # noqa: F401  (registers LFMDR-Visibility-v0, LFMDR-Bearing-v0, LFMDR-Range-v0)
 import mappers
-from lfmdr_gym.history import History, collect
+from lfmdr_gym import History, collect
 from lfmdr_gym.policies import RandomWalkPolicy
 
 

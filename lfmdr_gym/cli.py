@@ -1,8 +1,8 @@
 """The ``lfmdr`` command: parse, call one library function, print. No logic of its own.
 
 Subcommands: ``reproduce`` (the paper's protocol), ``run`` (one episode mapped at its
-checkpoints), ``map`` (map a saved history), ``collect`` (record a random-walk episode) and
-``mrclam`` (map a real MRCLAM run). Bad options exit with status 2 and a one-line message;
+checkpoints), ``map`` (map a saved history), ``collect`` (record a random-walk episode),
+``mrclam`` (map a real MRCLAM run) and ``compare`` (check a fresh table against a reference). Bad options exit with status 2 and a one-line message;
 Ctrl-C exits with 130 after saying how to resume.
 """
 
@@ -75,48 +75,54 @@ def _method_list(values: Sequence[str] | None) -> list[str] | None:
     return [name for v in values for name in _csv_list(v)]
 
 
-def _add_method_options(p: argparse.ArgumentParser) -> None:
-    """--method and --param, shared by `run` and `map`."""
-    p.add_argument("--method", required=True, help="method label (e.g. SDE, 'SMA(WGT)')")
+def _add_sensor_option(p: argparse.ArgumentParser, what: str) -> None:
+    """--sensor (also spelled --mode, its older name)."""
+    from mappers.sensors import SENSORS
+
+    p.add_argument("--sensor", "--mode", dest="sensor", required=True, choices=SENSORS, help=what)
+
+
+def _add_method_options(p: argparse.ArgumentParser, default: str) -> None:
+    """--method and --param, shared by `run`, `map` and `mrclam`."""
+    p.add_argument("--method", default=None,
+                   help="a registered method that maps this kind of history, case-insensitive "
+                        f"(e.g. CAL-SMA, 'SMA(WGT)', covis-power; default: {default})")
     p.add_argument("--param", action="append", default=None, metavar="NAME=VALUE",
                    help="method parameter overriding its default (repeatable), e.g. K=7 or "
                         "n_neighbors=7, sigma2=1, d=4")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``lfmdr`` (exposed for tests and documentation)."""
-    parser = argparse.ArgumentParser(prog="lfmdr", description=_DESCRIPTION, formatter_class=_Formatter)
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-
-    # ---------------------------------------------------------------- reproduce
+def _add_reproduce(sub: Any) -> None:
     p = sub.add_parser(
         "reproduce", formatter_class=_Formatter,
         help="run the paper's protocol and write results.csv, table.md/csv and figures",
         description=_text(
-            "Run the paper's protocol (SPEC §5): every (layout, pose) episode with the random-walk "
+            "Run the paper's protocol (§4.1): every (layout, pose) episode with the random-walk "
             "agent; at the last checkpoint every method over its whole parameter grid, at every "
             "checkpoint each method's default (the paper's optimum). Writes into --out: "
-            "results.csv (one row per mode, layout, pose, method, param, n_steps), table.md and "
+            "results.csv (one row per sensor, layout, pose, method, param, n_steps), table.md and "
             "table.csv (best parameter per method, mean ± std of MPE and MOE, beside the paper), "
-            "mpe_vs_n.png (figures 4/5/8) and map_*.png example maps (figures 6/7/9).",
+            "mpe_vs_n.png (figures 4/5/8), map_*.png example maps (figures 6/7/9) and "
+            "environment.json (package versions and machine).",
             "Safe to interrupt: each result is saved as soon as it exists; rerunning the same "
-            "command resumes where it stopped, after Ctrl-C or a kill alike. Other settings on "
-            "the same --out are refused. Episodes are cached in --out/histories.",
+            "command resumes where it stopped, after Ctrl-C or a kill alike, and computes again "
+            "any unit whose mapper failed. Other settings on the same --out are refused. "
+            "Episodes are cached in --out/histories.",
         ),
     )
-    p.add_argument("--mode", required=True, choices=["visibility", "bearing", "range"],
-                   help="sensor: visibility (Table 1), bearing (Table 2) or range (beyond the "
-                        "paper: the same protocol with a range sensor)")
+    _add_sensor_option(p, "visibility (Table 1), bearing (Table 2) or range (beyond the paper: "
+                          "the same protocol with a range sensor)")
     p.add_argument("--layouts", type=_positive_int, default=5, help="random object layouts")
     p.add_argument("--poses", type=_positive_int, default=5,
                    help="random start poses per layout (runs = layouts x poses)")
     p.add_argument("--steps", type=_positive_int, default=2000, help="episode length N")
     p.add_argument("--every", type=_positive_int, default=None,
                    help="checkpoint interval; must divide --steps (default: 500 for visibility, "
-                        "200 for bearing)")
+                        "200 otherwise)")
     p.add_argument("--methods", nargs="+", default=None, metavar="METHOD",
-                   help="method labels, space- or comma-separated, case-insensitive "
-                        "(default: all of mappers.METHODS)")
+                   help="registered methods that map the sensor's histories, space- or "
+                        "comma-separated, case-insensitive (default: every method made for "
+                        "complete histories)")
     p.add_argument("--seed", type=int, default=0, help="base seed of layouts and poses")
     p.add_argument("--jobs", type=_jobs, default=1,
                    help="worker processes on this machine (-1: all cores); BLAS is kept to one "
@@ -125,11 +131,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run the work on an existing Dask distributed cluster at ADDRESS "
                         "(e.g. tcp://host:8786) instead of local processes")
     p.add_argument("--out", default=None, metavar="DIR",
-                   help="run directory (default: results/<mode>); reuse it to resume")
+                   help="run directory (default: results/<sensor>); reuse it to resume")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(handler=_cmd_reproduce)
 
-    # ---------------------------------------------------------------- run
+
+def _add_run(sub: Any) -> None:
     p = sub.add_parser(
         "run", formatter_class=_Formatter,
         help="one episode, mapped at its checkpoints, scores printed, a map figure",
@@ -141,7 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--env", default="LFMDR-Visibility-v0", metavar="ID",
                    help="environment id (LFMDR-Visibility-v0, LFMDR-Bearing-v0, LFMDR-Range-v0)")
     p.add_argument("--steps", type=_positive_int, default=2000, help="episode length N")
-    _add_method_options(p)
+    _add_method_options(p, "the default for the env's histories, as build_map chooses")
     p.add_argument("--seed", type=int, default=0, help="seed of layout, start pose and walk")
     p.add_argument("--every", type=_positive_int, default=None,
                    help="checkpoint interval; must divide --steps (default: 500 for visibility, "
@@ -149,7 +156,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="lfmdr-run", metavar="DIR", help="output directory")
     p.set_defaults(handler=_cmd_run)
 
-    # ---------------------------------------------------------------- map
+
+def _add_map(sub: Any) -> None:
     p = sub.add_parser(
         "map", formatter_class=_Formatter,
         help="map a saved history (.npz); scores when it holds the ground truth",
@@ -159,14 +167,15 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     p.add_argument("history", metavar="HISTORY.npz", help="a history saved by lfmdr collect/run")
-    _add_method_options(p)
+    _add_method_options(p, "the default for the history's sensor and kind, as build_map chooses")
     p.add_argument("--steps", type=_positive_int, default=None,
                    help="map only the first N steps (default: all)")
     p.add_argument("--out", default=None, metavar="DIR",
                    help="output directory (default: next to the history, named after it)")
     p.set_defaults(handler=_cmd_map)
 
-    # ---------------------------------------------------------------- collect
+
+def _add_collect(sub: Any) -> None:
     p = sub.add_parser(
         "collect", formatter_class=_Formatter,
         help="record one random-walk episode as a history file and summarise it",
@@ -181,7 +190,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="FILE.npz", help="history file to write")
     p.set_defaults(handler=_cmd_collect)
 
-    # ---------------------------------------------------------------- mrclam
+
+def _add_mrclam(sub: Any) -> None:
     p = sub.add_parser(
         "mrclam", formatter_class=_Formatter,
         help="map the landmarks of a real UTIAS MRCLAM run",
@@ -192,24 +202,55 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     p.add_argument("run_dir", metavar="RUN_DIR", help="an MRCLAM run directory")
-    p.add_argument("--mode", required=True, choices=["visibility", "bearing", "range"],
-                   help="which measurement to map from")
+    _add_sensor_option(p, "which measurement to map from")
     p.add_argument("--robots", type=_int_list, default=None, metavar="1,2,3,4,5",
                    help="robot subject numbers whose logs are used (default: all five)")
-    p.add_argument("--method", default=None,
-                   help="masked mapping method of mappers.missing.MASKED_METHODS, "
-                        "'covis-ensemble', or 'naive' (the baseline) (default: the mode's best: "
-                        "range-quantile for range, covis-ensemble otherwise)")
+    _add_method_options(p, "covis-ensemble for visibility and bearing, range-quantile for "
+                           "range; 'naive' is SMA(UNWGT) with --zero-fill")
+    p.add_argument("--zero-fill", action="store_true",
+                   help="map the history with unobserved entries as zeros and no mask (the "
+                        "paper's pipeline on logged data), so methods for complete histories apply")
     p.add_argument("--anchors", type=_int_list, default=None, metavar="S1,S2,S3,S4",
                    help="landmark subject numbers used as anchors (default: the 4 nearest the "
                         "corners of the landmarks' bounding box)")
     p.add_argument("--bin-width", type=float, default=None, metavar="SECONDS",
-                   help="width of the time bins of the histories (default: the mode's default)")
-    p.add_argument("--param", action="append", default=None, metavar="NAME=VALUE",
-                   help="parameter of the masked method (repeatable), e.g. quantile=0.95")
+                   help="width of the time bins of the histories (default: the sensor's default)")
+    p.add_argument("--groundtruth-fixes", choices=["known", "detect", "none"], default="known",
+                   help="known: swap back documented ground-truth errors (DS1's subjects 11 and "
+                        "17); detect: also those a range+bearing check finds; none: use the file "
+                        "as given (problems still warn)")
     p.add_argument("--out", default="lfmdr-mrclam", metavar="DIR",
                    help="output directory for map.csv and map.png")
     p.set_defaults(handler=_cmd_mrclam)
+
+
+def _add_compare(sub: Any) -> None:
+    from lfmdr_gym.experiments.reproducibility import TOLERANCE
+
+    p = sub.add_parser(
+        "compare", formatter_class=_Formatter,
+        help="check that a fresh `lfmdr reproduce` run reproduces a reference table",
+        description=_text(
+            "Compare the table.csv of a run directory with a reference one (e.g. "
+            "docs/results/visibility): every method's mean MPE within --mpe-abs metres or "
+            "--mpe-rel of the reference, and its mean MOE within --moe-abs percentage points. "
+            "Exit status 0 when it reproduces, 1 otherwise."
+        ),
+    )
+    p.add_argument("fresh", metavar="RUN_DIR", help="a directory written by lfmdr reproduce")
+    p.add_argument("reference", metavar="REFERENCE_DIR", help="e.g. docs/results/visibility")
+    p.add_argument("--mpe-abs", type=float, default=TOLERANCE["mpe_abs"], help="metres")
+    p.add_argument("--mpe-rel", type=float, default=TOLERANCE["mpe_rel"], help="fraction")
+    p.add_argument("--moe-abs", type=float, default=TOLERANCE["moe_abs"], help="percentage points")
+    p.set_defaults(handler=_cmd_compare)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``lfmdr`` (exposed for tests and documentation)."""
+    parser = argparse.ArgumentParser(prog="lfmdr", description=_DESCRIPTION, formatter_class=_Formatter)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for add in (_add_reproduce, _add_run, _add_map, _add_collect, _add_mrclam, _add_compare):
+        add(sub)
     return parser
 
 
@@ -218,10 +259,10 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     from lfmdr_gym.experiments.protocol import ProtocolConfig, run_protocol
 
     config = ProtocolConfig(
-        mode=args.mode, layouts=args.layouts, poses=args.poses, steps=args.steps,
+        sensor=args.sensor, layouts=args.layouts, poses=args.poses, steps=args.steps,
         every=args.every, methods=_method_list(args.methods), seed=args.seed,
     )
-    out = args.out or f"results/{args.mode}"
+    out = args.out or f"results/{args.sensor}"
     try:
         summary = run_protocol(config, out, jobs=args.jobs, scheduler=args.scheduler,
                                progress=not args.no_progress)
@@ -248,7 +289,7 @@ def _print_scores(rows: Sequence[dict[str, Any]]) -> None:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from lfmdr_gym.experiments.protocol import run_episode
+    from lfmdr_gym.experiments.mapping import run_episode
 
     rows = run_episode(args.env, args.steps, args.method, seed=args.seed, every=args.every,
                        params=args.param, out=args.out)
@@ -259,14 +300,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_map(args: argparse.Namespace) -> int:
-    from lfmdr_gym.experiments.protocol import map_history_file
+    from lfmdr_gym.experiments.mapping import map_history_file
 
     info = map_history_file(args.history, args.method, params=args.param,
                             n_steps=args.steps, out=args.out)
     m = info["map"]
     print(f"{info['history']!r}: {info['method']} ({info['param']})")
     if m.unmapped:
-        print(f"unmapped objects (never sensed): {list(m.unmapped)}")
+        print(f"unmapped objects: {list(m.unmapped)}")
     for w in getattr(m, "warnings", ()):
         print(f"warning: {w}")
     if "mpe" in info:
@@ -279,7 +320,7 @@ def _cmd_map(args: argparse.Namespace) -> int:
 
 
 def _cmd_collect(args: argparse.Namespace) -> int:
-    from lfmdr_gym.experiments.protocol import collect_history, describe_history
+    from lfmdr_gym.experiments.episodes import collect_history, describe_history
 
     history = collect_history(args.env, args.steps, args.seed, out=args.out)
     print(describe_history(history))
@@ -292,20 +333,23 @@ def _cmd_mrclam(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from lfmdr_gym.datasets.mrclam import MRCLAMDataWarning, map_mrclam_run
-    from lfmdr_gym.experiments.protocol import parse_params
+    from lfmdr_gym.datasets.mrclam import MRCLAMDataWarning
+    from lfmdr_gym.experiments.mrclam import map_mrclam_run
+    from lfmdr_gym.experiments.params import parse_params
 
-    kwargs: dict[str, Any] = {"mode": args.mode, "out": args.out, "bin_width": args.bin_width}
+    kwargs: dict[str, Any] = {"out": args.out, "bin_width": args.bin_width,
+                              "groundtruth_fixes": args.groundtruth_fixes,
+                              "zero_fill": args.zero_fill}
     if args.robots is not None:
         kwargs["robots"] = args.robots
     if args.anchors is not None:
         kwargs["anchors"] = args.anchors
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MRCLAMDataWarning)  # they come back in result.warnings
-        result = map_mrclam_run(args.run_dir, method=args.method, **kwargs,
+        result = map_mrclam_run(args.run_dir, args.sensor, method=args.method, **kwargs,
                                 **parse_params(args.param))
     params = ", ".join(f"{k}={v}" for k, v in result.params.items()) or "-"
-    print(f"{result.run} ({result.mode}), {result.method} ({params}), anchors "
+    print(f"{result.run} ({result.sensor}), {result.method} ({params}), anchors "
           f"{list(result.anchor_subjects)}")
     for w in result.warnings:
         print(f"warning: {w}")
@@ -318,6 +362,21 @@ def _cmd_mrclam(args: argparse.Namespace) -> int:
     written = [str(p) for p in (result.csv_path, result.png_path) if p is not None]
     if written:
         print("wrote " + " and ".join(written))
+    return 0
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from lfmdr_gym.experiments.reproducibility import compare_tables
+
+    problems = compare_tables(args.fresh, args.reference, {
+        "mpe_abs": args.mpe_abs, "mpe_rel": args.mpe_rel, "moe_abs": args.moe_abs})
+    if problems:
+        print(f"{args.fresh} does not reproduce {args.reference}:")
+        for line in problems:
+            print(f"  {line}")
+        return 1
+    print(f"{args.fresh} reproduces {args.reference} (MPE within {args.mpe_abs} m or "
+          f"{args.mpe_rel:.0%}, MOE within {args.moe_abs} points)")
     return 0
 
 

@@ -1,4 +1,4 @@
-"""The Gymnasium environment: a robot wandering among identifiable objects (SPEC section 2)."""
+"""The Gymnasium environment: a robot wandering among identifiable objects (paper §4.1)."""
 
 from __future__ import annotations
 
@@ -10,8 +10,9 @@ import numpy as np
 from gymnasium import spaces
 
 from lfmdr_gym import sensors
-from lfmdr_gym.render import HumanViewer, draw_frame, human_rendering_error
+from lfmdr_gym.render import HumanViewer, available_render_modes, draw_frame, human_rendering_error
 from lfmdr_gym.world import World, check_int, check_real
+from mappers.sensors import SENSORS, check_sensor
 
 __all__ = ["LFMDREnv", "OBSERVATION_TYPES", "observation_factory"]
 
@@ -76,13 +77,12 @@ OBSERVATION_TYPES = {
 }
 
 
+assert tuple(OBSERVATION_TYPES) == SENSORS  # one observation type per sensor of the vocabulary
+
+
 def observation_factory(env: LFMDREnv, sensor: str):
     """The observation type named ``sensor`` for ``env`` (as HighwayEnv's ``observation_factory``)."""
-    try:
-        cls = OBSERVATION_TYPES[sensor]
-    except (KeyError, TypeError):
-        raise ValueError(f"sensor must be one of {list(OBSERVATION_TYPES)}, got {sensor!r}") from None
-    return cls(env)
+    return OBSERVATION_TYPES[check_sensor(sensor)](env)
 
 
 # ----------------------------------------------------------------------------- the environment
@@ -167,7 +167,9 @@ class LFMDREnv(gym.Env):
     - v0: initial version.
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+    # "human" is offered only where it can work (pygame and a display), so that Gymnasium's
+    # check_env, which renders every listed mode, passes on a headless machine.
+    metadata = {"render_modes": available_render_modes(), "render_fps": 10}
 
     def __init__(
         self,
@@ -190,8 +192,7 @@ class LFMDREnv(gym.Env):
         max_range: float | None = None,
         render_mode: str | None = None,
     ) -> None:
-        if sensor not in OBSERVATION_TYPES:
-            raise ValueError(f"sensor must be one of {list(OBSERVATION_TYPES)}, got {sensor!r}")
+        check_sensor(sensor)
         self.world = World(
             n_objects=n_objects,
             arena_size=arena_size,
@@ -216,14 +217,12 @@ class LFMDREnv(gym.Env):
         self.max_range = (
             None if max_range is None else check_real("max_range", max_range, low=0.0, low_open=True)
         )
+        if render_mode == "human" and human_rendering_error() is not None:
+            raise human_rendering_error()
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}"
             )
-        if render_mode == "human":
-            err = human_rendering_error()
-            if err is not None:
-                raise err
         self.render_mode = render_mode
 
         self._obs_type = observation_factory(self, sensor)

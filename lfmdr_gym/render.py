@@ -143,6 +143,11 @@ def draw_frame(
     return canvas.img
 
 
+def available_render_modes() -> list[str]:
+    """``"rgb_array"`` always (pure numpy), ``"human"`` where pygame and a display exist."""
+    return ["rgb_array"] if human_rendering_error() is not None else ["rgb_array", "human"]
+
+
 def human_rendering_error() -> Exception | None:
     """Why ``render_mode="human"`` cannot work here (an exception to raise), or None if it can."""
     try:

@@ -3,7 +3,7 @@
 Every function here takes a robot pose ``(x, y, heading)`` and the ``(M, 2)`` object centres and
 returns one reading per object (or per ray). Nothing depends on the simulator, so the same
 functions turn logged poses and landmark positions into the histories the simulator would have
-produced (SPEC section 2). Angles are in radians, counter-clockwise positive; the heading is the
+produced (paper §4.3.1, §4.4.1). Angles are in radians, counter-clockwise positive; the heading is the
 direction the robot faces.
 
 The ``*_from_rel`` kernels take the object offsets ``rel = objects - (x, y)`` and squared
@@ -147,7 +147,7 @@ def visibility(
     visual_angle: float,
     occlusion: bool = True,
 ) -> np.ndarray:
-    """Which objects the robot sees: (M,) int8, 1 = visible (SPEC section 2, paper 4.3.1).
+    """Which objects the robot sees: (M,) int8, 1 = visible (paper §4.3.1).
 
     Object ``j`` at distance ``d_j`` from the robot's centre is visible iff
 

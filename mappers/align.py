@@ -1,4 +1,5 @@
-"""Least-squares affine fit of the anchors' embedded points onto their known positions (SPEC §3.4).
+"""Anchors: their validation, and the least-squares affine fit of their embedded points onto
+their known positions (paper §3, step 4).
 
 A DR embedding is only defined up to an affine map (scale, rotation, shear, reflection,
 translation); the anchors fix it. Three non-collinear anchors determine the six affine
@@ -11,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["apply_affine", "check_anchors", "check_not_collinear", "fit_affine"]
+__all__ = ["apply_affine", "check_anchor_ids", "check_anchors", "check_not_collinear", "fit_affine"]
 
 
 def check_not_collinear(points: np.ndarray, what: str, *, rtol: float = 1e-6) -> None:
@@ -35,6 +36,22 @@ def check_not_collinear(points: np.ndarray, what: str, *, rtol: float = 1e-6) ->
         )
 
 
+def check_anchor_ids(anchor_ids: Any, n_objects: int, *, min_count: int = 3) -> np.ndarray:
+    """Validated anchor ids: (A,) int64, A >= ``min_count``, distinct, in [0, n_objects)."""
+    ids = np.asarray(anchor_ids)
+    if ids.ndim != 1 or ids.dtype == bool or (ids.size and not np.issubdtype(ids.dtype, np.integer)):
+        raise ValueError(f"anchor_ids must be a 1-D array of integer object ids, got {ids!r}")
+    if ids.size < min_count:
+        raise ValueError(f"need at least {min_count} anchors, got {ids.size}")
+    out = ids[(ids < 0) | (ids >= n_objects)]
+    if out.size:
+        raise ValueError(f"anchor_ids out of range [0, {n_objects - 1}]: {out.tolist()}")
+    uniq, counts = np.unique(ids, return_counts=True)
+    if np.any(counts > 1):
+        raise ValueError(f"anchor_ids must be distinct; duplicates: {uniq[counts > 1].tolist()}")
+    return ids.astype(np.int64)
+
+
 def check_anchors(
     anchor_ids: Any, anchor_positions: Any, n_objects: int
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -43,17 +60,7 @@ def check_anchors(
     ``anchor_ids``: A >= 3 distinct integer object ids in [0, n_objects); ``anchor_positions``:
     their known (A, 2) positions, finite and not collinear (an affine map needs three).
     """
-    ids = np.asarray(anchor_ids)
-    if ids.ndim != 1 or ids.dtype == bool or not np.issubdtype(ids.dtype, np.integer):
-        raise ValueError(f"anchor_ids must be a 1-D array of integer object ids, got {ids!r}")
-    if ids.size < 3:
-        raise ValueError(f"need at least 3 anchors, got {ids.size}")
-    out = ids[(ids < 0) | (ids >= n_objects)]
-    if out.size:
-        raise ValueError(f"anchor_ids out of range [0, {n_objects - 1}]: {out.tolist()}")
-    uniq, counts = np.unique(ids, return_counts=True)
-    if np.any(counts > 1):
-        raise ValueError(f"anchor_ids must be distinct; duplicates: {uniq[counts > 1].tolist()}")
+    ids = check_anchor_ids(anchor_ids, n_objects)
     try:
         pos = np.array(anchor_positions, dtype=float)
     except (TypeError, ValueError) as exc:
@@ -63,7 +70,7 @@ def check_anchors(
     if not np.all(np.isfinite(pos)):
         raise ValueError("anchor_positions contain NaN or inf")
     check_not_collinear(pos, "anchor positions (world)")
-    return ids.astype(np.int64), pos
+    return ids, pos
 
 
 def fit_affine(src: np.ndarray, dst: np.ndarray) -> np.ndarray:

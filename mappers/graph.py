@@ -4,6 +4,12 @@ Graph-based mappers (LEM, weighted SMACOF, SDE) need one connected neighbourhood
 disconnected graph their solutions are undefined (LEM, SDE) or the pieces drift apart (SMACOF).
 The repair used everywhere is the one Isomap uses in scikit-learn: join the components by their
 closest pairs of points, one edge at a time, and report how many edges were added.
+
+Two neighbour rules live here. The paper's methods use scikit-learn's kNN graph
+(:func:`symmetric_knn_graph`) on the history rows. CAL-SMA (:mod:`mappers.calibrated`) needs
+neighbours among *informative* pairs only: a dissimilarity at its saturation value (two objects
+never sensed together) says "far", not how far, so :func:`knn_mask` leaves such pairs out and
+breaks ties by index. The two rules differ only where distances tie, which saturated pairs do.
 """
 
 from __future__ import annotations
@@ -20,6 +26,8 @@ __all__ = [
     "GraphRepairWarning",
     "connect_components",
     "connected_knn_graph",
+    "informative_pairs",
+    "knn_mask",
     "symmetric_knn_graph",
     "warn_if_repaired",
 ]
@@ -40,7 +48,8 @@ def symmetric_knn_graph(
     if not 1 <= n_neighbors < n:
         raise ValueError(f"n_neighbors must be in [1, {n - 1}] for {n} points, got {n_neighbors}")
     metric = "precomputed" if precomputed else "euclidean"
-    A = kneighbors_graph(X, n_neighbors, mode="connectivity", metric=metric, include_self=False)
+    A = kneighbors_graph(X, n_neighbors, mode="connectivity", metric=metric, include_self=False,
+                         n_jobs=1)
     A = A.maximum(A.T).tocsr()
     A.data[:] = 1.0
     return A
@@ -73,7 +82,7 @@ def connected_knn_graph(
     X: np.ndarray, n_neighbors: int, *, precomputed: bool = False
 ) -> tuple[csr_matrix, np.ndarray, list[tuple[int, int]]]:
     """Symmetric kNN graph made connected; returns (graph, distance matrix, added edges)."""
-    D = np.asarray(X, dtype=float) if precomputed else pairwise_distances(X)
+    D = np.asarray(X, dtype=float) if precomputed else pairwise_distances(X, n_jobs=1)
     A = symmetric_knn_graph(D, n_neighbors, precomputed=True)
     A, added = connect_components(A, D)
     return A, D, added
@@ -89,3 +98,25 @@ def warn_if_repaired(added: list[tuple[int, int]], n_neighbors: int, *, stacklev
             GraphRepairWarning,
             stacklevel=stacklevel + 1,
         )
+
+
+def knn_mask(delta: np.ndarray, valid: np.ndarray, k: int) -> np.ndarray:
+    """(n, n) bool symmetric kNN mask in ``delta`` among the ``valid`` pairs (ties: lower index
+    first). Unlike :func:`symmetric_knn_graph` it never picks an uninformative pair."""
+    m = len(delta)
+    d = np.where(valid, delta, np.inf)
+    np.fill_diagonal(d, np.inf)
+    k = min(k, m - 1)
+    order = np.argsort(d, axis=1, kind="stable")[:, :k]
+    A = np.zeros((m, m), dtype=bool)
+    A[np.repeat(np.arange(m), k), order.ravel()] = True
+    A &= valid
+    return A | A.T
+
+
+def informative_pairs(delta: np.ndarray) -> np.ndarray:
+    """Pairs whose dissimilarity is informative: below the saturation value (never co-sensed)."""
+    top = delta.max()
+    valid = delta < top * (1.0 - 1e-9) if top > 0 else np.zeros_like(delta, dtype=bool)
+    np.fill_diagonal(valid, False)
+    return valid

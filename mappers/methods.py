@@ -1,10 +1,5 @@
-"""The paper's ten DR methods (SPEC §3) as a registry of scikit-learn-style estimators.
-
-``METHODS`` maps a label to a :class:`MethodSpec`: ``spec.factory(**params)`` builds an
-estimator whose ``fit_transform(X)`` returns the (M, 2) embedding; ``spec.defaults`` are the
-paper's optimum for visibility; ``spec.grid`` is the parameter grid of the protocol. New methods
-(yours, or the calibrated mapper of :mod:`mappers.calibrated`) join through
-:func:`register_method`.
+"""The paper's ten dimensionality-reduction methods (paper §3, Table 1), registered in
+:data:`mappers.registry.METHODS` with the paper's optimum as defaults and the protocol's grids.
 
 scikit-learn supplies PCA, kernel PCA, Isomap, LLE / Hessian LLE and the spectral embedding;
 only weighted SMACOF (:mod:`mappers.smacof`) and SDE/MVU (:mod:`mappers.mvu`) are ours. Thin
@@ -14,12 +9,7 @@ fixing and clear errors for (Hessian) LLE.
 
 from __future__ import annotations
 
-import inspect
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
 from numbers import Integral, Real
-from types import MappingProxyType
-from typing import Any
 
 import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
@@ -31,18 +21,10 @@ from sklearn.utils.extmath import svd_flip
 from sklearn.utils.validation import validate_data
 
 from mappers.graph import connected_knn_graph, warn_if_repaired
-from mappers.mvu import MaximumVarianceUnfolding
+from mappers.registry import MethodSpec
 from mappers.smacof import WeightedSMACOF
 
-__all__ = [
-    "DEFAULT_METHODS",
-    "METHODS",
-    "LaplacianEigenmap",
-    "LocallyLinear",
-    "MappingError",
-    "MethodSpec",
-    "register_method",
-]
+__all__ = ["DEGREE_GRID", "K_GRID", "SIGMA2_GRID", "LaplacianEigenmap", "LocallyLinear"]
 
 # The paper's grids (K 4..10, sigma^2 in {0.25, 0.5, 1, 2}, d in {2, 4, 8}), widened where our
 # first full protocol run put the best value on the grid's edge (HLLE at K = 10, KPCA(GAUS) at
@@ -50,93 +32,6 @@ __all__ = [
 K_GRID: tuple[int, ...] = (4, 5, 6, 7, 8, 9, 10, 11, 12)
 SIGMA2_GRID: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
 DEGREE_GRID: tuple[int, ...] = (2, 4, 8)
-
-
-class MappingError(ValueError):
-    """A method could not embed the data (eigenproblem failure, solver failure, ...)."""
-
-
-SENSORS: tuple[str, ...] = ("visibility", "bearing", "range")
-"""The kinds of history: one 0/1 column per step, (cos, sin) per step, or one range per step."""
-
-
-@dataclass(frozen=True)
-class MethodSpec:
-    """One mapping method: its label, how to build it, its default parameters and grid.
-
-    ``factory(**params)`` must return an object with ``fit_transform(X) -> (M, 2)``; the
-    parameters it accepts are the names in its signature (see :attr:`parameters`).
-    """
-
-    label: str
-    factory: Callable[..., Any]
-    defaults: Mapping[str, Any] = field(default_factory=dict)
-    grid: Mapping[str, Sequence[Any]] = field(default_factory=dict)
-    description: str = ""
-    # True when the estimator takes the anchors itself, as
-    # ``fit_transform(X, anchor_ids=..., anchor_positions=...)`` (ids index the rows of X), and
-    # holds them fixed; build_map then passes them and the affine fit is the identity.
-    uses_anchors: bool = False
-    # The sensors whose histories the method maps (None: any). build_map refuses the others, and
-    # the protocol leaves the method out of the tables of other sensors.
-    sensors: tuple[str, ...] | None = None
-    # Whether build_map divides each history by its norm first (paper eq. 7) unless told not to;
-    # False for methods whose model needs the raw values (UNFOLD: distances).
-    normalize: bool = True
-
-    @property
-    def parameters(self) -> tuple[str, ...]:
-        """Names of the keyword parameters ``factory`` accepts."""
-        sig = inspect.signature(self.factory)
-        return tuple(
-            name
-            for name, p in sig.parameters.items()
-            if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
-        )
-
-    def check_params(self, params: Mapping[str, Any]) -> None:
-        """ValueError naming any key of ``params`` that ``factory`` does not accept."""
-        unknown = sorted(set(params) - set(self.parameters))
-        if unknown:
-            raise ValueError(
-                f"unknown parameter(s) {unknown} for method {self.label!r}; "
-                f"it accepts {list(self.parameters)}"
-            )
-
-    def build(self, **params: Any) -> Any:
-        """The estimator with ``defaults`` updated by ``params`` (unknown names: ValueError)."""
-        self.check_params(params)
-        return self.factory(**{**self.defaults, **params})
-
-
-_METHODS: dict[str, MethodSpec] = {}
-METHODS: Mapping[str, MethodSpec] = MappingProxyType(_METHODS)
-"""Label -> :class:`MethodSpec`, in registration order (read-only view; use register_method)."""
-
-
-def register_method(spec: MethodSpec, *, replace: bool = False) -> MethodSpec:
-    """Add ``spec`` to :data:`METHODS` (ValueError if the label exists, unless ``replace``)."""
-    if not isinstance(spec, MethodSpec):
-        raise ValueError(f"spec must be a MethodSpec, got {type(spec).__name__}")
-    if not isinstance(spec.label, str) or not spec.label:
-        raise ValueError("spec.label must be a non-empty string")
-    if not callable(spec.factory):
-        raise ValueError(f"spec.factory of {spec.label!r} is not callable")
-    if spec.label in _METHODS and not replace:
-        raise ValueError(f"method {spec.label!r} is already registered (pass replace=True)")
-    if spec.sensors is not None and (
-        isinstance(spec.sensors, str) or not spec.sensors or not set(spec.sensors) <= set(SENSORS)
-    ):
-        raise ValueError(
-            f"{spec.label!r}: sensors must be None or a non-empty tuple of {SENSORS}, "
-            f"got {spec.sensors!r}"
-        )
-    for what, names in (("defaults", spec.defaults), ("grid", spec.grid)):
-        unknown = sorted(set(names) - set(spec.parameters))
-        if unknown:
-            raise ValueError(f"{spec.label!r}: {what} name(s) {unknown} not accepted by factory")
-    _METHODS[spec.label] = spec
-    return spec
 
 
 def _validated_knn_input(est: BaseEstimator, X) -> np.ndarray:
@@ -327,15 +222,15 @@ def _hlle(n_neighbors: int = 8, random_state=None) -> LocallyLinear:
     return LocallyLinear(n_neighbors=n_neighbors, method="hessian", random_state=random_state)
 
 
-def _sde(
-    n_neighbors: int = 7, solver: str = "auto", tol: float = 1e-3, n_basis: int | None = None
-) -> MaximumVarianceUnfolding:
+def _sde(n_neighbors: int = 7, solver: str = "auto", tol: float = 1e-3, n_basis: int | None = None):
+    from mappers.mvu import MaximumVarianceUnfolding  # cvxpy: loaded only when SDE is built
+
     return MaximumVarianceUnfolding(
         n_neighbors=n_neighbors, solver=solver, tol=tol, n_basis=n_basis
     )
 
 
-for _spec in (
+SPECS: tuple[MethodSpec, ...] = (
     MethodSpec("LPCA", _lpca, {}, {}, "linear PCA / classical MDS"),
     MethodSpec("SMA(UNWGT)", _sma_unweighted, {}, {}, "SMACOF, equal weights, LPCA start"),
     MethodSpec(
@@ -385,23 +280,5 @@ for _spec in (
         {"n_neighbors": list(K_GRID)},
         "semidefinite embedding / maximum variance unfolding",
     ),
-):
-    register_method(_spec)
-del _spec
-
-DEFAULT_METHODS: dict[str, str] = {
-    # CAL-SMA is registered by mappers/calibrated.py, which ``import mappers`` always loads
-    "visibility": "CAL-SMA",
-    "bearing": "CAL-SMA",
-    # UNFOLD is registered by mappers/unfolding.py, which ``import mappers`` always loads
-    "range": "UNFOLD",
-}
-"""Method build_map uses when none is given, per sensor. Measured on simulated random-walk
-histories (lfmdr_gym, M = 50, N = 2000, non-anchor MPE): CAL-SMA beats the paper's ten for
-visibility and bearing (``benchmarks/bench_calibrated.py``; see :mod:`mappers.calibrated`).
-For range, classical metric unfolding (UNFOLD, :mod:`mappers.unfolding`) is exact on complete
-range histories (the squared ranges, double-centred, are rank 2), where SMA(WGT), the best of
-the paper's ten on range (0.195 m, 5 layouts, default parameters; ``benchmarks/bench_mappers.py
---sections methods``), and CAL-SMA (0.18 m) are not (``--sections range``); SMA(WGT) is also
-best of the ten for bearing (0.051 m) and second for visibility (0.134 m, behind HLLE's
-0.114 m, which the paper reports "often failed to run")."""
+)
+"""The paper's ten, in the order of its Table 1; ``import mappers`` registers them."""

@@ -7,18 +7,15 @@
 and the embedding is the top eigenvectors of K scaled by the square roots of their eigenvalues.
 scikit-learn has no MVU, so it is written here.
 
-Choice of formulation and solver (measured with ``benchmarks/bench_mappers.py --sections sde``):
-the distance constraints are one sparse linear map on vec(K), built from index arrays (no
-per-edge Python loop; compiling is ~20 ms at M = 50). Compilation was never the bottleneck: the
-interior-point solver CLARABEL spends ~0.1-0.2 s per iteration on the dense KKT system of the
-(M(M+1)/2)-dimensional PSD cone, ~1-2.5 s at M = 50 whatever the formulation (a centred-by-
-construction (M-1)^2 variant was no faster). The first-order solver SCS at eps = 1e-3
-(relative to distances rescaled so the mean squared edge length is 1) with scale = 1 gives the
-same map (points within 1-3 mm of CLARABEL's after the anchor fit; MPE equal to +-2 mm) several
-times faster, so it is the default. The fast MVU of Weinberger et al. 2007 (``n_basis=m``:
-K = Q L Q^T with Q the m bottom non-constant eigenvectors of the graph Laplacian, constraints
-as a quadratic penalty) is offered for large M; at M = 50 it cost 10-30% more position error at
-m = 15-20, so it is not the default.
+Formulation and solver: the distance constraints are one sparse linear map on vec(K), built
+from index arrays (no per-edge Python loop). The time goes into the solver's dense PSD cone, not
+into compiling. The default is the first-order solver SCS at a moderate tolerance (distances
+rescaled so the mean squared edge length is 1, ``scale=1``), which lands on the interior-point
+solution (CLARABEL) within millimetres after the anchor fit, several times faster
+(``benchmarks/bench_mappers.py --sections sde``; figures in the README). The fast MVU of
+Weinberger et al. (2007) (``n_basis=m``: K = Q L Q^T with Q the m bottom non-constant
+eigenvectors of the graph Laplacian, constraints as a quadratic penalty) is offered for large M;
+it is less accurate, so it is not the default.
 """
 
 from __future__ import annotations
@@ -125,7 +122,15 @@ class MaximumVarianceUnfolding(TransformerMixin, BaseEstimator):
         try:
             problem.solve(solver=solver, **opts)
         except cp.error.SolverError as exc:
-            raise ValueError(f"MVU: solver {solver} failed: {exc}") from exc
+            if solver != "CLARABEL":
+                raise ValueError(f"MVU: solver {solver} failed: {exc}") from exc
+            # Clarabel can stop with NumericalError near a tight tolerance on some CPUs (the
+            # same problem solves elsewhere); shorter interior-point steps (default 0.99 of
+            # the way to the cone boundary) get through, so retry once with them.
+            try:
+                problem.solve(solver=solver, max_step_fraction=0.9, **opts)
+            except cp.error.SolverError as again:
+                raise ValueError(f"MVU: solver {solver} failed: {again}") from again
         self.solver_status_ = problem.status
         if problem.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE):
             raise ValueError(f"MVU: solver {solver} ended with status {problem.status!r}")

@@ -1,4 +1,4 @@
-"""Map scores of SPEC §4: mean position error (MPE) and mean orientation error (MOE)."""
+"""Map scores (paper §4.3.2): mean position error (MPE) and mean orientation error (MOE)."""
 
 from __future__ import annotations
 

@@ -2,8 +2,8 @@
 
 scikit-learn's :func:`sklearn.manifold.smacof` minimises raw stress with equal weights only.
 SMA(WGT) needs weights (w_ij = 1 for kNN pairs, else 0), and the anchored mappers
-(:mod:`mappers.calibrated`, :mod:`mappers.missing`) need anchors held fixed, so the Guttman
-transform is written here:
+(:mod:`mappers.calibrated`, :mod:`mappers.masked`) need anchors held fixed, so the Guttman
+transform is written here (other links than the identity: :mod:`mappers.smacof_variants`):
 
     X <- V^+ B(X) X,    V = sum_{i<j} w_ij (e_i - e_j)(e_i - e_j)^T,
     B(X)_ij = -w_ij delta_ij / d_ij(X) (i != j, d_ij > 0),   B_ii = -sum_{j != i} B_ij,
@@ -189,12 +189,10 @@ class WeightedSMACOF(TransformerMixin, BaseEstimator):
         init: starting configuration. ``"lpca"`` = classical MDS / linear PCA (the paper's
             start). ``"unweighted"`` (default) = the equal-weight SMACOF solution started from
             LPCA: on visibility histories the LPCA start is badly bent and kNN-weighted SMACOF
-            started there stays folded (simulated M = 50, N = 2000, 8 layouts: mean MPE 1.80 m
-            from LPCA, 0.13 m from the unweighted solution; ``benchmarks/bench_mappers.py
-            --sections smacof``). Ten starts (LPCA + 9 random) keeping the lowest weighted
-            stress still folded in 8 of 8 layouts, and a folded map can even have the lower
-            kNN stress, so stress alone cannot pick the start. An (n, n_components) array is
-            used as given.
+            started there stays folded, while the unweighted solution (globally rigid) does not
+            fold; a folded map can even have the lower kNN stress, so stress alone cannot pick
+            the start (``benchmarks/bench_mappers.py --sections smacof`` measures both; figures
+            in the README). An (n, n_components) array is used as given.
         n_init: number of starts; the first is ``init``, the others random (Gaussian, scaled
             like the data). The result with the lowest weighted stress is kept.
         max_iter, tol: per start, see :func:`weighted_smacof`.
@@ -259,7 +257,9 @@ class WeightedSMACOF(TransformerMixin, BaseEstimator):
             if np.any(delta < 0):
                 raise ValueError("precomputed dissimilarities must be non-negative")
         else:
-            delta = pairwise_distances(X)
+            # n_jobs=1: under a parallel joblib backend (a Dask worker) sklearn would split the
+            # rows into chunks, whose BLAS rounding differs: the same map must come out anywhere.
+            delta = pairwise_distances(X, n_jobs=1)
         n = len(delta)
         self.added_edges_ = []
         W = self._weights(delta)

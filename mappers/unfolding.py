@@ -16,14 +16,12 @@ pose, motion or measurement model goes in, and the step-side singular vectors (w
 robot's path) are discarded.
 
 Assumes: every object is ranged at every step (a zero range means "not sensed": use the masked
-range methods of :mod:`mappers.missing` via ``build_map(..., mask=...)``), ranges are
+range methods of :mod:`mappers.masked` via ``build_map(..., mask=...)``), ranges are
 centre-to-centre distances up to additive noise, and the robot's positions do not all lie on one
 line (else ``B`` is rank 1 and the map is degenerate: a :class:`~mappers.methods.MappingError`).
 
-Measured (``python benchmarks/bench_mappers.py --sections range``: LFMDR-Range-v0, M = 50,
-N = 2000, 5 layouts, non-anchor MPE; 7 ms per map): exact ranges 0.00000 m (float32
-observations), ranges with N(0, 0.02^2) / N(0, 0.1^2) noise 1.4 mm / 7.2 mm, where SMA(WGT),
-the best of the paper's ten on range histories, gives 0.19-0.20 m and CAL-SMA 0.18 m.
+Its accuracy with and without range noise, against the paper's methods, is measured by
+``python benchmarks/bench_mappers.py --sections range`` (figures in the README).
 """
 
 from __future__ import annotations
@@ -36,7 +34,7 @@ from sklearn.utils._param_validation import Interval
 from sklearn.utils.extmath import svd_flip
 from sklearn.utils.validation import check_non_negative, validate_data
 
-from mappers.methods import MappingError, MethodSpec, register_method
+from mappers.registry import MappingError, MethodSpec
 
 __all__ = ["ClassicalUnfolding"]
 
@@ -94,7 +92,7 @@ class ClassicalUnfolding(TransformerMixin, BaseEstimator):
             raise ValueError(
                 f"{zeros} range(s) are 0, i.e. not sensed (beyond max_range?): unfolding needs "
                 "every object ranged at every step; map such histories with their mask "
-                "(build_map(..., mask=X > 0) uses mappers.missing's range methods)"
+                "(build_map(..., mask=X > 0) uses mappers.masked's range methods)"
             )
         R2 = X * X
         B = R2 - R2.mean(axis=0, keepdims=True) - R2.mean(axis=1, keepdims=True) + R2.mean()
@@ -114,14 +112,12 @@ def _unfold() -> ClassicalUnfolding:
     return ClassicalUnfolding(n_components=2, zero_is_missing=True)
 
 
-register_method(
-    MethodSpec(
-        "UNFOLD",
-        _unfold,
-        {},
-        {},
-        "classical metric unfolding of the squared range histories (range sensor only)",
-        sensors=("range",),
-        normalize=False,
-    )
+SPEC = MethodSpec(
+    "UNFOLD",
+    _unfold,
+    {},
+    {},
+    "classical metric unfolding of the squared range histories (range sensor only)",
+    sensors=("range",),
+    normalize=False,
 )

@@ -18,10 +18,10 @@ from lfmdr_gym.experiments.store import JOURNAL, read_results
 from mappers import METHODS
 
 ROOT = Path(__file__).resolve().parents[1]
-SMALL = ["--mode", "visibility", "--layouts", "1", "--poses", "2", "--steps", "200",
+SMALL = ["--sensor", "visibility", "--layouts", "1", "--poses", "2", "--steps", "200",
          "--every", "100", "--methods", "LPCA", "SMA(WGT)", "ISOMAP", "--no-progress"]
 # Longer, for the interrupt tests: enough units that a kill lands in the middle.
-LONGER = ["--mode", "visibility", "--layouts", "1", "--poses", "2", "--steps", "300",
+LONGER = ["--sensor", "visibility", "--layouts", "1", "--poses", "2", "--steps", "300",
           "--every", "50", "--methods", "LPCA,SMA(WGT),ISOMAP,LLE", "--no-progress"]
 
 
@@ -97,16 +97,24 @@ def clean_longer(tmp_path_factory):
     return _comparable(read_results(out / "results.csv"))
 
 
-def _interrupt_then_resume(tmp_path: Path, sig: int, extra: list[str]) -> tuple[int, int]:
+def _interrupt_then_resume(tmp_path: Path, sig: int, extra: list[str],
+                           group: bool = False) -> tuple[int, int]:
+    """Interrupt a run once it has saved a row, then resume it. ``group``: signal the whole
+    process group, workers included, as Ctrl-C in a terminal does."""
     journal = tmp_path / JOURNAL
-    proc = _lfmdr("reproduce", *LONGER, *extra, "--out", str(tmp_path))
+    proc = _lfmdr("reproduce", *LONGER, *extra, "--out", str(tmp_path), start_new_session=group)
     deadline = time.monotonic() + 60
     while _journal_rows(journal) < 1:
         assert proc.poll() is None, proc.communicate()
         assert time.monotonic() < deadline, "no row was written within 60 s"
         time.sleep(0.005)
-    proc.send_signal(sig)
-    proc.communicate(timeout=60)
+    if group:
+        os.killpg(proc.pid, sig)
+    else:
+        proc.send_signal(sig)
+    _, err = proc.communicate(timeout=60)  # promptly: never the minutes of a hung worker pool
+    if sig != signal.SIGKILL:
+        assert "Traceback" not in err, err
     rows_at_stop = _journal_rows(journal)
     if sig == signal.SIGKILL:
         # As if the kill had struck in the middle of a write: a torn last line.
@@ -126,10 +134,12 @@ def test_sigkill_then_rerun_gives_the_rows_of_a_clean_run(clean_longer, tmp_path
     assert _comparable(read_results(tmp_path / "results.csv")) == clean_longer
 
 
-@pytest.mark.parametrize(("sig", "jobs"), [(signal.SIGINT, "2"), (signal.SIGTERM, "1")],
-                         ids=["ctrl-c-2-workers", "sigterm"])
-def test_ctrl_c_then_rerun_gives_the_rows_of_a_clean_run(clean_longer, tmp_path, sig, jobs):
-    code, stopped = _interrupt_then_resume(tmp_path, sig, ["--jobs", jobs])
+@pytest.mark.parametrize(("sig", "jobs", "group"),
+                         [(signal.SIGINT, "2", False), (signal.SIGINT, "2", True),
+                          (signal.SIGTERM, "1", False)],
+                         ids=["ctrl-c-2-workers", "ctrl-c-to-the-process-group", "sigterm"])
+def test_ctrl_c_then_rerun_gives_the_rows_of_a_clean_run(clean_longer, tmp_path, sig, jobs, group):
+    code, stopped = _interrupt_then_resume(tmp_path, sig, ["--jobs", jobs], group)
     assert code == 130
     assert 0 < stopped < len(clean_longer), "Ctrl-C did not land in the middle of the run"
     assert _comparable(read_results(tmp_path / "results.csv")) == clean_longer
@@ -192,6 +202,33 @@ def test_unknown_method_in_run_and_map(tmp_path, capsys):
     assert "unknown parameter(s) ['sigma2'] for method 'SDE'" in err
 
 
+def test_compare_accepts_a_reproduction_and_names_what_moved(tmp_path, capsys):
+    ref = ROOT / "docs" / "results" / "visibility"
+    fresh = tmp_path / "fresh"
+    fresh.mkdir()
+    lines = (ref / "table.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    col, method_col = header.index("mpe_mean"), header.index("method")
+
+    def write(shift):
+        rows = [lines[0]]
+        for line in lines[1:]:
+            cells = line.split(",")
+            if cells[method_col] == "LLE":
+                cells[col] = repr(float(cells[col]) + shift)
+            rows.append(",".join(cells))
+        (fresh / "table.csv").write_text("\n".join(rows) + "\n")
+
+    write(0.001)  # within the stated tolerance (0.002 m)
+    assert main(["compare", str(fresh), str(ref)]) == 0
+    assert "reproduces" in capsys.readouterr().out
+    write(0.05)
+    assert main(["compare", str(fresh), str(ref)]) == 1
+    out = capsys.readouterr().out
+    assert "does not reproduce" in out and "LLE: mpe_mean" in out and "SDE" not in out
+    assert main(["compare", str(fresh), str(ref), "--mpe-abs", "0.1"]) == 0
+
+
 # ------------------------------------------------------------------ single runs
 def test_collect_then_map(tmp_path, capsys):
     path = tmp_path / "walk.npz"
@@ -208,6 +245,16 @@ def test_collect_then_map(tmp_path, capsys):
     assert (tmp_path / "m" / "map.png").stat().st_size > 10_000
 
 
+def test_map_and_run_without_method_use_the_default(tmp_path, capsys):
+    path = tmp_path / "walk.npz"
+    assert main(["collect", "--steps", "150", "--seed", "3", "--out", str(path)]) == 0
+    assert main(["map", str(path), "--out", str(tmp_path / "m")]) == 0
+    assert "CAL-SMA" in capsys.readouterr().out  # the visibility default
+    assert main(["run", "--env", "LFMDR-Range-v0", "--steps", "100", "--every", "100",
+                 "--out", str(tmp_path / "r")]) == 0
+    assert "UNFOLD" in capsys.readouterr().out  # the range default
+
+
 def test_run_prints_scores_at_each_checkpoint(tmp_path, capsys):
     assert main(["run", "--env", "LFMDR-Visibility-v0", "--steps", "200", "--every", "100",
                  "--method", "LPCA", "--out", str(tmp_path)]) == 0
@@ -222,13 +269,13 @@ def test_run_prints_scores_at_each_checkpoint(tmp_path, capsys):
 def test_mrclam_passes_its_options_to_the_loader(monkeypatch, tmp_path, capsys):
     from types import SimpleNamespace
 
-    mrclam = pytest.importorskip("lfmdr_gym.datasets.mrclam")
+    mrclam = pytest.importorskip("lfmdr_gym.experiments.mrclam")
     seen = {}
 
-    def fake(run_dir, **kwargs):
-        seen.update(kwargs, run_dir=run_dir)
+    def fake(run_dir, sensor, **kwargs):
+        seen.update(kwargs, run_dir=run_dir, sensor=sensor)
         return SimpleNamespace(
-            run="MRCLAM_X", mode=kwargs["mode"], method="range-quantile", params={"quantile": 0.9},
+            run="MRCLAM_X", sensor=sensor, method="range-quantile", params={"quantile": 0.9},
             anchor_subjects=(6, 7, 8, 9), warnings=("clustered layout",), mpe=0.25, moe=3.5,
             centroid_mpe=3.0, csv_path=tmp_path / "o" / "map.csv", png_path=None,
             subjects=np.arange(6, 12), positions=np.array([[0.0, 0]] * 5 + [[np.nan, np.nan]]),
@@ -237,10 +284,12 @@ def test_mrclam_passes_its_options_to_the_loader(monkeypatch, tmp_path, capsys):
     monkeypatch.setattr(mrclam, "map_mrclam_run", fake)
     assert main(["mrclam", str(tmp_path), "--mode", "range", "--robots", "1,3",
                  "--anchors", "6,7,8,9", "--method", "range-quantile", "--param", "quantile=0.9",
-                 "--bin-width", "0.5", "--out", str(tmp_path / "o")]) == 0
-    assert seen == {"run_dir": str(tmp_path), "mode": "range", "robots": [1, 3],
+                 "--bin-width", "0.5", "--groundtruth-fixes", "none",
+                 "--out", str(tmp_path / "o")]) == 0
+    assert seen == {"run_dir": str(tmp_path), "sensor": "range", "robots": [1, 3],
                     "anchors": [6, 7, 8, 9], "method": "range-quantile", "quantile": 0.9,
-                    "bin_width": 0.5, "out": str(tmp_path / "o")}
+                    "bin_width": 0.5, "out": str(tmp_path / "o"), "groundtruth_fixes": "none",
+                    "zero_fill": False}
     out = capsys.readouterr().out
     assert "MPE 0.250 m, MOE 3.50 %" in out and "warning: clustered layout" in out
     assert "centroid baseline: MPE 3.000 m" in out
@@ -254,7 +303,7 @@ def test_mrclam_bad_robots_is_an_argparse_error(capsys):
     assert "expected numbers like 1,2,3" in capsys.readouterr().err
 
 
-MRCLAM_DATA = Path("/work/shared/data/mrclam")
+MRCLAM_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "mrclam"
 
 
 def test_mrclam_on_a_real_run(tmp_path, capsys):

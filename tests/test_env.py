@@ -45,6 +45,18 @@ def test_check_env_without_warnings(env_id):
 
 
 @pytest.mark.parametrize("env_id", ENV_IDS)
+def test_check_env_with_default_arguments(env_id):
+    """A newcomer's first check: gymnasium's checker with its defaults, render check included
+    ("human" is listed only where pygame and a display make it work)."""
+    from lfmdr_gym.render import human_rendering_error
+
+    env = gym.make(env_id)
+    assert ("human" in env.unwrapped.metadata["render_modes"]) == (human_rendering_error() is None)
+    check_env(env.unwrapped)
+    env.close()
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
 def test_spaces_dtypes_and_info(env_id):
     env = gym.make(env_id)
     obs, info = env.reset(seed=3)

@@ -14,7 +14,7 @@ from mappers import (
     mean_position_error,
     register_method,
 )
-from mappers.methods import _METHODS
+from mappers.registry import _METHODS
 
 LABELS = ["LPCA", "SMA(UNWGT)", "SMA(WGT)", "KPCA(GAUS)", "KPCA(POLY)", "ISOMAP", "LLE", "LEM", "HLLE", "SDE"]
 
@@ -49,8 +49,9 @@ def test_registry_labels_defaults_grids():
     assert METHODS["KPCA(GAUS)"].grid == {"sigma2": [0.25, 0.5, 1.0, 2.0, 4.0, 8.0]}
     assert METHODS["KPCA(POLY)"].grid == {"degree": [2, 4, 8]}
     assert METHODS["HLLE"].grid == {"n_neighbors": [6, 7, 8, 9, 10, 11, 12]}  # K > 5 needed in 2-D
-    assert set(DEFAULT_METHODS) == {"visibility", "bearing", "range"}
-    assert all(m in METHODS for m in DEFAULT_METHODS.values())
+    assert set(DEFAULT_METHODS) == {(s, masked) for s in ("visibility", "bearing", "range")
+                                    for masked in (False, True)}
+    assert all(METHODS[m].accepts(s, masked) for (s, masked), m in DEFAULT_METHODS.items())
 
 
 def test_register_method_and_unknown_parameter():

@@ -15,7 +15,7 @@ from mappers import (
     mean_position_error,
     register_method,
 )
-from mappers.methods import _METHODS
+from mappers.registry import _METHODS
 
 
 def world(n_objects=40, n_steps=1200, seed=0, sensor="visibility"):
@@ -43,7 +43,7 @@ def world(n_objects=40, n_steps=1200, seed=0, sensor="visibility"):
 def test_default_method_maps_each_sensor(sensor):
     H, P, a = world(sensor=sensor)
     m = build_map(H, a, P[a])
-    assert m.sensor == sensor and m.method == DEFAULT_METHODS[sensor]
+    assert m.sensor == sensor and m.method == DEFAULT_METHODS[(sensor, False)]
     assert m.positions.shape == (40, 2) and m.unmapped == ()
     assert np.all(np.isfinite(m.positions))
     m = build_map(H, a, P[a], "SMA(WGT)")
@@ -114,46 +114,64 @@ def test_mask_all_true_is_no_mask():
     np.testing.assert_array_equal(m1.positions, m2.positions)
 
 
-def test_partial_mask_calls_the_missing_data_hook(monkeypatch):
-    import sys
-    import types
+class _RecordingMasked:
+    """A masked-history method for tests: records what build_map hands it."""
 
-    calls = []
+    calls: list = []
+    nan_rows: tuple = ()
 
-    H, P, a = world()
+    def __init__(self, P):
+        self.P = P
 
-    def fake(X, mask, method, sensor, **params):
-        calls.append((X.shape, mask.shape, method, sensor, params))
-        return 2.0 * np.delete(P, 9, axis=0) + 1.0  # an exact (affine) embedding of the others
-
-    monkeypatch.setitem(sys.modules, "mappers.missing", types.SimpleNamespace(build_masked_embedding=fake))
-    H[9] = 0.0  # unmapped: not handed to the hook
-    mask = np.ones(H.shape, dtype=bool)
-    mask[5, :10] = False
-    H[5, :10] = np.nan  # unobserved entries may hold anything
-    m = build_map(H, a, P[a], "SMA(WGT)", mask=mask, n_neighbors=6)
-    (xs, ms, meth, sens, params), = calls
-    assert (xs, ms, meth, sens) == ((39, 1200), (39, 1200), "SMA(WGT)", "visibility")
-    assert params.pop("n_neighbors") == 6
-    # anchors go to the hook as rows of the mapped objects (object 9 is not handed over)
-    np.testing.assert_array_equal(params.pop("anchor_ids"), np.searchsorted(np.delete(np.arange(40), 9), a))
-    np.testing.assert_array_equal(params.pop("anchor_positions"), P[a])
-    assert params == {}
-    assert m.unmapped == (9,)
-    np.testing.assert_allclose(np.delete(m.positions, 9, axis=0), np.delete(P, 9, axis=0), atol=1e-9)
-
-    # NaN rows from the hook: those objects (here object 5 and anchor 2) become unmapped
-    def fake_nan(X, mask, method, sensor, **params):
-        Y = fake(X, mask, method, sensor, **params)
-        Y[[2, 5]] = np.nan  # rows of mapped objects 2 and 5 (9 is not handed over)
+    def fit_transform(self, X, mask=None, *, sensor, anchor_ids, anchor_positions):
+        self.calls.append((X.shape, None if mask is None else mask.shape, sensor, anchor_ids,
+                           anchor_positions))
+        Y = 2.0 * np.delete(self.P, 9, axis=0) + 1.0  # an exact (affine) embedding of the others
+        Y[list(self.nan_rows)] = np.nan
         return Y
 
-    monkeypatch.setitem(sys.modules, "mappers.missing", types.SimpleNamespace(build_masked_embedding=fake_nan))
-    a5 = np.array([0, 1, 2, 3, 20])
-    m = build_map(H, a5, P[a5], "SMA(WGT)", mask=mask)
-    assert m.unmapped == (2, 5, 9) and m.anchor_ids == (0, 1, 3, 20)
-    assert np.all(np.isnan(m.positions[[2, 5, 9]]))
-    assert any("could not be placed" in w for w in m.warnings)
+
+def test_partial_mask_goes_to_a_method_for_masked_histories():
+    H, P, a = world()
+    spec = MethodSpec("MASKED-TEST", lambda: _RecordingMasked(P), uses_anchors=True,
+                      normalize=False, histories=("masked",))
+    register_method(spec)
+    try:
+        H[9] = 0.0  # unmapped: not handed to the method
+        mask = np.ones(H.shape, dtype=bool)
+        mask[5, :10] = False
+        H[5, :10] = np.nan  # unobserved entries may hold anything
+        with pytest.raises(ValueError, match=r"does not map masked visibility.*MASKED-TEST"):
+            build_map(H, a, P[a], "SMA(WGT)", mask=mask)  # a label that does not fit
+        m = build_map(H, a, P[a], "masked-test", mask=mask)  # labels are case-insensitive
+        (xs, ms, sens, ids, pos), = _RecordingMasked.calls
+        assert (xs, ms, sens) == ((39, 1200), (39, 1200), "visibility")
+        # anchors go to the method as rows of the mapped objects (object 9 is not handed over)
+        np.testing.assert_array_equal(ids, np.searchsorted(np.delete(np.arange(40), 9), a))
+        np.testing.assert_array_equal(pos, P[a])
+        assert m.method == "MASKED-TEST" and m.unmapped == (9,)
+        np.testing.assert_allclose(np.delete(m.positions, 9, axis=0), np.delete(P, 9, axis=0), atol=1e-9)
+        with pytest.raises(ValueError, match="does not map complete"):
+            build_map(np.nan_to_num(H), a, P[a], "MASKED-TEST")  # masked histories only
+
+        # NaN rows from the method: those objects (here object 5 and anchor 2) become unmapped
+        _RecordingMasked.nan_rows = (2, 5)  # rows of mapped objects 2 and 5 (9 is not handed over)
+        a5 = np.array([0, 1, 2, 3, 20])
+        m = build_map(H, a5, P[a5], "MASKED-TEST", mask=mask)
+        assert m.unmapped == (2, 5, 9) and m.anchor_ids == (0, 1, 3, 20)
+        assert np.all(np.isnan(m.positions[[2, 5, 9]]))
+        assert any("could not be placed" in w for w in m.warnings)
+    finally:
+        _METHODS.pop("MASKED-TEST")
+        _RecordingMasked.calls, _RecordingMasked.nan_rows = [], ()
+
+
+def test_masked_default_per_sensor_and_a_method_registered_by_a_user_works_with_masks():
+    H, P, a = world()
+    mask = H > 0
+    m = build_map(H, a, P[a], mask=mask)
+    assert m.method == DEFAULT_METHODS[("visibility", True)] == "covis-nonmetric"
+    assert mean_position_error(m.positions, P, exclude=a) < 0.3
 
 
 def test_method_failure_is_a_mapping_error_naming_method():
@@ -234,3 +252,15 @@ def test_bad_input_raises_value_error_naming_problem(kwargs, match):
     args.update(kwargs)
     with pytest.raises(ValueError, match=match):
         build_map(**args)
+
+
+def test_labels_are_matched_case_insensitively_and_reported_canonically():
+    rng = np.random.default_rng(4)
+    P = rng.uniform(-1, 1, (30, 2))
+    P[:4] = [(-1, -1), (1, -1), (-1, 1), (1, 1)]  # anchors at the corners
+    robot = rng.uniform(-1.2, 1.2, (800, 2))
+    H = (np.linalg.norm(P[:, None] - robot[None], axis=2) < 0.6).astype(float)
+    a = np.arange(4)
+    m = build_map(H, a, P[a], "isomap", n_neighbors=7)
+    assert m.method == "ISOMAP" and m.params["n_neighbors"] == 7
+    assert build_map(H, a, P[a], " Cal-Sma ").method == "CAL-SMA"

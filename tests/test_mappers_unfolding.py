@@ -35,7 +35,7 @@ def test_exact_ranges_give_the_exact_map_and_rank_two():
     s = est.singular_values_
     assert s[2] < 1e-9 * s[0]  # the double-centred squared ranges are rank 2
     m = build_map(R, a, P[a])  # the range default, raw ranges (no row normalisation)
-    assert m.method == "UNFOLD" == DEFAULT_METHODS["range"] and m.sensor == "range"
+    assert m.method == "UNFOLD" == DEFAULT_METHODS[("range", False)] and m.sensor == "range"
     np.testing.assert_allclose(m.positions, P, atol=1e-8)
 
 

@@ -1,4 +1,5 @@
-"""MRCLAM loader and mapping (lfmdr_gym/datasets/mrclam.py).
+"""MRCLAM: the loader (lfmdr_gym/datasets/mrclam.py) and mapping a run
+(lfmdr_gym/experiments/mrclam.py).
 
 Synthetic runs are written by the tests into tmp_path in the MRCLAM layout (4-line ``#``
 header, CRLF, tabs); the real runs are used when ``<repo>/../shared/data/mrclam`` exists.
@@ -18,9 +19,9 @@ from lfmdr_gym.datasets import (
     check_groundtruth,
     corner_anchors,
     load_mrclam,
-    map_mrclam_run,
     read_run,
 )
+from lfmdr_gym.experiments.mrclam import map_mrclam_run
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "mrclam"
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"MRCLAM data not found at {DATA}")
@@ -136,7 +137,9 @@ def test_loader_filters_and_counts(tmp_path):
     # barcodes mapped to subjects; per-robot bins concatenated: R1 bin0, R1 bin1, R2 bin0, R2 bin2
     expected = np.array([[1, 0, 1, 0], [1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 0, 1],
                          [0, 0, 0, 0], [0, 0, 0, 0]], float)
-    assert np.array_equal(h.matrix, expected) and h.mask is None
+    assert np.array_equal(h.matrix, expected)
+    assert np.array_equal(h.mask, expected > 0)  # a camera log knows what was seen, not what was not
+    assert h.timeline.tolist() == [[0, 0], [0, 1], [1, 0], [1, 2]]  # (robot, bin) of each step
     assert h.anchor_ids.tolist() == [0, 2, 3]
     assert np.allclose(h.anchor_positions, [[6, 0], [8, 2], [9, 0]])
     assert np.allclose(h.object_positions[1], [7.0, 1.0])
@@ -163,7 +166,7 @@ def test_loader_robot_subset_and_bad_arguments(tmp_path):
         warnings.simplefilter("ignore", MRCLAMDataWarning)
         h, rep = load_mrclam(run, "visibility", robots=(2,), bin_width=1.0, anchors=(6, 8, 9))
     assert rep.rows == 2 and h.n_steps == 2 and h.meta["robots"] == [2]
-    with pytest.raises(ValueError, match="mode"):
+    with pytest.raises(ValueError, match="sensor must be one of"):
         load_mrclam(run, "sonar")
     with pytest.raises(ValueError, match="bin_width"):
         load_mrclam(run, "visibility", robots=(1, 2), bin_width=0)
@@ -311,7 +314,7 @@ def test_covis_ensemble_is_the_visibility_default_and_checks_its_arguments(tmp_p
     ens = map_mrclam_run(run, "bearing", robots=(1, 2, 3), plot=False, **small)
     assert ens.method == "covis-ensemble"
     assert ens.params == {"bin_widths": [1.0, 2.0], "min_co": [3], "member": "covis-power",
-                          "power": 0.5, "angle_weight": 0.0, "nearness_weight": 0.0}
+                          "power": 0.5}
     singles = [map_mrclam_run(run, "bearing", robots=(1, 2, 3), method="covis-power",
                               bin_width=w, min_co=3) for w in (1.0, 2.0)]
     assert np.allclose(ens.positions, np.mean([s.positions for s in singles], axis=0))
@@ -326,10 +329,30 @@ def test_covis_ensemble_is_the_visibility_default_and_checks_its_arguments(tmp_p
         map_mrclam_run(run, "visibility", robots=(1, 2, 3), member="covis-range")
     with pytest.raises(ValueError, match="power"):
         map_mrclam_run(run, "visibility", robots=(1, 2, 3), member="covis-nonmetric", power=0.5)
-    # bearing parallax (images of one robot) reweights the dissimilarities; bearing mode only
-    par = map_mrclam_run(run, "bearing", robots=(1, 2, 3), plot=False, nearness_weight=0.3,
-                         **small)
-    assert par.params["nearness_weight"] == 0.3 and np.all(np.isfinite(par.positions))
-    assert not np.allclose(par.positions, ens.positions)
-    with pytest.raises(ValueError, match="nearness_weight"):
-        map_mrclam_run(run, "visibility", robots=(1, 2, 3), nearness_weight=0.3, **small)
+    # any registered method that maps the run's masked histories, in any spelling of the label
+    one_power = map_mrclam_run(run, "visibility", robots=(1, 2, 3), method="COVIS-POWER")
+    assert one_power.method == "covis-power"
+    with pytest.raises(ValueError, match=r"'CAL-SMA' does not map masked visibility.*covis-power"):
+        map_mrclam_run(run, "visibility", robots=(1, 2, 3), method="cal-sma")
+    # zero-filled, methods for complete histories apply ("naive" is SMA(UNWGT) zero-filled)
+    zf = map_mrclam_run(run, "visibility", robots=(1, 2, 3), method="SMA(UNWGT)", zero_fill=True)
+    naive = map_mrclam_run(run, "visibility", robots=(1, 2, 3), method="naive")
+    assert naive.method == "naive" and np.array_equal(zf.positions, naive.positions)
+
+
+@needs_data
+def test_the_mrclam_example_maps_a_real_run(capsys):
+    import runpy
+    import sys
+
+    script = Path(__file__).resolve().parents[1] / "examples" / "mrclam_map.py"
+    argv = sys.argv
+    sys.argv = [str(script), str(DATA / "MRCLAM_Dataset2"), "--sensor", "range"]
+    try:
+        runpy.run_path(str(script), run_name="__main__")
+    finally:
+        sys.argv = argv
+    out = capsys.readouterr().out
+    assert "range / range-quantile" in out
+    mpe = float(out.split("MPE ")[1].split()[0])
+    assert 0 < mpe < 0.5  # README: 0.23 m leave-one-run-out on DS2

@@ -20,7 +20,7 @@ from lfmdr_gym.experiments.protocol import (
 from lfmdr_gym.experiments.store import SettingsMismatchError, read_results
 
 METHODS = ("LPCA", "SMA(WGT)", "ISOMAP")
-SMALL = dict(mode="visibility", layouts=1, poses=2, steps=200, every=100, methods=METHODS)
+SMALL = dict(sensor="visibility", layouts=1, poses=2, steps=200, every=100, methods=METHODS)
 
 
 def _without_seconds(rows):
@@ -49,16 +49,19 @@ def clean_run(tmp_path_factory):
 
 # ------------------------------------------------------------------ configuration and plan
 def test_config_defaults_follow_the_paper():
-    vis = ProtocolConfig(mode="visibility", methods=["lpca"])
-    bea = ProtocolConfig(mode="bearing", methods=["lpca"])
+    vis = ProtocolConfig(sensor="visibility", methods=["lpca"])
+    bea = ProtocolConfig(mode="bearing", methods=["lpca"])  # "mode": the older name of sensor
+    assert bea.sensor == "bearing"
     assert (vis.layouts, vis.poses, vis.steps, vis.every) == (5, 5, 2000, 500)
     assert bea.every == 200 and bea.checkpoints[-1] == 2000 and len(bea.checkpoints) == 10
     assert vis.methods == ("LPCA",)  # labels matched case-insensitively
     from mappers import METHODS as ALL
 
-    # all methods that map the mode's histories by default, in table order (UNFOLD: range only)
-    assert ProtocolConfig().methods == tuple(m for m in ALL if m != "UNFOLD")
-    assert ProtocolConfig(mode="bearing").methods == tuple(m for m in ALL if m != "UNFOLD")
+    # by default every method made for complete histories of the sensor, in table order (UNFOLD:
+    # range only; the masked-history methods are not in the paper's tables)
+    complete = tuple(m for m in ALL if m != "UNFOLD" and not ALL[m].takes_masks)
+    assert ProtocolConfig().methods == complete == ProtocolConfig(sensor="bearing").methods
+    assert complete[-1] == "CAL-SMA" and len(complete) == 11
 
 
 @pytest.mark.parametrize(
@@ -68,7 +71,8 @@ def test_config_defaults_follow_the_paper():
         ({"poses": -1}, "poses must be a positive integer"),
         ({"steps": 250, "every": 100}, r"steps \(250\) must be a multiple of every \(100\)"),
         ({"methods": ["LPCA", "NOPE"]}, "unknown method 'NOPE'"),
-        ({"mode": "smell"}, "mode must be one of"),
+        ({"sensor": "smell"}, "sensor must be one of"),
+        ({"methods": ["UNFOLD"]}, "UNFOLD. maps range histories only: it does not map visibility"),
     ],
 )
 def test_bad_config_is_a_value_error(kwargs, message):
@@ -101,7 +105,7 @@ def test_param_labels_round_trip():
 
 
 def test_poses_share_their_layout_and_layouts_differ():
-    config = ProtocolConfig(mode="visibility", layouts=2, poses=2, steps=20, every=10,
+    config = ProtocolConfig(sensor="visibility", layouts=2, poses=2, steps=20, every=10,
                             methods=["LPCA"])
     eps = config.episodes()
     hs = {(e.layout, e.pose): collect_episode(e) for e in eps}
@@ -120,7 +124,8 @@ def test_small_protocol_writes_every_row_table_and_figures(clean_run):
     config = ProtocolConfig(**SMALL)
     assert summary.total_units == len(config.units()) == len(rows) == summary.computed
     assert {(r["layout"], r["pose"]) for r in rows} == {(0, 0), (0, 1)}
-    assert all(r["mode"] == "visibility" for r in rows)
+    assert all(r["sensor"] == "visibility" for r in rows)
+    assert (out / "environment.json").is_file()
     ok = [r for r in rows if not r["error"]]
     assert ok and all(0 <= r["mpe"] < 3 and 0 <= r["moe"] <= 100 for r in ok)
     assert (out / "histories" / "L0_P0.npz").is_file()
@@ -197,7 +202,7 @@ def test_bad_jobs_is_refused(tmp_path):
 # ------------------------------------------------------------------ tables
 def _rows(values):
     return [
-        {"mode": "visibility", "layout": 0, "pose": i, "method": m, "param": p, "n_steps": 100,
+        {"sensor": "visibility", "layout": 0, "pose": i, "method": m, "param": p, "n_steps": 100,
          "mpe": v, "moe": 1.0, "mpe_nonanchor": v, "unmapped": 0, "seconds": 0.0,
          "error": "" if math.isfinite(v) else "boom"}
         for m, p, vs in values for i, v in enumerate(vs)
@@ -217,7 +222,7 @@ def test_a_method_registered_in_this_process_reaches_the_worker_processes(tmp_pa
     """register_method in the user's script (the registry is per process): the protocol ships
     the spec to its workers, so jobs=2 gives the rows of jobs=1, not 'unknown method' errors."""
     from mappers import MethodSpec, WeightedSMACOF, register_method
-    from mappers.methods import _METHODS
+    from mappers.registry import _METHODS
 
     def knn_smacof(*, n_neighbors: int = 6):  # a local function: workers cannot import it
         return WeightedSMACOF(n_neighbors=n_neighbors)
@@ -237,7 +242,7 @@ def test_a_method_registered_in_this_process_reaches_the_worker_processes(tmp_pa
 
 
 def test_range_mode_runs_the_same_protocol_with_unfold_and_a_table_of_our_own(tmp_path):
-    cfg = ProtocolConfig(mode="range", layouts=1, poses=2, steps=200, every=100,
+    cfg = ProtocolConfig(sensor="range", layouts=1, poses=2, steps=200, every=100,
                          methods=("SMA(WGT)", "UNFOLD"))
     assert cfg.env_id == "LFMDR-Range-v0"
     summary = run_protocol(cfg, tmp_path, progress=False)

@@ -102,7 +102,7 @@ def test_visibility_matches_brute_force_in_crowded_scenes(occlusion):
 
 def test_visibility_threshold_distance():
     d_vis = sensors.visibility_distance(R, THRESHOLD)
-    assert d_vis == pytest.approx(0.550, abs=1e-3)  # SPEC: d below about 0.550 m for r = 24 mm
+    assert d_vis == pytest.approx(0.550, abs=1e-3)  # paper §4.3: visible below about 0.550 m for r = 24 mm
     objects = np.array([[d_vis * 0.999, 0.0], [0.0, d_vis * 1.001]])
     np.testing.assert_array_equal(sensors.visibility((0.0, 0.0, 0.0), objects, R, THRESHOLD), [1, 0])
 

@@ -18,12 +18,12 @@ from lfmdr_gym.experiments.store import (
     row_key,
 )
 
-SETTINGS = {"mode": "visibility", "steps": 200, "methods": ["LPCA", "SDE"]}
+SETTINGS = {"sensor": "visibility", "steps": 200, "methods": ["LPCA", "SDE"]}
 
 
 def _row(layout: int, pose: int, method: str = "LPCA", param: str = "-", n: int = 100, **kw):
     row = {
-        "mode": "visibility",
+        "sensor": "visibility",
         "layout": layout,
         "pose": pose,
         "method": method,
@@ -60,6 +60,39 @@ def test_failed_unit_keeps_nan_and_message(tmp_path):
     with ResultStore(tmp_path, SETTINGS) as store:
         (row,) = store.rows()
     assert math.isnan(row["mpe"]) and row["error"] == 'boom, "quoted" line'
+
+
+def test_failed_unit_is_replaced_by_a_later_result(tmp_path):
+    """An interrupted worker's "failure" must not stick: resume computes it again."""
+    with ResultStore(tmp_path, SETTINGS) as store:
+        store.add([_row(0, 0, mpe=math.nan, error="KeyboardInterrupt"), _row(0, 1)])
+        assert store.failed == {row_key(_row(0, 0))} and len(store) == 2
+        assert store.add([_row(0, 1, mpe=9.0)]) == 0  # a good row is never replaced
+    with ResultStore(tmp_path, SETTINGS) as store:
+        assert store.failed == {row_key(_row(0, 0))}
+        assert store.add([_row(0, 0)]) == 1
+        assert not store.failed
+    with ResultStore(tmp_path, SETTINGS) as store:  # the journal keeps both; the later one wins
+        rows = {(r["layout"], r["pose"]): r for r in store.rows()}
+        assert rows[(0, 0)]["error"] == "" and rows[(0, 0)]["mpe"] == _row(0, 0)["mpe"]
+        assert rows[(0, 1)]["mpe"] == _row(0, 1)["mpe"] and len(store) == 2
+
+
+def test_run_written_with_the_old_mode_column_resumes(tmp_path):
+    """Run directories from before "mode" was renamed "sensor" still open and resume."""
+    with ResultStore(tmp_path, SETTINGS) as store:
+        store.add([_row(0, 0)])
+        store.write_results()
+    for name in (JOURNAL, RESULTS):
+        path = tmp_path / name
+        path.write_text(path.read_text().replace("sensor,", "mode,", 1))
+    manifest = tmp_path / "manifest.json"
+    manifest.write_text(manifest.read_text().replace('"sensor"', '"mode"'))
+    with ResultStore(tmp_path, SETTINGS) as store:
+        assert len(store) == 1 and store.add([_row(0, 1)]) == 1
+    assert [r["sensor"] for r in read_results(tmp_path / RESULTS)] == ["visibility"]
+    with ResultStore(tmp_path, SETTINGS) as store:
+        assert len(store) == 2
 
 
 def test_torn_last_line_is_dropped_and_cut_off(tmp_path):

@@ -2,28 +2,24 @@
 
 from lfmdr_gym.datasets.mrclam import (
     DEFAULT_BIN_WIDTH,
-    MODES,
     MRCLAMDataWarning,
-    MRCLAMMap,
     MRCLAMReport,
     MRCLAMRun,
+    bin_run,
     check_groundtruth,
     corner_anchors,
     load_mrclam,
-    map_mrclam_run,
     read_run,
 )
 
 __all__ = [
     "DEFAULT_BIN_WIDTH",
-    "MODES",
     "MRCLAMDataWarning",
-    "MRCLAMMap",
     "MRCLAMReport",
     "MRCLAMRun",
+    "bin_run",
     "check_groundtruth",
     "corner_anchors",
     "load_mrclam",
-    "map_mrclam_run",
     "read_run",
 ]

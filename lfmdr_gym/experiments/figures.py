@@ -33,7 +33,7 @@ __all__ = [
     "write_table",
 ]
 
-# The paper's figures as far as the seed's text conversion keeps them (SPEC §6). Parameters are
+# The paper's figures as far as the seed's text conversion keeps them (Tables 1 and 2, figures 6, 7 and 9). Parameters are
 # in the paper's notation; "mpe"/"moe" None where the pairing was lost.
 PAPER: dict[str, dict[str, dict[str, Any]]] = {
     "visibility": {
@@ -63,7 +63,7 @@ PAPER_EXAMPLES: dict[str, tuple[str, ...]] = {
     "visibility": ("LPCA", "SDE"),  # figures 6 and 7
     "bearing": ("SMA(WGT)",),  # figure 9
 }
-"""Methods of the paper's example maps per mode."""
+"""Methods of the paper's example maps per sensor."""
 
 # The paper's split of its curves: figure 4 (global methods + ISOMAP), figure 5 (local methods).
 _PANELS = (
@@ -114,7 +114,7 @@ def summarise(rows: Sequence[Mapping[str, Any]], n_steps: int) -> dict[str, dict
 
 
 def best_params(rows: Sequence[Mapping[str, Any]], n_steps: int) -> dict[str, dict[str, Any]]:
-    """Per method, the parameter with the lowest mean MPE at ``n_steps`` (SPEC §5).
+    """Per method, the parameter with the lowest mean MPE at ``n_steps`` (paper §4.1).
 
     A parameter that failed on fewer runs wins over one that failed on more: a mean over the
     runs a method survived would otherwise flatter it.
@@ -153,7 +153,7 @@ def write_table(
     rows: Sequence[Mapping[str, Any]],
     out: Path,
     *,
-    mode: str,
+    sensor: str,
     n_steps: int,
     methods: Sequence[str],
     defaults: Mapping[str, str] | None = None,
@@ -163,7 +163,7 @@ def write_table(
     mean ± std of MPE and MOE over the runs, beside the paper's figures (Tables 1 and 2)."""
     out = Path(out)
     best = best_params(rows, n_steps)
-    paper = PAPER.get(mode, {})
+    paper = PAPER.get(sensor, {})
     cols = ["method", "param", "runs", "failed", "mpe_mean", "mpe_std", "moe_mean", "moe_std",
             "mpe_nonanchor_mean", "mpe_nonanchor_std", "default_param", "paper_param",
             "paper_mpe", "paper_moe", "paper_note"]
@@ -187,15 +187,15 @@ def write_table(
 
     runs = f"{n_runs} runs" if n_runs else "all runs"
     lines = [
-        f"# {mode.capitalize()}-only mapping: final map errors at N = {n_steps} ({runs})",
+        f"# {sensor.capitalize()}-only mapping: final map errors at N = {n_steps} ({runs})",
         "",
         "Best parameter per method by mean MPE at the last checkpoint; mean ± sample std over the "
         "runs. MPE over the mapped objects (anchors included, as in the paper), MOE over all "
         "triangles of mapped objects.",
         "",
         "| method | best param | MPE [m] | MOE [%] | MPE non-anchor [m] | runs (failed) "
-        + ("| paper param | paper MPE [m] | paper MOE [%] |" if mode in PAPER_SOURCE else "|"),
-        "|---|---|---|---|---|---|" + ("---|---|---|" if mode in PAPER_SOURCE else ""),
+        + ("| paper param | paper MPE [m] | paper MOE [%] |" if sensor in PAPER_SOURCE else "|"),
+        "|---|---|---|---|---|---|" + ("---|---|---|" if sensor in PAPER_SOURCE else ""),
     ]
     for r in table:
         pm = r["paper_mpe"] if r["paper_mpe"] != "" else r["paper_note"]
@@ -206,12 +206,12 @@ def write_table(
             f"| {_pm(r['mpe_nonanchor_mean'], r['mpe_nonanchor_std'], 3)} "
             f"| {r['runs']} ({r['failed']}) |"
         )
-        if mode in PAPER_SOURCE:
+        if sensor in PAPER_SOURCE:
             line += f" {r['paper_param'] or '—'} | {pm or '—'} | {r['paper_moe'] or '—'} |"
         lines.append(line)
-    source = PAPER_SOURCE.get(mode)
+    source = PAPER_SOURCE.get(sensor)
     lines += ["", f"Paper: {source}." if source else
-              f"The paper has no {mode} sensor: this table is ours (same protocol).", ""]
+              f"The paper has no {sensor} sensor: this table is ours (same protocol).", ""]
     md_path = out / "table.md"
     atomic_write_text(md_path, "\n".join(lines))
     return [csv_path, md_path]
@@ -221,7 +221,7 @@ def plot_curves(
     rows: Sequence[Mapping[str, Any]],
     path: Path,
     *,
-    mode: str,
+    sensor: str,
     methods: Sequence[str],
     curve_params: Mapping[str, str],
 ) -> Path:
@@ -252,7 +252,7 @@ def plot_curves(
         ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
-    fig.suptitle(f"{mode.capitalize()}-only mapping: MPE against the number of observations")
+    fig.suptitle(f"{sensor.capitalize()}-only mapping: MPE against the number of observations")
     atomic_savefig(fig, path)
     return Path(path)
 

@@ -32,8 +32,9 @@ try:  # advisory locking is POSIX-only; elsewhere the store simply runs unlocked
 except ImportError:  # pragma: no cover - Windows
     fcntl = None  # type: ignore[assignment]
 
-KEY_COLUMNS: tuple[str, ...] = ("mode", "layout", "pose", "method", "param", "n_steps")
-"""The columns that identify one unit of work: a row is written once per key."""
+KEY_COLUMNS: tuple[str, ...] = ("sensor", "layout", "pose", "method", "param", "n_steps")
+"""The columns that identify one unit of work: a row is written once per key (again only to
+replace a failed one)."""
 
 VALUE_COLUMNS: tuple[str, ...] = ("mpe", "moe", "mpe_nonanchor", "unmapped", "seconds", "error")
 """Scores of a unit (MPE [m] over the mapped objects, MOE [%], MPE over the mapped non-anchor
@@ -49,6 +50,10 @@ MANIFEST = "manifest.json"
 JOURNAL = "journal.csv"
 RESULTS = "results.csv"
 _JOURNAL_HEADER = ",".join(COLUMNS) + ",crc\n"
+# Before the sensor vocabulary was unified the first column was called "mode"; such run
+# directories still resume.
+_LEGACY = {"mode": "sensor"}
+_LEGACY_HEADER = _JOURNAL_HEADER.replace("sensor,", "mode,", 1)
 
 
 class SettingsMismatchError(ValueError):
@@ -64,7 +69,7 @@ Key = tuple[Any, ...]
 
 
 def row_key(row: Mapping[str, Any]) -> Key:
-    """The identity of a row: its (mode, layout, pose, method, param, n_steps)."""
+    """The identity of a row: its (sensor, layout, pose, method, param, n_steps)."""
     return tuple(row[c] for c in KEY_COLUMNS)
 
 
@@ -115,8 +120,9 @@ def _parse_journal_line(line: bytes) -> Row | None:
 
 
 def _canonical(settings: Mapping[str, Any]) -> dict[str, Any]:
-    """Settings as they read back from JSON (tuples become lists, keys strings)."""
-    return json.loads(json.dumps(settings, sort_keys=True))
+    """Settings as they read back from JSON (tuples become lists, keys strings; legacy names)."""
+    out = json.loads(json.dumps(settings, sort_keys=True))
+    return {_LEGACY.get(k, k): v for k, v in out.items()}
 
 
 def ensure_writable_dir(path: str | os.PathLike) -> Path:
@@ -173,7 +179,7 @@ class ResultStore:
         path = self.directory / MANIFEST
         if path.exists():
             try:
-                stored = json.loads(path.read_text(encoding="utf-8"))
+                stored = _canonical(json.loads(path.read_text(encoding="utf-8")))
             except (OSError, ValueError) as exc:
                 raise SettingsMismatchError(
                     f"{path} is unreadable ({exc}); this is not a usable lfmdr run directory"
@@ -222,7 +228,7 @@ class ResultStore:
                 break
             line = data[pos:nl]
             if pos == 0:
-                if line + b"\n" != _JOURNAL_HEADER.encode():
+                if (line + b"\n").decode(errors="replace") not in (_JOURNAL_HEADER, _LEGACY_HEADER):
                     raise SettingsMismatchError(
                         f"{self.directory / JOURNAL} has an unknown header; not an lfmdr journal"
                     )
@@ -232,7 +238,9 @@ class ResultStore:
                     self.dropped_lines += 1
                     pos = nl + 1
                     continue  # keep reading: only this line is damaged
-                self._rows.setdefault(row_key(row), row)
+                key = row_key(row)
+                if key not in self._rows or self._rows[key]["error"]:
+                    self._rows[key] = row  # a later row replaces a failed one
             pos = nl + 1
             good_end = pos
         if good_end < len(data):
@@ -264,6 +272,11 @@ class ResultStore:
         """Keys of every unit already stored."""
         return frozenset(self._rows)
 
+    @property
+    def failed(self) -> frozenset[Key]:
+        """Keys of the stored units whose mapper failed (a resume computes them again)."""
+        return frozenset(k for k, r in self._rows.items() if r["error"])
+
     def rows(self) -> list[Row]:
         """All stored rows, sorted for ``results.csv``."""
         return sorted(self._rows.values(), key=self._sort_key)
@@ -275,7 +288,8 @@ class ResultStore:
         os.fsync(self._fh.fileno())
 
     def add(self, rows: Iterable[Mapping[str, Any]]) -> int:
-        """Durably append the rows not stored yet (one write + fsync); return how many were new."""
+        """Durably append the rows not stored yet, or replacing a failed one (one write + fsync);
+        return how many were new."""
         new: dict[Key, Row] = {}
         for row in rows:
             missing = [c for c in COLUMNS if c not in row]
@@ -286,7 +300,7 @@ class ResultStore:
                 c: " ".join(row[c].split()) if isinstance(row[c], str) else row[c] for c in COLUMNS
             }
             key = row_key(clean)
-            if key not in self._rows and key not in new:
+            if (key not in self._rows or self._rows[key]["error"]) and key not in new:
                 new[key] = clean
         if new:
             self._append(b"".join(_journal_line(r) for r in new.values()))
@@ -310,6 +324,8 @@ def read_results(path: str | os.PathLike) -> list[Row]:
     path = Path(path)
     with open(path, newline="", encoding="utf-8") as fh:
         reader = csv.DictReader(fh)
-        if reader.fieldnames is None or list(reader.fieldnames[: len(COLUMNS)]) != list(COLUMNS):
+        names = [_LEGACY.get(c, c) for c in reader.fieldnames or ()]
+        if names[: len(COLUMNS)] != list(COLUMNS):
             raise ValueError(f"{path} is not an lfmdr results.csv (columns {reader.fieldnames})")
-        return [{c: _parse(c, r[c]) for c in COLUMNS} for r in reader]
+        return [{c: _parse(c, v) for c, v in zip(names, r.values(), strict=False) if c in COLUMNS}
+                for r in reader]

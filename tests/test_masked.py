@@ -1,19 +1,15 @@
-"""Masked (missing-data) mapping: mappers/missing.py."""
+"""Masked (missing-data) mapping: mappers/masked.py, mappers/coobservation.py, the SMACOF
+variants and the covisibility ensemble."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from mappers.missing import (
-    MASKED_METHODS,
-    build_masked_embedding,
-    covisibility_dissimilarity,
-    masked_embedding,
-    nonmetric_smacof,
-    range_pair_distances,
-    step_observations,
-)
+from mappers.coobservation import covisibility_dissimilarity, range_pair_distances
+from mappers.masked import MASKED_METHODS, masked_embedding
+from mappers.sensors import step_observations
+from mappers.smacof_variants import nonmetric_smacof
 
 
 def _corners(P: np.ndarray) -> np.ndarray:
@@ -143,8 +139,7 @@ def test_never_sensed_objects_are_unmapped_and_hook_shape():
     anchors = anchors[anchors != 7]
     if len(anchors) < 3:
         anchors = np.array([0, 1, 2])
-    Y = build_masked_embedding(X, seen, None, "range", anchor_ids=anchors,
-                               anchor_positions=P[anchors])
+    Y = masked_embedding(X, seen, "range", anchor_ids=anchors, anchor_positions=P[anchors]).positions
     assert Y.shape == (len(P), 2)
     assert np.isnan(Y[7]).all() and np.isfinite(np.delete(Y, 7, axis=0)).all()
 
@@ -166,7 +161,7 @@ def test_bad_arguments_raise_value_error():
     assert set(MASKED_METHODS) >= {"range-quantile", "covis-nonmetric", "masked-euclidean"}
 
 
-def test_build_map_hands_masked_histories_to_this_module():
+def test_build_map_maps_masked_histories_with_the_masked_methods():
     from mappers import build_map
 
     P, seen, r, _ = _simulate(noise=0.01, seed=8)
@@ -174,15 +169,16 @@ def test_build_map_hands_masked_histories_to_this_module():
     anchors = _corners(P)
     m = build_map(X, anchors, P[anchors], sensor="range", mask=seen)
     assert _score(m.positions, P, anchors) < 0.3
-    # a method for complete histories: mapped with the masked default, and the Map says so
-    u = build_map(X, anchors, P[anchors], "UNFOLD", sensor="range", mask=seen)
-    assert u.method == "range-quantile"
-    assert any("'UNFOLD' needs complete histories" in w for w in u.warnings)
-    np.testing.assert_allclose(u.positions, m.positions)
+    assert m.method == "range-quantile"
+    direct = masked_embedding(X, seen, "range", anchor_ids=anchors, anchor_positions=P[anchors])
+    np.testing.assert_allclose(m.positions, direct.positions, atol=1e-12)  # anchors held: affine = I
+    # a method for complete histories is refused, naming those that fit
+    with pytest.raises(ValueError, match="'UNFOLD' does not map masked range.*range-quantile"):
+        build_map(X, anchors, P[anchors], "UNFOLD", sensor="range", mask=seen)
 
 
 def test_range_bounds_bracket_the_truth_and_map_well():
-    from mappers.missing import range_pair_bounds
+    from mappers.coobservation import range_pair_bounds
 
     P, seen, r, _ = _simulate(fov=0.6, seed=9)
     upper = range_pair_bounds(r, seen, fov=1.2, upper_quantile=0.0)
@@ -201,7 +197,7 @@ def test_range_bounds_bracket_the_truth_and_map_well():
 
 
 def test_bounded_smacof_has_no_stress_inside_the_intervals():
-    from mappers.missing import bounded_smacof
+    from mappers.smacof_variants import bounded_smacof
 
     rng = np.random.default_rng(10)
     P = rng.uniform(0, 3, size=(8, 2))
@@ -217,7 +213,7 @@ def test_bounded_smacof_has_no_stress_inside_the_intervals():
 
 
 def test_ensemble_is_the_mean_of_its_members_and_no_worse_than_them_on_average():
-    from mappers.missing import ensemble_embedding
+    from mappers.ensemble import ensemble_embedding
 
     P, seen, _, _ = _simulate(n_obj=14, n_steps=3000, seed=11)
     anchors = _corners(P)
@@ -251,7 +247,7 @@ def test_ensemble_is_the_mean_of_its_members_and_no_worse_than_them_on_average()
 
 
 def test_power_link_smacof_recovers_a_layout_from_a_power_of_its_distances():
-    from mappers.missing import power_link_smacof
+    from mappers.smacof_variants import power_link_smacof
 
     rng = np.random.default_rng(12)
     P = rng.uniform(0, 5, size=(12, 2))
@@ -292,96 +288,6 @@ def test_covis_power_maps_a_simulated_camera_and_falls_back_on_a_split_layout():
     nm = masked_embedding(split.astype(float), None, "visibility", "covis-nonmetric", **kw)
     assert any("kept the covis-nonmetric map" in w for w in pw.warnings)
     assert np.allclose(pw.positions, nm.positions)
-    near = masked_embedding(split.astype(float), None, "visibility", "covis-power",
-                            nearness=np.linspace(0.5, 2, split.shape[0]), nearness_weight=0.5, **kw)
-    assert any("nearness_weight not applied" in w for w in near.warnings)
-    assert np.allclose(near.positions, nm.positions)
-
-
-def test_end_on_penalty_is_largest_for_pairs_seen_lined_up():
-    from mappers.missing import end_on_penalty
-
-    seen = np.array([[1, 1, 1, 0], [1, 1, 0, 0], [1, 0, 1, 0], [0, 0, 0, 1]], bool)
-    b = np.array([[0.0, 0.1, 0.2, 0.0], [0.02, 0.11, 0.0, 0.0], [0.8, 0.0, 0.9, 0.0],
-                  [0.0, 0.0, 0.0, 0.3]])
-    pen = end_on_penalty(b, seen)
-    # mean subtended angles: (0,1) 0.015 (lined up), (0,2) 0.75 (broadside), (1,2) 0.78
-    assert pen[0, 1] == pytest.approx(0.78 - 0.015) and pen[1, 2] == pytest.approx(0.0)
-    assert pen[0, 2] == pytest.approx(0.03) and pen[0, 3] == 0.0 and np.allclose(pen, pen.T)
-    P, seen_s, _, bear = _simulate(n_obj=10, n_steps=800, seed=14)
-    X = np.zeros((10, 2 * seen_s.shape[1]))
-    X[:, 0::2], X[:, 1::2] = np.cos(bear) * seen_s, np.sin(bear) * seen_s
-    anchors = _corners(P)
-    kw = {"anchor_ids": anchors, "anchor_positions": P[anchors]}
-    mm = masked_embedding(X, np.repeat(seen_s, 2, axis=1), "bearing", "covis-power",
-                          angle_weight=0.5, **kw)
-    assert np.all(np.isfinite(mm.positions))
-    with pytest.raises(ValueError, match="angle_weight"):
-        masked_embedding(seen_s.astype(float), None, "visibility", "covis-power",
-                         angle_weight=0.5, **kw)
-
-
-def _parallax_log(turn=0.05, n_pairs=6):
-    """A robot photographs 4 landmarks (two 2 m ahead, two 8 m ahead, +-0.8 / +-3 m to the
-    sides), then 2 s later again after moving 0.3 m forward and turning by ``turn``; repeated
-    ``n_pairs`` times. Returns rows (robot, time, landmark, bearing) and which are near."""
-    P = np.array([[2.0, 0.8], [8.0, 3.0], [8.0, -3.0], [2.0, -0.8]])
-    rows = []
-    for k in range(n_pairs):
-        for t, (x, th) in ((10.0 * k, (0.0, 0.0)), (10.0 * k + 2.0, (0.3, turn))):
-            b = np.arctan2(P[:, 1], P[:, 0] - x) - th
-            rows += [(1, t, i, b[i]) for i in range(4)]
-    return np.array(rows), np.array([True, False, False, True])
-
-
-def test_parallax_nearness_ranks_landmarks_seen_close_higher_and_ignores_rotation():
-    from mappers.missing import parallax_nearness
-
-    rows, near = _parallax_log()
-    h = parallax_nearness(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], 4)
-    assert np.isfinite(h).all()
-    assert h[near].min() > 2.5 * h[~near].max()
-    # the robot's rotation between the images shifts every bearing equally: no effect
-    rows2, _ = _parallax_log(turn=-0.3)
-    h2 = parallax_nearness(rows2[:, 0], rows2[:, 1], rows2[:, 2], rows2[:, 3], 4)
-    assert np.allclose(h, h2)
-    # too few image pairs per landmark -> NaN; images too far apart are not paired
-    assert np.isnan(parallax_nearness(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], 4,
-                                      min_samples=7)).all()
-    assert np.isnan(parallax_nearness(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], 4,
-                                      dt_min=0.5, dt_max=1.0)).all()
-    with pytest.raises(ValueError, match="same length"):
-        parallax_nearness(rows[:, 0], rows[:-1, 1], rows[:, 2], rows[:, 3], 4)
-    with pytest.raises(ValueError, match="landmark indices"):
-        parallax_nearness(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], 3)
-    with pytest.raises(ValueError, match="dt_min"):
-        parallax_nearness(rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], 4, dt_min=2, dt_max=1)
-
-
-def test_nearness_weight_shrinks_dissimilarities_of_near_seen_landmarks():
-    from mappers.missing import nearness_factor
-
-    F = nearness_factor(np.array([2.0, 1.0, 0.5, np.nan]), 0.5, 4)
-    assert np.allclose(np.diag(F), 1.0) and np.allclose(F, F.T)
-    assert F[0, 1] < 1 < F[2, 1]  # landmark 0 seen from close: its dissimilarities shrink
-    P, seen_s, _, bear = _simulate(n_obj=10, n_steps=800, seed=14)
-    X = np.zeros((10, 2 * seen_s.shape[1]))
-    X[:, 0::2], X[:, 1::2] = np.cos(bear) * seen_s, np.sin(bear) * seen_s
-    anchors = _corners(P)
-    kw = {"anchor_ids": anchors, "anchor_positions": P[anchors]}
-    mask = np.repeat(seen_s, 2, axis=1)
-    h = np.linspace(0.5, 2.0, 10)
-    base = masked_embedding(X, mask, "bearing", "covis-power", **kw)
-    zero = masked_embedding(X, mask, "bearing", "covis-power", nearness=h, nearness_weight=0.0, **kw)
-    mm = masked_embedding(X, mask, "bearing", "covis-power", nearness=h, nearness_weight=0.3, **kw)
-    assert np.allclose(base.positions, zero.positions)
-    expect = base.delta * nearness_factor(h, 0.3, 10)
-    assert np.allclose(mm.delta, expect)
-    with pytest.raises(ValueError, match="nearness"):
-        masked_embedding(X, mask, "bearing", "covis-power", nearness_weight=0.3, **kw)
-    with pytest.raises(ValueError, match="shape"):
-        masked_embedding(X, mask, "bearing", "covis-power", nearness=h[:5], nearness_weight=0.3,
-                         **kw)
 
 
 @pytest.mark.parametrize("method", ["covis-nonmetric", "covis-power", "range-quantile"])
@@ -422,3 +328,20 @@ def test_no_group_with_two_anchors_is_a_clear_error():
     with pytest.raises(ValueError, match="no group holds 2 or more anchors"):
         masked_embedding(split.astype(float), None, "visibility", "covis-nonmetric",
                          anchor_ids=anchors, anchor_positions=P[anchors])
+
+
+def test_window_steps_merges_ticks_per_robot_and_never_across_robots():
+    from mappers.ensemble import window_steps
+
+    # two robots; robot 0 at ticks 0, 1, 2, 5 and robot 1 at ticks 0, 3
+    timeline = np.array([[0, 0], [0, 1], [0, 2], [0, 5], [1, 0], [1, 3]])
+    seen = np.array([[1, 0, 0, 0, 0, 1],
+                     [0, 1, 0, 1, 1, 0]], dtype=bool)
+    got = window_steps(seen, 2, timeline)
+    # windows of 2 ticks: robot 0 -> {0,1}, {2}, {5}; robot 1 -> {0}, {3}
+    assert got.tolist() == [[True, False, False, False, True],
+                            [True, False, True, True, False]]
+    assert window_steps(seen, 1, timeline).shape == (2, 6)  # one window per step
+    assert window_steps(seen[:, :3], 2).tolist() == [[True, False], [True, False]]  # ticks 0-1, 2
+    with pytest.raises(ValueError):
+        window_steps(seen, 2, timeline[:-1])  # one timeline row per step

@@ -1,0 +1,146 @@
+"""Single maps as the command line makes them: one episode mapped at its checkpoints
+(``lfmdr run``), or one saved history mapped (``lfmdr map``), with their files written."""
+
+from __future__ import annotations
+
+import csv
+import os
+import warnings
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lfmdr_gym.atomic import atomic_write
+from lfmdr_gym.experiments.episodes import collect_history
+from lfmdr_gym.experiments.params import param_label, user_params
+from lfmdr_gym.experiments.protocol import DEFAULT_EVERY
+from lfmdr_gym.experiments.scoring import evaluate, map_history, score_map
+from lfmdr_gym.experiments.store import ensure_writable_dir
+from lfmdr_gym.history import History
+
+__all__ = ["checkpoints_for", "map_history_file", "run_episode"]
+
+
+def checkpoints_for(steps: int, every: int | None, sensor: str | None) -> tuple[int, ...]:
+    """Checkpoints of a single run: multiples of ``every`` up to ``steps`` (which is always one).
+
+    With ``every`` None the sensor's default interval is used and ``steps`` is appended when it
+    is not a multiple; an explicit ``every`` must divide ``steps``.
+    """
+    if not isinstance(steps, int | np.integer) or steps < 1:
+        raise ValueError(f"steps must be a positive integer, got {steps!r}")
+    if every is None:
+        step = min(DEFAULT_EVERY.get(sensor or "", 200), int(steps))
+        points = list(range(step, steps + 1, step))
+        if points[-1] != steps:
+            points.append(int(steps))
+        return tuple(points)
+    if not isinstance(every, int | np.integer) or every < 1:
+        raise ValueError(f"every must be a positive integer, got {every!r}")
+    if steps % every:
+        raise ValueError(f"steps ({steps}) must be a multiple of every ({every})")
+    return tuple(range(every, steps + 1, every))
+
+
+def _method_and_params(method: str | None, history: History, params) -> tuple[str, dict[str, Any]]:
+    """The registered label that maps ``history`` (None: its default) and its parameters."""
+    from mappers import resolve_method
+
+    label = resolve_method(method, history.sensor, masked=history.mask is not None).label
+    return label, user_params(label, params)
+
+
+def _sensor_of(env_id: str) -> str:
+    from lfmdr_gym import ENV_IDS
+
+    if env_id not in ENV_IDS:
+        raise ValueError(f"unknown env id {env_id!r}; choose from {list(ENV_IDS)}")
+    return ENV_IDS[env_id]
+
+
+def run_episode(
+    env_id: str,
+    steps: int,
+    method: str | None = None,
+    *,
+    seed: int | None = 0,
+    every: int | None = None,
+    params: Iterable[str] | Mapping[str, Any] | None = None,
+    out: str | os.PathLike | None = None,
+) -> list[dict[str, Any]]:
+    """One episode, mapped with ``method`` (None: the default for its history) at every
+    checkpoint; rows of scores per checkpoint. With ``out``: writes ``history.npz``,
+    ``scores.csv``, ``map.csv`` and ``map.png`` (the map at the last checkpoint) there."""
+    points = checkpoints_for(steps, every, _sensor_of(env_id))
+    if out is not None:
+        out = ensure_writable_dir(out)
+    history = collect_history(env_id, steps, seed)
+    method, params = _method_and_params(method, history, params)
+    rows, last = [], None
+    for n in points:
+        result = evaluate(history.head(n), method, params)
+        last = result.pop("map")
+        rows.append({"n_steps": n, "method": method, "param": param_label(params), **result})
+    if out is not None:
+        history.save(out / "history.npz")
+        _write_csv(out / "scores.csv", rows)
+        if last is not None:
+            r = rows[-1]
+            _write_map(out, last.positions, history,
+                       f"{env_id}, {method} ({param_label(params)}), N={steps}: "
+                       f"MPE {r['mpe']:.3f} m, MOE {r['moe']:.2f} %")
+    return rows
+
+
+def map_history_file(
+    path: str | os.PathLike,
+    method: str | None = None,
+    *,
+    params: Iterable[str] | Mapping[str, Any] | None = None,
+    n_steps: int | None = None,
+    out: str | os.PathLike | None = None,
+) -> dict[str, Any]:
+    """Map a saved history (``method`` None: the default for its sensor and kind); scores when
+    its ground truth is known; writes ``map.csv`` + ``map.png``.
+
+    Returns a dict with ``map`` (the ``mappers.Map``), ``history`` and, when every object's true
+    position is in the file, ``mpe``, ``moe``, ``mpe_nonanchor``.
+    """
+    history = History.load(path)
+    method, params = _method_and_params(method, history, params)
+    if n_steps is not None:
+        history = history.head(n_steps)
+    out = ensure_writable_dir(out if out is not None else Path(path).with_suffix(""))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = map_history(history, method, params)
+    info: dict[str, Any] = {"map": result, "history": history, "method": method,
+                            "param": param_label(params), "out": out}
+    title = f"{Path(path).name}, {method} ({param_label(params)}), N={history.n_steps}"
+    if np.all(np.isfinite(history.object_positions)):
+        info.update(score_map(result.positions, result.unmapped, history))
+        title += f": MPE {info['mpe']:.3f} m, MOE {info['moe']:.2f} %"
+    info["figure"] = _write_map(out, result.positions, history, title)
+    return info
+
+
+def _write_csv(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
+    with atomic_write(path) as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def _write_map(out: Path, positions: np.ndarray, history: History, title: str) -> Path:
+    """``map.csv`` (object, estimate, truth, anchor flag) and ``map.png``; returns the figure."""
+    from lfmdr_gym.experiments import figures
+
+    anchors = {int(i) for i in history.anchor_ids}
+    with atomic_write(out / "map.csv") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(["object", "x", "y", "true_x", "true_y", "anchor"])
+        for j, (est, tru) in enumerate(zip(positions, history.object_positions, strict=True)):
+            writer.writerow([j, *(f"{v:.6g}" for v in est), *(f"{v:.6g}" for v in tru), int(j in anchors)])
+    return figures.plot_map(positions, history, out / "map.png", title=title)

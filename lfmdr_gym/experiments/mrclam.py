@@ -1,0 +1,255 @@
+"""Mapping a real MRCLAM run and scoring it against motion capture (``lfmdr mrclam``).
+
+The loader (:mod:`lfmdr_gym.datasets.mrclam`) reads and bins the run; here it is mapped with any
+registered method that maps its histories (:func:`mappers.build_map`), scored over the
+non-anchor landmarks, and written as ``map.csv`` and ``map.png``. Ground truth places the
+anchors and scores; nothing else of it reaches the mapper.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lfmdr_gym.atomic import atomic_write_text
+from lfmdr_gym.datasets.mrclam import (
+    ROBOT_SUBJECTS,
+    MRCLAMDataWarning,
+    MRCLAMReport,
+    load_mrclam,
+)
+from lfmdr_gym.history import History
+from mappers.sensors import check_sensor
+
+__all__ = ["DEFAULT_METHOD", "ENSEMBLE_BIN_WIDTHS", "METHOD_ALIASES", "MRCLAMMap", "map_mrclam_run"]
+
+DEFAULT_METHOD: dict[str, str] = {
+    "visibility": "covis-ensemble",
+    "bearing": "covis-ensemble",
+    "range": "range-quantile",
+}
+"""The method per sensor on real runs when none is given: the best measured leave-one-run-out
+(``benchmarks/bench_mrclam.py``). Bearing uses the pattern of what was seen: no bearing-only
+statistic measured better (``docs/bearing-on-real-data.md``)."""
+
+ENSEMBLE_BIN_WIDTHS: tuple[float, ...] = (1.0, 1.5, 2.0, 3.0, 4.0, 5.0)
+"""Bin widths [s] of the covis-ensemble's members on real runs (``bin_widths=`` overrides)."""
+
+METHOD_ALIASES: dict[str, str] = {"naive": "SMA(UNWGT)"}
+"""Older names: ``naive`` is the paper's pipeline on the zero-filled history (``zero_fill``)."""
+
+
+@dataclass(frozen=True, eq=False)
+class MRCLAMMap:
+    """A map of one MRCLAM run and its scores against motion capture.
+
+    Attributes:
+        run, sensor, method, params: what was mapped and how.
+        subjects: (M,) landmark subject numbers, one per row of ``positions``.
+        positions: (M, 2) estimates in the ground-truth frame (anchors included; NaN = unmapped).
+        truth: (M, 2) ground truth (after ``groundtruth_fixes``).
+        anchor_subjects: subjects used as anchors.
+        mpe: mean position error [m] over the mapped non-anchor landmarks.
+        moe: mean orientation error [%] over the mapped non-anchor landmarks.
+        centroid_mpe: MPE of placing every non-anchor landmark at the anchors' centroid.
+        warnings: data and mapping warnings (also issued as :class:`MRCLAMDataWarning`).
+        report: the loader's filtering report.
+        history_meta: ``History.meta`` of the binned history.
+        csv_path, png_path: files written (None when ``out`` is None).
+    """
+
+    run: str
+    sensor: str
+    method: str
+    params: dict[str, Any]
+    subjects: np.ndarray
+    positions: np.ndarray
+    truth: np.ndarray
+    anchor_subjects: tuple[int, ...]
+    mpe: float
+    moe: float
+    centroid_mpe: float
+    warnings: tuple[str, ...]
+    report: MRCLAMReport
+    history_meta: dict[str, Any]
+    csv_path: Path | None = None
+    png_path: Path | None = None
+
+    @property
+    def mode(self) -> str:
+        """The older name of :attr:`sensor`."""
+        return self.sensor
+
+
+def _tick(widths: Sequence[float]) -> float:
+    """The coarsest bin width [s] every width is a whole multiple of (their greatest common
+    divisor, from their decimal values): the ensemble's members are unions of such bins."""
+    fr = [Fraction(w).limit_denominator(1000) for w in widths]
+    num = math.gcd(*(f.numerator * (math.lcm(*(g.denominator for g in fr)) // f.denominator)
+                     for f in fr))
+    return num / math.lcm(*(f.denominator for f in fr))
+
+
+def _plan(sensor: str, method: str | None, bin_width: float | None, params: dict[str, Any]):
+    """(method label, bin width of the history, the method's parameters, zero-fill or not)."""
+    zero_fill = False
+    if method in METHOD_ALIASES:
+        method, zero_fill = METHOD_ALIASES[method], True
+    if method is None:
+        method = DEFAULT_METHOD[sensor]
+        if method == "covis-ensemble" and bin_width is not None:
+            method = "covis-power"  # one bin width asked for: one member at that width
+    if method != "covis-ensemble":
+        return method, bin_width, params, zero_fill
+    if bin_width is not None:
+        raise ValueError("method 'covis-ensemble' bins the run at several widths (bin_widths=...); "
+                         "bin_width must be None")
+    widths = tuple(float(w) for w in np.atleast_1d(params.pop("bin_widths", ENSEMBLE_BIN_WIDTHS)))
+    if not widths or min(widths) <= 0:
+        raise ValueError(f"bin_widths must be positive numbers of seconds, got {widths}")
+    tick = _tick(widths)
+    return method, tick, {"windows": tuple(round(w / tick) for w in widths), **params}, zero_fill
+
+
+def _load(run_dir, sensor, robots, bin_width, anchors, groundtruth_fixes) -> tuple[History, MRCLAMReport]:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", MRCLAMDataWarning)
+        history, report = load_mrclam(run_dir, sensor, robots=robots, bin_width=bin_width,
+                                      anchors=anchors, groundtruth_fixes=groundtruth_fixes)
+    for w in caught:  # re-issue what the loader said, so callers' filters still apply
+        if issubclass(w.category, MRCLAMDataWarning):
+            warnings.warn(str(w.message), MRCLAMDataWarning, stacklevel=3)
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return history, report
+
+
+def _scores(positions: np.ndarray, history: History) -> tuple[float, float, float]:
+    """MPE and MOE over the mapped non-anchor landmarks, and the anchors' centroid baseline."""
+    from mappers import mean_orientation_error, mean_position_error
+
+    anchors = set(history.anchor_ids.tolist())
+    truth = history.object_positions
+    scored = [i for i in range(len(truth))
+              if i not in anchors and np.all(np.isfinite(positions[i]))]
+    exclude = [i for i in range(len(truth)) if i not in scored]
+    mpe = mean_position_error(positions, truth, exclude=exclude) if scored else math.nan
+    moe = mean_orientation_error(positions, truth, exclude=exclude) if len(scored) >= 3 else math.nan
+    centroid = np.repeat(truth[history.anchor_ids].mean(axis=0)[None], len(truth), axis=0)
+    return float(mpe), float(moe), mean_position_error(centroid, truth, exclude=sorted(anchors))
+
+
+def _reported_params(method: str, params: dict[str, Any], tick: float | None) -> dict[str, Any]:
+    """The parameters as the user gives them (an ensemble's windows as bin widths in seconds)."""
+    from mappers import METHODS
+
+    used = METHODS[method].resolved_params(params)
+    if method == "covis-ensemble":
+        used = {"bin_widths": [w * tick for w in used.pop("windows")], **used,
+                "min_co": list(used["min_co"])}
+        used["power"] = 0.5 if used["power"] is None else used["power"]
+        used.pop("max_iter", None)
+    return used
+
+
+def map_mrclam_run(
+    run_dir: str | os.PathLike,
+    sensor: str = "visibility",
+    robots: Sequence[int] = ROBOT_SUBJECTS,
+    method: str | None = None,
+    anchors: Sequence[int] | None = None,
+    out: str | os.PathLike | None = None,
+    bin_width: float | None = None,
+    *,
+    groundtruth_fixes: str = "known",
+    plot: bool = True,
+    zero_fill: bool = False,
+    mode: str | None = None,
+    **params: Any,
+) -> MRCLAMMap:
+    """Map one MRCLAM run from one sensor and score it against motion capture.
+
+    The parameters map 1:1 onto ``lfmdr mrclam RUN_DIR --sensor SENSOR --robots 1,2,3,4,5
+    --method M --anchors S1,S2,S3,S4 --out DIR --bin-width SECONDS --zero-fill``.
+
+    Args:
+        run_dir: the run's directory.
+        sensor: ``"visibility"``, ``"bearing"`` or ``"range"`` (``mode=`` is the older name).
+        robots: robot subject numbers whose logs to use.
+        method: any registered method that maps the run's (masked) histories, e.g.
+            ``"covis-ensemble"`` (``bin_widths`` [s] and ``min_co`` sequences, ``member``,
+            ``power``), ``"covis-power"``, ``"range-quantile"``; a method for complete histories
+            with ``zero_fill``; ``"naive"`` = ``"SMA(UNWGT)"`` with ``zero_fill``; None =
+            :data:`DEFAULT_METHOD` of the sensor.
+        anchors: anchor landmark subject numbers; None = the 4 nearest the bounding-box corners.
+        out: directory for ``map.csv`` (subject, x, y of every landmark, anchors included, in
+            the ground-truth frame; written atomically) and ``map.png``; None writes nothing.
+        bin_width: seconds per bin; None = the loader's default for the sensor; must be None for
+            ``covis-ensemble``; given with ``method=None`` for visibility or bearing, the
+            ensemble's member method (``covis-power``) maps the run binned at that one width.
+        groundtruth_fixes: ``"known"`` / ``"detect"`` / ``"none"`` (see ``read_run``).
+        plot: write ``map.png`` (needs matplotlib) when ``out`` is given.
+        zero_fill: map the history with its unobserved entries as zeros and no mask (the paper's
+            pipeline on logged data), so methods for complete histories apply.
+        **params: the method's parameters (e.g. ``quantile=0.95``, ``min_co=5``).
+    """
+    from mappers import build_map
+
+    sensor = check_sensor(mode if mode is not None else sensor)
+    method, bin_width, params, alias_fill = _plan(sensor, method, bin_width, dict(params))
+    history, report = _load(run_dir, sensor, robots, bin_width, anchors, groundtruth_fixes)
+    if zero_fill or alias_fill:
+        history = dataclasses.replace(history, mask=None)
+    msgs = list(report.warnings)
+    result = build_map(history, history.anchor_ids, history.anchor_positions, method, **params)
+    run = history.meta["run"]
+    for w in result.warnings:
+        msgs.append(f"{run} ({sensor}, {result.method}): {w}")
+        warnings.warn(msgs[-1], MRCLAMDataWarning, stacklevel=2)
+    subjects = np.asarray(history.meta["subjects"], dtype=np.int64)
+    if result.unmapped:
+        msgs.append(f"{run} ({sensor}): subject(s) {subjects[list(result.unmapped)].tolist()} are "
+                    "unmapped (empty in map.csv) and not scored")
+        warnings.warn(msgs[-1], MRCLAMDataWarning, stacklevel=2)
+    mpe, moe, centroid_mpe = _scores(result.positions, history)
+    label = "naive" if alias_fill else result.method
+    outcome = MRCLAMMap(
+        run=str(run), sensor=sensor, method=label,
+        params={} if alias_fill else _reported_params(result.method, params, bin_width),
+        subjects=subjects, positions=result.positions, truth=history.object_positions,
+        anchor_subjects=tuple(int(s) for s in subjects[history.anchor_ids]), mpe=mpe, moe=moe,
+        centroid_mpe=centroid_mpe, warnings=tuple(msgs), report=report, history_meta=history.meta,
+    )
+    return outcome if out is None else _write(outcome, Path(out), plot)
+
+
+def _write(result: MRCLAMMap, out: Path, plot: bool) -> MRCLAMMap:
+    lines = ["subject,x,y"]
+    for s, (x, y) in zip(result.subjects, result.positions, strict=True):
+        lines.append(f"{int(s)},{'' if np.isnan(x) else f'{x:.6f}'},{'' if np.isnan(y) else f'{y:.6f}'}")
+    csv_path = out / "map.csv"
+    atomic_write_text(csv_path, "\n".join(lines) + "\n")
+    png_path = None
+    if plot:
+        from lfmdr_gym.experiments.figures import plot_estimate
+
+        png_path = out / "map.png"
+        anchors = np.flatnonzero(np.isin(result.subjects, result.anchor_subjects))
+        title = (f"{result.run} {result.sensor} ({result.method}): MPE {result.mpe:.2f} m, "
+                 f"MOE {result.moe:.1f} %")
+        if result.warnings:
+            first = result.warnings[0]
+            title += (f"\nWARNING ({len(result.warnings)}): {first[:80]}"
+                      f"{'...' if len(first) > 80 else ''}")
+        plot_estimate(result.positions, result.truth, anchors, png_path, title=title,
+                      labels=result.subjects)
+    return dataclasses.replace(result, csv_path=csv_path, png_path=png_path)

@@ -1,0 +1,235 @@
+"""The one registry of mapping methods: label -> :class:`MethodSpec`, and the default per input.
+
+Every method — the paper's ten (:mod:`mappers.methods`), CAL-SMA (:mod:`mappers.calibrated`),
+UNFOLD (:mod:`mappers.unfolding`), the methods for masked histories (:mod:`mappers.masked`,
+:mod:`mappers.ensemble`) and any a user registers — is a :class:`MethodSpec` in :data:`METHODS`.
+A spec says what the method accepts (which sensors, complete and/or masked histories); the
+pipeline, the protocol and the command line choose and check methods by the spec alone
+(:func:`resolve_method`).
+"""
+
+from __future__ import annotations
+
+import inspect
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from mappers.sensors import SENSORS, check_sensor
+
+__all__ = [
+    "DEFAULT_METHODS",
+    "HISTORY_KINDS",
+    "METHODS",
+    "MappingError",
+    "MethodSpec",
+    "methods_for",
+    "register_method",
+    "resolve_method",
+]
+
+HISTORY_KINDS: tuple[str, ...] = ("complete", "masked")
+"""``"complete"``: every entry is a measurement (a 0 is "not visible"); ``"masked"``: a boolean
+mask says which entries the sensor measured, the others are unknown."""
+
+
+class MappingError(ValueError):
+    """A method could not embed the data (eigenproblem failure, solver failure, ...)."""
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """One mapping method: its label, how to build it, its parameters and what it accepts.
+
+    ``factory(**params)`` returns an object with ``fit_transform(X, **inputs) -> (M, 2)``; the
+    parameters it accepts are the names in its signature (:attr:`parameters`). What
+    ``build_map`` passes as ``inputs`` follows from the flags below.
+
+    Attributes:
+        defaults: the default of each parameter (the paper's optimum for its methods).
+        grid: the parameter grid the protocol sweeps.
+        uses_anchors: the estimator takes ``anchor_ids`` (rows of X) and ``anchor_positions``
+            and holds them fixed, so its embedding is already in world coordinates.
+        sensors: the sensors whose histories it maps (None: any).
+        normalize: whether ``build_map`` divides each row by its norm first (paper eq. 7) unless
+            told otherwise; False for methods whose model needs the raw values (UNFOLD).
+        histories: the kinds of history it maps (:data:`HISTORY_KINDS`). A method that maps
+            masked histories receives ``mask`` (None for a complete history) and ``sensor``.
+        uses_timeline: the estimator takes ``timeline`` ((N, 2) ints: robot and tick of each
+            step, or None for one robot stepping once per tick) to group consecutive steps.
+    """
+
+    label: str
+    factory: Callable[..., Any]
+    defaults: Mapping[str, Any] = field(default_factory=dict)
+    grid: Mapping[str, Sequence[Any]] = field(default_factory=dict)
+    description: str = ""
+    uses_anchors: bool = False
+    sensors: tuple[str, ...] | None = None
+    normalize: bool = True
+    histories: tuple[str, ...] = ("complete",)
+    uses_timeline: bool = False
+
+    @property
+    def parameters(self) -> tuple[str, ...]:
+        """Names of the keyword parameters ``factory`` accepts."""
+        sig = inspect.signature(self.factory)
+        return tuple(
+            name
+            for name, p in sig.parameters.items()
+            if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+        )
+
+    def check_params(self, params: Mapping[str, Any]) -> None:
+        """ValueError naming any key of ``params`` that ``factory`` does not accept."""
+        unknown = sorted(set(params) - set(self.parameters))
+        if unknown:
+            raise ValueError(
+                f"unknown parameter(s) {unknown} for method {self.label!r}; "
+                f"it accepts {list(self.parameters)}"
+            )
+
+    def resolved_params(self, params: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        """Every parameter's value: the factory's own defaults, updated by ``defaults`` and then
+        by ``params`` (unknown names: ValueError)."""
+        params = dict(params or {})
+        self.check_params(params)
+        own = {name: p.default for name, p in inspect.signature(self.factory).parameters.items()
+               if p.default is not inspect.Parameter.empty}
+        return {**own, **self.defaults, **params}
+
+    def build(self, **params: Any) -> Any:
+        """The estimator with ``defaults`` updated by ``params`` (unknown names: ValueError)."""
+        return self.factory(**self.resolved_params(params))
+
+    @property
+    def takes_masks(self) -> bool:
+        return "masked" in self.histories
+
+    def accepts(self, sensor: str, masked: bool) -> bool:
+        """Whether the method maps ``sensor`` histories of that kind (masked or complete)."""
+        kind = "masked" if masked else "complete"
+        return (self.sensors is None or sensor in self.sensors) and kind in self.histories
+
+
+_METHODS: dict[str, MethodSpec] = {}
+_BUILTINS_LOADED = False
+
+
+def _load_builtins() -> None:
+    """Register the built-in methods once, in table order: the paper's ten (its Table 1), ours
+    for complete histories, then those for masked histories. Done on first use of the registry,
+    so that ``import mappers`` (and the world, which imports the sensor vocabulary) stays light."""
+    global _BUILTINS_LOADED
+    if _BUILTINS_LOADED:
+        return
+    _BUILTINS_LOADED = True
+    from mappers import calibrated, ensemble, masked, methods, unfolding
+
+    for spec in (*methods.SPECS, calibrated.SPEC, unfolding.SPEC, *masked.SPECS, ensemble.SPEC):
+        _METHODS.setdefault(spec.label, spec)
+
+
+class _Registry(Mapping[str, MethodSpec]):
+    """Read-only view of the registered methods, in registration order (use register_method)."""
+
+    def __getitem__(self, label: str) -> MethodSpec:
+        _load_builtins()
+        return _METHODS[label]
+
+    def __iter__(self) -> Iterator[str]:
+        _load_builtins()
+        return iter(list(_METHODS))
+
+    def __len__(self) -> int:
+        _load_builtins()
+        return len(_METHODS)
+
+    def __repr__(self) -> str:
+        return f"METHODS({list(self)})"
+
+
+METHODS: Mapping[str, MethodSpec] = _Registry()
+"""Label -> :class:`MethodSpec`, in registration order (read-only view; use register_method)."""
+
+DEFAULT_METHODS: dict[tuple[str, bool], str] = {
+    ("visibility", False): "CAL-SMA",
+    ("bearing", False): "CAL-SMA",
+    ("range", False): "UNFOLD",
+    ("visibility", True): "covis-nonmetric",
+    ("bearing", True): "covis-nonmetric",
+    ("range", True): "range-quantile",
+}
+"""(sensor, masked) -> the label ``build_map`` uses when no method is given. The measured
+figures behind each choice are in the README and ``benchmarks/``."""
+
+
+def register_method(spec: MethodSpec, *, replace: bool = False) -> MethodSpec:
+    """Add ``spec`` to :data:`METHODS` (ValueError if the label exists, unless ``replace``)."""
+    _load_builtins()
+    if not isinstance(spec, MethodSpec):
+        raise ValueError(f"spec must be a MethodSpec, got {type(spec).__name__}")
+    if not isinstance(spec.label, str) or not spec.label:
+        raise ValueError("spec.label must be a non-empty string")
+    if not callable(spec.factory):
+        raise ValueError(f"spec.factory of {spec.label!r} is not callable")
+    if spec.label in _METHODS and not replace:
+        raise ValueError(f"method {spec.label!r} is already registered (pass replace=True)")
+    if spec.sensors is not None and (
+        isinstance(spec.sensors, str) or not spec.sensors or not set(spec.sensors) <= set(SENSORS)
+    ):
+        raise ValueError(
+            f"{spec.label!r}: sensors must be None or a non-empty tuple of {SENSORS}, "
+            f"got {spec.sensors!r}"
+        )
+    if (isinstance(spec.histories, str) or not spec.histories
+            or not set(spec.histories) <= set(HISTORY_KINDS)):
+        raise ValueError(
+            f"{spec.label!r}: histories must be a non-empty tuple of {HISTORY_KINDS}, "
+            f"got {spec.histories!r}"
+        )
+    for what, names in (("defaults", spec.defaults), ("grid", spec.grid)):
+        unknown = sorted(set(names) - set(spec.parameters))
+        if unknown:
+            raise ValueError(f"{spec.label!r}: {what} name(s) {unknown} not accepted by factory")
+    _METHODS[spec.label] = spec
+    return spec
+
+
+def methods_for(sensor: str | None = None, masked: bool | None = None) -> tuple[str, ...]:
+    """Labels of the registered methods that map ``sensor`` histories of that kind (None: any)."""
+    _load_builtins()
+    return tuple(
+        label for label, spec in _METHODS.items()
+        if (sensor is None or spec.sensors is None or sensor in spec.sensors)
+        and (masked is None or ("masked" if masked else "complete") in spec.histories)
+    )
+
+
+def resolve_method(method: str | None, sensor: str, masked: bool = False) -> MethodSpec:
+    """The spec of ``method`` (a label, matched case-insensitively; None = the default for
+    ``sensor`` and the kind of history) if it maps such histories, else a ValueError that lists
+    the labels which do."""
+    check_sensor(sensor)
+    kind = "masked" if masked else "complete"
+    fits = methods_for(sensor, masked)  # loads the built-ins
+    if method is None:
+        method = DEFAULT_METHODS.get((sensor, bool(masked)))
+        if method is None or method not in _METHODS:
+            raise ValueError(f"no default method for {kind} {sensor} histories; choose from {list(fits)}")
+    if not isinstance(method, str):
+        raise ValueError(f"method must be a label (str) or None, got {method!r}")
+    label = method if method in _METHODS else {k.lower(): k for k in _METHODS}.get(method.strip().lower())
+    if label is None:
+        raise ValueError(f"unknown method {method!r}; methods for {kind} {sensor} histories: {list(fits)}")
+    spec = _METHODS[label]
+    if spec.sensors is not None and sensor not in spec.sensors:
+        raise ValueError(
+            f"method {label!r} maps {' and '.join(spec.sensors)} histories only: it does not map "
+            f"{sensor} histories; methods for {kind} {sensor} histories: {list(fits)}"
+        )
+    if kind not in spec.histories:
+        raise ValueError(
+            f"method {label!r} does not map {kind} {sensor} histories; methods that do: {list(fits)}"
+        )
+    return spec

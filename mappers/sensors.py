@@ -1,0 +1,115 @@
+"""The sensor vocabulary: which kinds of history exist and how their columns are laid out.
+
+Defined once here; the world (``lfmdr_gym``), the registry of methods, the protocol and the
+command line all take their sensor names from :data:`SENSORS`.
+
+A history has one row per object and, per step, ``COLUMNS_PER_STEP[sensor]`` columns in step
+order: visibility one 0/1 column (paper §4.3.1), bearing the ``(cos, sin)`` pair of the bearing
+relative to the heading (paper §4.4.1), range one distance (paper §6, "range-only mapping").
+An optional boolean mask of the same shape marks the entries the sensor actually measured, and
+an optional *timeline* ((N, 2) integers) says which robot took each step and at which tick of its
+clock, for logged data of several robots binned in time.
+"""
+
+from __future__ import annotations
+
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "COLUMNS_PER_STEP",
+    "SENSORS",
+    "check_sensor",
+    "check_timeline",
+    "infer_sensor",
+    "step_observations",
+]
+
+SENSORS: tuple[str, ...] = ("visibility", "bearing", "range")
+"""The kinds of history, in the order tables and listings use."""
+
+COLUMNS_PER_STEP = MappingProxyType({"visibility": 1, "bearing": 2, "range": 1})
+"""Matrix columns one step contributes, per sensor."""
+
+def check_sensor(sensor: object, *, allow_none: bool = False) -> str | None:
+    """``sensor`` if it names a sensor of :data:`SENSORS` (or is None when allowed), else a
+    ValueError listing the sensors."""
+    if sensor is None and allow_none:
+        return None
+    if not isinstance(sensor, str) or sensor not in SENSORS:
+        extra = " or None" if allow_none else ""
+        raise ValueError(f"sensor must be one of {list(SENSORS)}{extra}, got {sensor!r}")
+    return sensor
+
+
+def check_timeline(timeline: Any, n_steps: int) -> np.ndarray | None:
+    """A validated (N, 2) int64 timeline (robot, tick per step), or None; else ValueError."""
+    if timeline is None:
+        return None
+    tl = np.asarray(timeline)
+    if tl.shape != (n_steps, 2) or not np.issubdtype(tl.dtype, np.integer):
+        raise ValueError(f"timeline must be an ({n_steps}, 2) integer array (robot, tick per step), "
+                         f"got {tl.dtype} {tl.shape}")
+    if n_steps and tl.min() < 0:
+        raise ValueError("timeline holds negative robots or ticks")
+    return tl.astype(np.int64)
+
+
+def infer_sensor(X: np.ndarray, mask: np.ndarray | None = None) -> str:
+    """Guess the sensor of a history matrix from its observed entries.
+
+    All entries 0/1 -> "visibility"; an even number of columns whose (cos, sin) pairs are unit
+    vectors (all-zero pairs ignored) -> "bearing"; anything else -> "range".
+    """
+    X = np.asarray(X, dtype=float)
+    observed = X if mask is None else X[mask]
+    if np.all((observed == 0) | (observed == 1)):
+        return "visibility"
+    if X.shape[1] % 2 == 0:
+        c, s = X[:, 0::2], X[:, 1::2]
+        pair_seen = (
+            np.ones(c.shape, dtype=bool) if mask is None else (mask[:, 0::2] & mask[:, 1::2])
+        )
+        r2 = c**2 + s**2
+        nonzero = pair_seen & (r2 > 0)
+        if nonzero.any() and np.allclose(r2[nonzero], 1.0, atol=1e-4):
+            return "bearing"
+    return "range"
+
+
+def step_observations(
+    X: np.ndarray, mask: np.ndarray | None, sensor: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per-step view of a (possibly masked) history matrix.
+
+    Returns ``(seen, values)``: ``seen`` (M, N) bool, True where the object was sensed in the
+    step; ``values`` (M, N) float: the 0/1 visibility, the bearing angle [rad] or the range [m]
+    (NaN where not sensed). A visibility 0, an unmasked range of 0 and a bearing pair (0, 0)
+    count as not sensed.
+    """
+    check_sensor(sensor)
+    columns = COLUMNS_PER_STEP[sensor]
+    X = np.asarray(X, dtype=float)
+    if X.ndim != 2 or X.shape[1] % columns:
+        raise ValueError(f"X must be (M, N*{columns}) for {sensor!r}, got {X.shape}")
+    if mask is not None:
+        mask = np.asarray(mask)
+        if mask.dtype != np.bool_ or mask.shape != X.shape:
+            raise ValueError(
+                f"mask must be a bool array of shape {X.shape}, got {mask.dtype} {mask.shape}"
+            )
+    Xf = np.where(np.isfinite(X), X, 0.0)
+    if sensor == "bearing":
+        c, s = Xf[:, 0::2], Xf[:, 1::2]
+        seen = (c != 0) | (s != 0)
+        if mask is not None:
+            seen &= mask[:, 0::2] & mask[:, 1::2]
+        values = np.where(seen, np.arctan2(s, c), np.nan)
+    else:
+        seen = Xf > 0 if mask is None else (mask & np.isfinite(X))
+        if sensor == "visibility":
+            seen &= Xf > 0
+        values = np.where(seen, Xf, np.nan)
+    return seen, values
