@@ -11,7 +11,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import lfmdr_gym  # noqa: F401  (registers the ids)
-from lfmdr_gym import sensors
+from lfmdr_gym import recording, sensors
 from lfmdr_gym.env import LFMDREnv
 
 EVERY_LIMIT = {
@@ -215,3 +215,74 @@ def test_make_with_keywords():
 def test_bad_keywords_refused_with_the_name(kwargs, name):
     with pytest.raises(ValueError, match=name):
         LFMDREnv(**kwargs)
+
+
+# ----------------------------------------------------------------------------- the observed set end to end
+def _expected_mask(env_kwargs, sensor, n_steps, seed):
+    """The mask a history should carry: the env's "observed" flags after each move, per column."""
+    env = LFMDREnv(sensor, **env_kwargs)
+    policy = lfmdr_gym.RandomWalkPolicy()
+    obs, _ = env.reset(seed=seed)
+    policy.reset(seed=recording._policy_seed(seed))
+    flags = []
+    for _ in range(n_steps):
+        obs, *_ = env.step(policy(obs))
+        flags.append(obs["observed"].astype(bool))
+    return np.repeat(np.array(flags).T, 2 if sensor == "bearing" else 1, axis=1)
+
+
+@pytest.mark.parametrize("sensor", ["visibility", "bearing", "range"])
+def test_collect_puts_observed_into_the_mask(sensor, tmp_path):
+    kwargs = EVERY_LIMIT[sensor]
+    history = lfmdr_gym.collect(lfmdr_gym.env_id_for(sensor), lfmdr_gym.RandomWalkPolicy(), 120,
+                                seed=4, make_kwargs=kwargs)
+    assert history.mask is not None and history.mask.shape == history.matrix.shape
+    np.testing.assert_array_equal(history.mask, _expected_mask(kwargs, sensor, 120, 4))
+    assert not history.matrix[~history.mask].any()  # unobserved entries read 0
+    assert 0 < history.mask.mean() < 1
+    assert history.meta["env_kwargs"]["fov_deg"] == 90.0  # the settings travel with the history
+    loaded = lfmdr_gym.History.load(history.save(tmp_path / "h.npz"))
+    np.testing.assert_array_equal(loaded.mask, history.mask)
+    np.testing.assert_array_equal(loaded.matrix, history.matrix)
+    assert loaded.meta == history.meta
+
+
+def test_collect_without_limits_has_no_mask():
+    history = lfmdr_gym.collect("LFMDR-Bearing-v0", lfmdr_gym.RandomWalkPolicy(), 30, seed=1)
+    assert history.mask is None
+
+
+def _steer(obs):
+    """A deterministic, batch-aware policy (turn toward the freer side), as in test_history."""
+    prox = np.asarray(obs["proximity"], dtype=np.float32)
+    n = prox.shape[-1]
+    return (0.7 * np.tanh(4.0 * (prox[..., n // 4] - prox[..., 3 * n // 4]))).astype(np.float32)
+
+
+@pytest.mark.parametrize("mode", ["NextStep", "SameStep", "Disabled"])
+def test_masks_survive_make_vec(mode):
+    kwargs, n = EVERY_LIMIT["bearing"], 40
+    envs = gym.make_vec("LFMDR-Bearing-v0", num_envs=2, max_episode_steps=n,
+                        vector_kwargs={"autoreset_mode": mode}, **kwargs)
+    histories = lfmdr_gym.collect_vector(envs, _steer, n, seed=7, n_episodes=2)
+    envs.close()
+    assert len(histories) == 4
+    for i in range(2):  # sub-env i: a seeded episode, then one continuing its random streams
+        env = gym.make("LFMDR-Bearing-v0", max_episode_steps=n, **kwargs)
+        singles = [lfmdr_gym.collect(env, _steer, n, seed=7 + i), lfmdr_gym.collect(env, _steer, n)]
+        for h, single in zip(histories[2 * i: 2 * i + 2], singles, strict=True):
+            assert h.mask is not None and 0 < h.mask.mean() < 1
+            np.testing.assert_array_equal(h.mask, single.mask)
+            np.testing.assert_array_equal(h.matrix, single.matrix)
+
+
+def test_build_map_maps_a_masked_history_with_the_masked_default():
+    from mappers import DEFAULT_METHODS, build_map, mean_position_error
+
+    history = lfmdr_gym.collect("LFMDR-Bearing-v0", lfmdr_gym.RandomWalkPolicy(), 1500, seed=2,
+                                make_kwargs=dict(fov_deg=90.0, max_range=1.5, bearing_noise_deg=2.0))
+    m = build_map(history, history.anchor_ids, history.anchor_positions)
+    assert m.method == DEFAULT_METHODS[("bearing", True)]
+    exclude = sorted({*history.anchor_ids.tolist(), *m.unmapped})
+    error = mean_position_error(m.positions, history.object_positions, exclude)
+    assert len(m.unmapped) < 5 and error < 0.3  # a map, not noise: the arena is 2.5 m wide
