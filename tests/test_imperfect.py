@@ -286,3 +286,15 @@ def test_build_map_maps_a_masked_history_with_the_masked_default():
     exclude = sorted({*history.anchor_ids.tolist(), *m.unmapped})
     error = mean_position_error(m.positions, history.object_positions, exclude)
     assert len(m.unmapped) < 5 and error < 0.3  # a map, not noise: the arena is 2.5 m wide
+
+
+def test_limited_camera_example(tmp_path, capsys):
+    import runpy
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "examples" / "limited_camera.py"
+    history = runpy.run_path(str(script))["main"](["--steps", "800", "--out", str(tmp_path / "m.png")])
+    out = capsys.readouterr().out
+    assert history.mask is not None and (tmp_path / "m.png").is_file()
+    mpe = float(out.split("MPE ")[1].split(" m")[0])
+    assert 0 < mpe < 0.3 and "objects per step" in out
