@@ -127,9 +127,10 @@ class SensingLimits:
         if self.max_range is not None:
             seen &= np.sqrt(d2) <= self.max_range
         if self.line_of_sight:
-            # the visibility test with no distance limit: every object a target and an occluder
+            # the visibility test, every object an occluder; targets only within max_range
+            reach2 = math.inf if self.max_range is None else self.max_range * self.max_range
             clear = sensors.visibility_kernel(self.n_objects, np.arange(self.n_objects), rel, d2,
-                                              math.inf, d2 - self.r2, True)
+                                              reach2, d2 - self.r2, True)
             seen &= clear.astype(bool)
         return seen
 

@@ -95,13 +95,16 @@ def test_field_of_view_and_range_against_brute_force(sensor, fov, max_range):
     assert 0 < np.mean(counts) < 50  # the limits bite, and something is seen
 
 
-@pytest.mark.parametrize("sensor", ["bearing", "range"])
-def test_line_of_sight_against_brute_force(sensor):
+@pytest.mark.parametrize(("sensor", "max_range"), [("bearing", None), ("range", None),
+                                                   ("bearing", 1.0)])
+def test_line_of_sight_against_brute_force(sensor, max_range):
     # a dense layout, so that objects hide each other often
-    env = LFMDREnv(sensor, n_objects=120, object_clearance=0.02, line_of_sight=True)
+    env = LFMDREnv(sensor, n_objects=120, object_clearance=0.02, line_of_sight=True,
+                   max_range=max_range)
     hidden = 0
     for obs, info in _rollout(env, 40):
-        expect = _brute_clear(info["robot_pose"], info["object_positions"], 0.024)
+        pose, objects = info["robot_pose"], info["object_positions"]
+        expect = _brute_clear(pose, objects, 0.024) & _brute_in_view(pose, objects, 360.0, max_range)
         np.testing.assert_array_equal(obs["observed"], expect.astype(np.int8))
         hidden += (~expect).sum()
     assert hidden > 0
