@@ -372,6 +372,7 @@ class LFMDREnv(gym.Env):
             sensor=self._key,
             reading=obs.get(self._key),
             proximity=obs.get("proximity"),
+            observed=obs.get("observed"),
         )
         if self.render_mode == "rgb_array":
             return frame
