@@ -183,7 +183,8 @@ class LFMDREnv(gym.Env):
 
     ## Version History
 
-    - v0: initial version.
+    - v0: initial version; the imperfect-sensing keywords came later, off by default (the
+      observations without them are unchanged).
     """
 
     # "human" is offered only where it can work (pygame and a display), so that Gymnasium's
