@@ -66,7 +66,8 @@ class SensingLimits:
             bound of 10 standard deviations past the largest true range never happens in practice
             and at 0 keeps the reading a distance.
         miss_rate: probability that a visible object is reported not visible.
-        false_rate: probability that an object that is not visible is reported visible.
+        false_rate: probability that an object inside the view and range that is not visible
+            (too far to see, or occluded) is reported visible.
         line_of_sight: occlusion for bearing and range: an object is observed only if the
             segment from the robot's centre to its centre passes no nearer than r to another
             object's centre (the visibility sensor's ``occlusion`` test).
