@@ -128,10 +128,17 @@ class SensingLimits:
         if self.max_range is not None:
             seen &= np.sqrt(d2) <= self.max_range
         if self.line_of_sight:
-            # the visibility test, every object an occluder; targets only within max_range
-            reach2 = math.inf if self.max_range is None else self.max_range * self.max_range
-            clear = sensors.visibility_kernel(self.n_objects, np.arange(self.n_objects), rel, d2,
-                                              reach2, d2 - self.r2, True)
+            # The visibility test with targets within max_range (if any). An occluder of a
+            # target at distance d lies within sqrt(d^2 + r^2) (see sensors), so only objects
+            # that near are candidates: the cost scales with the objects in range, not with M.
+            if self.max_range is None:
+                cand, reach2 = np.arange(self.n_objects), math.inf
+            else:
+                reach2 = self.max_range * self.max_range
+                cand = (d2 < reach2 + self.r2).nonzero()[0]
+            dc2 = d2.take(cand)
+            clear = sensors.visibility_kernel(self.n_objects, cand, rel.take(cand, axis=0), dc2,
+                                              reach2, dc2 - self.r2, True)
             seen &= clear.astype(bool)
         return seen
 
