@@ -1,0 +1,147 @@
+"""Tests of the online mapper (mappers.online, issue 14)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mappers import OnlineMapper, build_map, mean_position_error
+from mappers.calibrated import history_dissimilarity
+from mappers.online import gram_dissimilarity
+
+HALF = 1.25
+
+
+def _world(seed: int, m: int = 30):
+    rng = np.random.default_rng(seed)
+    pts = []
+    while len(pts) < m:
+        p = rng.uniform(-HALF + 0.15, HALF - 0.15, 2)
+        if all(np.hypot(*(p - q)) >= 0.25 for q in pts):
+            pts.append(p)
+    pts = np.array(pts)
+    ids = []
+    for c in ([-HALF, -HALF], [HALF, -HALF], [HALF, HALF], [-HALF, HALF]):
+        d = np.hypot(*(pts - np.array(c)).T)
+        d[ids] = np.inf
+        ids.append(int(np.argmin(d)))
+    return pts, np.array(ids), rng
+
+
+def _histories(pts, sensor, n, rng):
+    """A robot at random poses; visibility within 0.6 m, or the bearing relative to the heading."""
+    robot = rng.uniform(-HALF, HALF, (n, 2))
+    d = pts[:, None, :] - robot[None, :, :]
+    if sensor == "visibility":
+        return (np.hypot(d[..., 0], d[..., 1]) < 0.6).astype(float)
+    ang = np.arctan2(d[..., 1], d[..., 0]) - rng.uniform(-np.pi, np.pi, n)[None, :]
+    X = np.empty((len(pts), 2 * n))
+    X[:, 0::2], X[:, 1::2] = np.cos(ang), np.sin(ang)
+    return X
+
+
+@pytest.mark.parametrize("sensor", ["visibility", "bearing"])
+def test_gram_dissimilarity_matches_history_dissimilarity(sensor):
+    pts, _, rng = _world(1)
+    X = _histories(pts, sensor, 300, rng)
+    X = X[np.any(X != 0, axis=1)]
+    Y = X / np.linalg.norm(X, axis=1, keepdims=True)
+    ref, kind = history_dissimilarity(Y)
+    assert np.allclose(gram_dissimilarity(X @ X.T, X.shape[1], kind), ref, atol=1e-10)
+
+
+@pytest.mark.parametrize("sensor", ["visibility", "bearing"])
+def test_one_update_is_build_map(sensor):
+    pts, ids, rng = _world(2)
+    X = _histories(pts, sensor, 400, rng)
+    online = OnlineMapper(ids, pts[ids], sensor=sensor).update(X)
+    offline = build_map(X, ids, pts[ids], sensor=sensor)
+    assert online.method == offline.method == "CAL-SMA"
+    assert online.unmapped == offline.unmapped
+    assert np.allclose(online.positions, offline.positions, atol=1e-8, equal_nan=True)
+
+
+@pytest.mark.parametrize("sensor", ["visibility", "bearing"])
+def test_batches_track_build_map(sensor):
+    pts, ids, rng = _world(3)
+    X = _histories(pts, sensor, 600, rng)
+    cols = 1 if sensor == "visibility" else 2
+    om = OnlineMapper(ids, pts[ids], sensor=sensor)
+    for s in range(0, 600, 20):
+        current = om.update(X[:, s * cols:(s + 20) * cols])
+    assert om.n_steps == 600 and om.n_full_fits >= 1
+    keep = np.setdiff1d(np.arange(len(pts)), ids)
+    offline = build_map(X, ids, pts[ids], sensor=sensor)
+    err_on = mean_position_error(current.positions[keep], pts[keep])
+    err_off = mean_position_error(offline.positions[keep], pts[keep])
+    assert err_on <= 1.25 * err_off + 0.01
+    assert np.allclose(current.positions[ids], pts[ids])
+
+
+def test_early_updates_map_nothing_and_say_why():
+    pts, ids, _ = _world(4)
+    om = OnlineMapper(ids, pts[ids], sensor="visibility")
+    result = om.update(np.zeros((len(pts), 5)))
+    assert len(result.unmapped) == len(pts) and np.isnan(result.positions).all()
+    assert "sensed" in result.warnings[0]
+
+
+def test_sensor_inferred_once_something_is_sensed():
+    pts, ids, rng = _world(5)
+    X = _histories(pts, "bearing", 300, rng)
+    om = OnlineMapper(ids, pts[ids])
+    om.update(np.zeros((len(pts), 4)))  # two steps with nothing sensed: held back
+    result = om.update(X)
+    assert om.sensor == "bearing" and om.n_steps == 302
+    assert not result.unmapped
+
+
+@pytest.mark.slow
+def test_masked_histories_refit_with_their_method():
+    pts, ids, rng = _world(6)
+    X = _histories(pts, "visibility", 400, rng)
+    mask = rng.random(X.shape) < 0.7
+    om = OnlineMapper(ids, pts[ids], sensor="visibility", refit_growth=1.5)
+    maps = [om.update(X[:, s:s + 50], mask[:, s:s + 50]) for s in range(0, 400, 50)]
+    assert not om.incremental and maps[-1].method == "covis-nonmetric"
+    offline = build_map(X, ids, pts[ids], sensor="visibility", mask=mask)
+    assert om.n_full_fits >= 3 and om._last_full == om.n_steps == 400
+    assert np.allclose(maps[-1].positions, offline.positions, equal_nan=True)
+    stale = [m for m in maps if any("online map of the first" in w for w in m.warnings)]
+    assert stale  # between refits the last map is returned, and says so
+
+
+@pytest.mark.parametrize("bad, match", [
+    (np.zeros(30), "2-D"),
+    (np.zeros((30, 0)), "at least one column"),
+    (np.zeros((29, 4)), "30 rows"),
+    (np.zeros((30, 3)), "groups of 2"),
+    (np.full((30, 2), np.nan), "NaN"),
+])
+def test_bad_column_shapes_refused(bad, match):
+    pts, ids, rng = _world(7)
+    om = OnlineMapper(ids, pts[ids], sensor="bearing")
+    om.update(_histories(pts, "bearing", 10, rng))
+    with pytest.raises(ValueError, match=match):
+        om.update(bad)
+
+
+def test_bad_arguments_refused():
+    pts, ids, rng = _world(8)
+    with pytest.raises(ValueError, match="refit_growth"):
+        OnlineMapper(ids, pts[ids], refit_growth=1.0)
+    with pytest.raises(ValueError, match="warm_rounds"):
+        OnlineMapper(ids, pts[ids], warm_rounds=0)
+    with pytest.raises(ValueError, match="anchor_positions"):
+        OnlineMapper(ids, pts[ids][:2])
+    om = OnlineMapper(ids, pts[ids], sensor="visibility")
+    X = _histories(pts, "visibility", 50, rng)
+    with pytest.raises(ValueError, match="mask"):
+        om.update(X, np.ones(X.shape, dtype=int))
+    om.update(X)
+    with pytest.raises(ValueError, match="first update"):
+        om.update(X, rng.random(X.shape) < 0.5)
+    with pytest.raises(ValueError, match="unknown parameter"):
+        OnlineMapper(ids, pts[ids], sensor="visibility", bogus=1).update(X)
+    with pytest.raises(ValueError, match="anchor"):
+        OnlineMapper([0, 1, 99], pts[[0, 1, 2]], sensor="visibility").update(X)
