@@ -178,16 +178,19 @@ def _add_map(sub: Any) -> None:
 def _add_collect(sub: Any) -> None:
     p = sub.add_parser(
         "collect", formatter_class=_Formatter,
-        help="record one random-walk episode as a history file and summarise it",
+        help="record one episode as a history file and summarise it",
         description=_text(
-            "Run one episode with the paper's random-walk agent and save what the robot sensed "
-            "(and the ground truth for scoring) as a History .npz; print a summary."
+            "Run one episode with an exploration policy (default: the paper's random walk) and "
+            "save what the robot sensed (and the ground truth for scoring) as a History .npz; "
+            "print a summary."
         ),
     )
     p.add_argument("--env", default="LFMDR-Visibility-v0", metavar="ID", help="environment id")
     p.add_argument("--steps", type=_positive_int, default=2000, help="episode length N")
     p.add_argument("--seed", type=int, default=0, help="seed of layout, start pose and walk")
     p.add_argument("--out", required=True, metavar="FILE.npz", help="history file to write")
+    p.add_argument("--policy", default="random-walk", metavar="NAME",
+                   help="exploration policy, a name of lfmdr_gym.POLICIES (random-walk, coverage)")
     p.set_defaults(handler=_cmd_collect)
 
 
@@ -322,7 +325,7 @@ def _cmd_map(args: argparse.Namespace) -> int:
 def _cmd_collect(args: argparse.Namespace) -> int:
     from lfmdr_gym.experiments.episodes import collect_history, describe_history
 
-    history = collect_history(args.env, args.steps, args.seed, out=args.out)
+    history = collect_history(args.env, args.steps, args.seed, out=args.out, policy=args.policy)
     print(describe_history(history))
     print(f"wrote {args.out}")
     return 0
