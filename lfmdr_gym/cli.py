@@ -154,6 +154,12 @@ def _add_run(sub: Any) -> None:
                    help="checkpoint interval; must divide --steps (default: 500 for visibility, "
                         "200 otherwise, plus N itself)")
     p.add_argument("--out", default="lfmdr-run", metavar="DIR", help="output directory")
+    p.add_argument("--online", action="store_true",
+                   help="map online as the robot moves (mappers.OnlineMapper, updated every 10 "
+                        "steps) and write the growing map beside the robot as DIR/live.gif "
+                        "(needs matplotlib: pip install lfmdr[plots])")
+    p.add_argument("--policy", default="random-walk", metavar="NAME",
+                   help="exploration policy, a name of lfmdr_gym.POLICIES (random-walk, coverage)")
     p.set_defaults(handler=_cmd_run)
 
 
@@ -294,11 +300,37 @@ def _print_scores(rows: Sequence[dict[str, Any]]) -> None:
 def _cmd_run(args: argparse.Namespace) -> int:
     from lfmdr_gym.experiments.mapping import run_episode
 
+    if args.online:
+        return _cmd_run_online(args)
     rows = run_episode(args.env, args.steps, args.method, seed=args.seed, every=args.every,
-                       params=args.param, out=args.out)
+                       params=args.param, out=args.out, policy=args.policy)
     print(f"{args.env}, seed {args.seed}, {rows[-1]['method']} ({rows[-1]['param']})")
     _print_scores(rows)
     print(f"wrote {args.out}/history.npz, scores.csv, map.csv, map.png")
+    return 0
+
+
+def _cmd_run_online(args: argparse.Namespace) -> int:
+    from lfmdr_gym.experiments.live import online_episode, save_gif
+    from lfmdr_gym.experiments.mapping import _sensor_of, checkpoints_for
+    from lfmdr_gym.experiments.params import user_params
+    from lfmdr_gym.experiments.store import ensure_writable_dir
+    from mappers import resolve_method
+
+    sensor = _sensor_of(args.env)
+    points = set(checkpoints_for(args.steps, args.every, sensor))
+    out = ensure_writable_dir(args.out)
+    label = resolve_method(args.method, sensor).label
+    frames, rows, _ = online_episode(args.env, args.steps, seed=args.seed, policy=args.policy,
+                                     method=args.method, params=user_params(label, args.param),
+                                     frame_every=max(args.steps // 50, 1))
+    print(f"{args.env}, seed {args.seed}, policy {args.policy}, online {label}")
+    print(f"{'steps':>6s} {'MPE non-anchor [m]':>19s} {'mapped':>7s}")
+    for r in rows:
+        if r["n_steps"] in points:
+            print(f"{r['n_steps']:6d} {r['mpe']:19.4f} {r['mapped']:7d}")
+    path = save_gif(frames, rows, out / "live.gif", title=f"{args.env} ({args.policy})")
+    print(f"wrote {path}")
     return 0
 
 

@@ -145,3 +145,36 @@ def test_bad_arguments_refused():
         OnlineMapper(ids, pts[ids], sensor="visibility", bogus=1).update(X)
     with pytest.raises(ValueError, match="anchor"):
         OnlineMapper([0, 1, 99], pts[[0, 1, 2]], sensor="visibility").update(X)
+
+
+# ----------------------------------------------------------------------------- live maps
+def test_online_episode_frames_and_gif(tmp_path):
+    pytest.importorskip("matplotlib")
+    from PIL import Image
+
+    from lfmdr_gym.experiments.live import online_episode, save_gif
+
+    frames, rows, final = online_episode("LFMDR-Bearing-v0", 60, seed=2, every=10,
+                                         frame_every=20, size=96)
+    assert [t for t, _ in frames] == [20, 40, 60]
+    assert frames[0][1].shape == (96, 192, 3) and frames[0][1].dtype == np.uint8
+    assert [r["n_steps"] for r in rows] == [10, 20, 30, 40, 50, 60]
+    assert rows[-1]["mapped"] == 50 and 0 < rows[-1]["mpe"] < 1.0
+    assert final.method == "CAL-SMA"
+    path = save_gif(frames, rows, tmp_path / "live.gif")
+    with Image.open(path) as im:
+        assert im.n_frames == 3
+    with pytest.raises(ValueError, match="gif"):
+        save_gif(frames, rows, tmp_path / "live.mp4")
+    with pytest.raises(ValueError, match="every"):
+        online_episode("LFMDR-Bearing-v0", 60, every=0)
+
+
+def test_cli_run_online(tmp_path, capsys):
+    pytest.importorskip("matplotlib")
+    from lfmdr_gym.cli import main
+
+    assert main(["run", "--online", "--env", "LFMDR-Bearing-v0", "--steps", "40", "--every",
+                 "20", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "online CAL-SMA" in out and (tmp_path / "live.gif").exists()
