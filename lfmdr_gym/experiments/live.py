@@ -21,9 +21,12 @@ __all__ = ["online_episode", "save_gif"]
 
 def online_episode(env_id: str, steps: int, *, seed: int | None = 0, policy: str = "random-walk",
                    method: str | None = None, params: dict[str, Any] | None = None,
-                   every: int = 10, frame_every: int = 20, size: int = 240):
-    """Run one episode of ``env_id`` with the policy named ``policy``, updating an online map
-    every ``every`` steps; a frame (arena | map) every ``frame_every`` steps.
+                   every: int = 10, frame_every: int = 20, size: int = 240,
+                   env_kwargs: dict[str, Any] | None = None):
+    """Run one episode of ``env_id`` (with the env keywords ``env_kwargs``) with the policy
+    named ``policy``, updating an online map every ``every`` steps; a frame (arena | map) every
+    ``frame_every`` steps. An env that reports what it measured (``"observed"``, imperfect
+    sensing) gives a masked history, mapped by the masked default (or ``method``).
 
     Returns ``(frames, rows, final_map)``: the (H, 2W, 3) uint8 frames, one dict per update
     (``n_steps``, ``mpe``: mean position error of the non-anchor objects mapped so far [m],
@@ -39,7 +42,7 @@ def online_episode(env_id: str, steps: int, *, seed: int | None = 0, policy: str
             raise ValueError(f"{name} must be a positive integer, got {value!r}")
     if policy not in POLICIES:
         raise ValueError(f"unknown policy {policy!r}; choose from {list(POLICIES)}")
-    env = make_env(env_id, steps, {"render_mode": "rgb_array"})
+    env = make_env(env_id, steps, {**dict(env_kwargs or {}), "render_mode": "rgb_array"})
     try:
         obs, info = env.reset(seed=seed)
         world = env.unwrapped.world
@@ -51,15 +54,19 @@ def online_episode(env_id: str, steps: int, *, seed: int | None = 0, policy: str
         mapper = mappers.OnlineMapper(anchors, truth[anchors], sensor=sensor, method=method,
                                       **dict(params or {}))
         keep = np.setdiff1d(np.arange(len(truth)), anchors)
-        frames, rows, batch, current = [], [], [], None
+        frames, rows, batch, seen, current = [], [], [], [], None
         for t in range(1, steps + 1):
             obs, _, _, _, _ = env.step(agent(obs))
             batch.append(np.asarray(obs[sensor], dtype=float).reshape(len(truth), -1))
+            if "observed" in obs:  # one flag per object and step covers the step's columns
+                flags = np.asarray(obs["observed"], dtype=bool)[:, None]
+                seen.append(np.repeat(flags, batch[-1].shape[1], axis=1))
             if t % every == 0 or t == steps:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    current = mapper.update(np.concatenate(batch, axis=1))
-                batch = []
+                    current = mapper.update(np.concatenate(batch, axis=1),
+                                            np.concatenate(seen, axis=1) if seen else None)
+                batch, seen = [], []
                 ok = keep[np.all(np.isfinite(current.positions[keep]), axis=1)]
                 mpe = (mappers.mean_position_error(current.positions[ok], truth[ok])
                        if ok.size else float("nan"))
