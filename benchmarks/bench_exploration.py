@@ -65,6 +65,7 @@ def plot(results: dict[str, dict[str, np.ndarray]], path: str) -> None:
         ax.set(title=f"{sensor} (CAL-SMA, {len(rows)} layouts)", xlabel="steps",
                ylabel="mean MPE [m]", xscale="log")
         ax.set_xticks(STEPS, [str(n) for n in STEPS])
+        ax.minorticks_off()
         ax.grid(alpha=0.3)
         ax.legend()
     fig.tight_layout()
