@@ -39,6 +39,7 @@ warm-started SMACOF (majorisation decreases stress from any start).
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from numbers import Integral, Real
 from typing import Any
@@ -46,6 +47,7 @@ from typing import Any
 import numpy as np
 
 from mappers.align import apply_affine, check_anchor_ids, check_anchors
+from mappers.graph import informative_pairs
 from mappers.pipeline import Map, _thread_limit, build_map
 from mappers.registry import MappingError, resolve_method
 from mappers.sensors import COLUMNS_PER_STEP, check_sensor, infer_sensor
@@ -121,6 +123,7 @@ class OnlineMapper:
         self._n_columns = 0
         self._blocks: list[tuple[np.ndarray, np.ndarray | None]] = []
         self._last_full = 0
+        self._fit_notes: tuple[str, ...] = ()
         self._Y: np.ndarray | None = None  # last embedding (M, 2), NaN rows for unmapped
 
     # ------------------------------------------------------------------ inputs
@@ -268,7 +271,7 @@ class OnlineMapper:
         m = mapped.size
         kind = "cosine" if self.sensor == "visibility" and self._n_columns >= 2 else "euclidean"
         D = gram_dissimilarity(G[np.ix_(mapped, mapped)], self._n_columns, kind)
-        if not np.any((D > 0) & (D < D.max())) and kind == "cosine":
+        if not informative_pairs(D).any():  # CAL-SMA's own condition: nothing to calibrate
             return self._empty("no two objects sensed together yet")
         if not full and np.isnan(self._Y[mapped]).all():
             full = True
@@ -309,7 +312,7 @@ class OnlineMapper:
         if not full:
             stale = f"online map of the first {self._last_full} of {self.n_steps} steps " \
                     f"(next refit at {int(np.ceil(self.refit_growth * self._last_full))})"
-            return Map(**{**self.map.__dict__, "warnings": (*self._fit_notes, stale)})
+            return dataclasses.replace(self.map, warnings=(*self._fit_notes, stale))
         X = np.concatenate([C for C, _ in self._blocks], axis=1)
         if len(self._blocks) > 1:  # keep one block: the next refit concatenates less
             mask = None
@@ -329,8 +332,8 @@ class OnlineMapper:
         except MappingError as exc:
             if self.map is None or not np.isfinite(self.map.positions).any():
                 return self._empty(f"the method found nothing to map yet ({exc})")
-            return Map(**{**self.map.__dict__, "warnings": (
-                *self.map.warnings, f"refit at {self.n_steps} steps failed, map kept: {exc}")})
+            return dataclasses.replace(self.map, warnings=(
+                *self.map.warnings, f"refit at {self.n_steps} steps failed, map kept: {exc}"))
         self._last_full, self.n_full_fits = self.n_steps, self.n_full_fits + 1
         self._Y = result.embedding
         self._fit_notes = result.warnings
