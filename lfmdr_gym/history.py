@@ -137,6 +137,11 @@ class History:
         return compact.is_sparse(data) or data.dtype != np.float64
 
     @property
+    def is_sparse(self) -> bool:
+        """Whether the matrix is stored as a scipy sparse matrix (visibility, limited range)."""
+        return compact.is_sparse(self.__dict__["_data"])
+
+    @property
     def sparse(self):
         """The matrix as a float64 ``scipy.sparse.csr_array`` (zeros not stored): works at any size."""
         return compact.to_sparse(self.__dict__["_data"])
