@@ -110,7 +110,9 @@ def _inputs(histories, sensor, mask, timeline):
     """The validated history matrix (unobserved entries zeroed), mask, sensor and timeline; a
     ``History``-like object (with ``.matrix``) brings its own sensor, mask and timeline. A
     ``scipy.sparse`` matrix, or a History stored sparse (``is_sparse``), stays sparse."""
-    if hasattr(histories, "matrix") and not isinstance(histories, np.ndarray):
+    # (is_sparse first: hasattr(.., "matrix") would build a History's dense matrix, or refuse to)
+    if getattr(histories, "is_sparse", False) or (
+            hasattr(histories, "matrix") and not isinstance(histories, np.ndarray)):
         sensor = sensor if sensor is not None else getattr(histories, "sensor", None)
         mask = mask if mask is not None else getattr(histories, "mask", None)
         timeline = timeline if timeline is not None else getattr(histories, "timeline", None)

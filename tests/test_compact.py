@@ -83,3 +83,19 @@ def test_a_dense_matrix_beyond_the_budget_is_refused_naming_the_sparse_accessor(
 def test_compact_argument_is_checked():
     with pytest.raises(ValueError, match="compact"):
         collect("LFMDR-Visibility-v0", RandomWalkPolicy(seed=0), 5, seed=1, compact="yes")
+
+
+def test_build_map_maps_a_history_beyond_the_budget_without_the_dense_matrix(monkeypatch):
+    from lfmdr_gym import compact
+    from mappers import pipeline
+
+    h = collect("LFMDR-Visibility-v0", RandomWalkPolicy(seed=0), 600, seed=8,
+                make_kwargs={"anchors": "random", "n_anchors": 6}, compact=True)
+    monkeypatch.setattr(compact, "MAX_DENSE_BYTES", 1024)  # far below this history's 240 kB
+    monkeypatch.setattr(pipeline, "DENSE_BUDGET_BYTES", 1024)
+    with pytest.raises(DenseTooLargeError, match="History.sparse"):
+        h.matrix  # noqa: B018
+    built = mappers.build_map(h, h.anchor_ids, h.anchor_positions, method="CAL-SMA-SPARSE")
+    assert built.method == "CAL-SMA-SPARSE" and np.isfinite(built.positions).all()
+    with pytest.raises(ValueError, match="CAL-SMA-SPARSE"):
+        mappers.build_map(h, h.anchor_ids, h.anchor_positions, method="CAL-SMA")
