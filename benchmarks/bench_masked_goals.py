@@ -13,8 +13,11 @@ printing the mean and the largest MPE over the runs [m] and the median CPU time 
     PYTHONPATH=. python benchmarks/bench_masked_goals.py                   # 25 runs from seed 1000
     PYTHONPATH=. python benchmarks/bench_masked_goals.py --runs 5 --seed 0 --methods CAL-SMA-M
 
-The sensor settings are applied by :func:`sense` to full-information episodes (see there for
-what each does), so the figures do not depend on the world's own keywords.
+The settings are the env's sensing keywords (``gym.make("LFMDR-Bearing-v0", fov_deg=90, ...)``):
+an object is observed inside the field of view centred on the heading and within ``max_range``
+(centre to centre); bearing noise is Gaussian on the angle; with ``miss_rate`` each visible entry
+reads 0 with that probability and stays observed, so such a history's mask is True everywhere:
+it is a complete history to the mapper, which cannot tell a miss from an invisible object.
 """
 
 from __future__ import annotations
@@ -29,11 +32,11 @@ from threadpoolctl import threadpool_limits
 
 import lfmdr_gym  # noqa: F401 - registers the envs
 import mappers
-from lfmdr_gym import History
+from lfmdr_gym.history import History
 from lfmdr_gym.policies import RandomWalkPolicy
 from lfmdr_gym.recording import collect
 
-# (name, sensor, settings of sense(), goal mean MPE [m], figure the issue measured before [m])
+# (name, sensor, env keywords, goal mean MPE [m], figure the issue measured before [m])
 SETTINGS = (
     ("bearing, 90 deg view, unlimited range, 2 deg noise", "bearing",
      dict(fov_deg=90, bearing_noise_deg=2), 0.06, 0.13),
@@ -49,48 +52,10 @@ BEFORE = {"visibility": "covis-nonmetric", "bearing": "covis-nonmetric"}  # mask
 TIME_GOAL = 1.0  # s per map at M = 50
 
 
-def sense(hist: History, rng: np.random.Generator, *, fov_deg: float = 360.0,
-          max_range: float | None = None, bearing_noise_deg: float = 0.0,
-          miss_rate: float = 0.0) -> History:
-    """The history a limited, noisy sensor would have recorded on the same path.
-
-    ``hist`` is a full-information episode with its robot poses. Object j is *observed* at step t
-    when its bearing relative to the heading is within ``fov_deg / 2`` and its centre within
-    ``max_range`` of the robot's centre (None: any distance). Bearing: the angle gets Gaussian
-    noise of ``bearing_noise_deg`` (std) and is stored as (cos, sin); unobserved pairs read
-    (0, 0) and are False in the mask. Visibility: the perfect sensor's bit where observed, 0
-    elsewhere (False in the mask); with ``miss_rate`` each visible entry reads 0 with that
-    probability, and since the sensor did report on it, it stays observed (the mapper cannot tell
-    a miss from an invisible object). A mask that is True everywhere is left out (no mask).
-    """
-    if hist.robot_poses is None:
-        raise ValueError("hist must hold robot_poses (a full-information episode)")
-    poses, obj = hist.robot_poses, hist.object_positions
-    rel = obj[:, None, :] - poses[None, :, :2]  # (M, N, 2)
-    angle = np.arctan2(rel[..., 1], rel[..., 0]) - poses[None, :, 2]
-    angle = np.angle(np.exp(1j * angle))
-    observed = np.abs(angle) <= np.radians(fov_deg) / 2 + 1e-12
-    if max_range is not None:
-        observed &= np.hypot(rel[..., 0], rel[..., 1]) <= max_range
-    if hist.sensor == "bearing":
-        angle = angle + np.radians(bearing_noise_deg) * rng.standard_normal(angle.shape)
-        X = np.stack([np.cos(angle), np.sin(angle)], axis=-1) * observed[..., None]
-        X = X.reshape(len(obj), -1)
-        mask = np.repeat(observed, 2, axis=1)
-    elif hist.sensor == "visibility":
-        X = hist.matrix * observed
-        if miss_rate:
-            X = X * (rng.random(X.shape) >= miss_rate)
-        mask = observed
-    else:
-        raise ValueError(f"sense() models bearing and visibility, not {hist.sensor!r}")
-    return History(hist.sensor, X, obj, hist.anchor_ids, hist.anchor_positions,
-                   robot_poses=poses, mask=None if mask.all() else mask, meta=hist.meta)
-
-
-def episode(sensor: str, seed: int, steps: int) -> History:
-    """One full-information episode of ``steps`` moves (layout, start and walk from ``seed``)."""
-    env = gym.make(f"LFMDR-{sensor.capitalize()}-v0")
+def episode(sensor: str, seed: int, steps: int, **sensing) -> History:
+    """One episode of ``steps`` moves (layout, start and walk from ``seed``) with the world's
+    sensing keywords (``fov_deg``, ``max_range``, ``bearing_noise_deg``, ``miss_rate``, ...)."""
+    env = gym.make(f"LFMDR-{sensor.capitalize()}-v0", max_episode_steps=steps, **sensing)
     return collect(env, RandomWalkPolicy.for_env(env), steps, seed=seed)
 
 
@@ -116,7 +81,6 @@ def main(argv=None) -> None:
                     help="indices of the settings to run (default all)")
     args = ap.parse_args(argv)
     chosen = range(len(SETTINGS)) if args.settings is None else args.settings
-    cache: dict[tuple[str, int], History] = {}
     print(f"{args.runs} runs from seed {args.seed}, N = {args.steps}; MPE [m] mean / max run; "
           "CPU s per map (median, one BLAS thread)")
     with threadpool_limits(limits=1):
@@ -125,10 +89,9 @@ def main(argv=None) -> None:
             rows: dict[str, list] = {}
             for r in range(args.runs):
                 seed = args.seed + r
-                if (sensor, seed) not in cache:
-                    cache[(sensor, seed)] = episode(sensor, seed, args.steps)
-                h = sense(cache[(sensor, seed)], np.random.default_rng(seed), **kw)
-                before = BEFORE[sensor] if h.mask is not None else "CAL-SMA"
+                h = episode(sensor, seed, args.steps, **kw)
+                masked = h.mask is not None and not h.mask.all()
+                before = BEFORE[sensor] if masked else "CAL-SMA"
                 labels = {f"before ({before})": before, "default": None}
                 for extra in args.methods or ():
                     labels[extra] = extra

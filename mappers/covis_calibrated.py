@@ -12,15 +12,20 @@ its link to distance changes with the horizon, and only its order is trusted (th
 never seen together).
 
 ``"covis-cal"`` (visibility, bearing)
-    CAL-SMA on ``1 - och_ij`` (precomputed), pairs seen together in fewer than ``min_co`` steps
-    at the saturation value (never neighbours, only "far"). *Assumes*: what CAL-SMA assumes of a
-    history dissimilarity: a smooth, monotone link to distance that varies slowly over the arena.
+    CAL-SMA on ``1 - och_ij`` and on ``-log och_ij`` (precomputed; pairs seen together in fewer
+    than ``min_co`` steps at the saturation value: never neighbours, only "far"), and the mean
+    of the two anchored maps. The two differ only by a monotone transform, which the calibration
+    absorbs, but they start from different places and settle in different local optima; their
+    mean has the variance of neither (``links`` picks one or both). *Assumes*: what CAL-SMA
+    assumes of a history dissimilarity: a smooth, monotone link to distance that varies slowly
+    over the arena.
 
-``"covis-auto"`` (visibility, bearing)
+``"covis-auto"`` (bearing)
     ``covis-cal`` when the share of pairs (of sensed objects) seen together in fewer than
-    ``min_co`` steps is at most ``local_share``, else the ordinal map (``covis-angle`` for
-    bearing, ``covis-nonmetric`` for visibility). The share is read from the data; the chosen
-    branch is in ``branch_``. *Assumes*: what the chosen branch assumes.
+    ``min_co`` steps is at most ``local_share``, else the ordinal ``covis-angle``. The share is
+    read from the data; the chosen branch is in ``branch_``. *Assumes*: what the chosen branch
+    assumes. (A visibility history is always local: the sensor sees only nearby objects; its
+    masked default is ``covis-cal``, as CAL-SMA is its complete default.)
 """
 
 from __future__ import annotations
@@ -65,24 +70,32 @@ class CovisCalibrated:
     """``"covis-cal"``: CAL-SMA on ``1 -`` the co-observation coefficient (module docstring).
 
     ``fit_transform(X, mask=None, *, sensor, anchor_ids=None, anchor_positions=None)`` returns
-    the (M, 2) map (in the anchors' frame when anchors are given); ``cal_`` is the fitted
-    :class:`~mappers.calibrated.CalibratedSMACOF` (its ``fold_score_``, ``folded_``, ...).
+    the (M, 2) map (in the anchors' frame when anchors are given: without anchors the members'
+    frames differ, so give one link only); ``cals_`` are the fitted
+    :class:`~mappers.calibrated.CalibratedSMACOF` per link (``fold_score_``, ``folded_``, ...).
     """
 
-    def __init__(self, *, min_co: int = 3, n_neighbors: int = 12, random_state=0) -> None:
+    def __init__(self, *, min_co: int = 3, n_neighbors: int = 12,
+                 links: tuple[str, ...] = ("linear", "log"), random_state=0) -> None:
         self.min_co = _check_min_co(min_co)
-        self.n_neighbors = n_neighbors
-        self.random_state = random_state
+        links = (links,) if isinstance(links, str) else tuple(links)
+        if not links or not set(links) <= {"linear", "log"}:
+            raise ValueError(f"links must be a non-empty tuple of 'linear' and 'log', got {links!r}")
+        self.n_neighbors, self.links, self.random_state = n_neighbors, links, random_state
 
     def fit_transform(self, X, mask=None, *, sensor: str, anchor_ids=None, anchor_positions=None):
         och, C = co_observation_coefficient(X, mask, sensor)
-        D = 1.0 - och
-        D[C < self.min_co] = 1.0  # the saturation value: "far", never a neighbour target
-        np.fill_diagonal(D, 0.0)
-        self.cal_ = CalibratedSMACOF(dissimilarity="precomputed", n_neighbors=self.n_neighbors,
-                                     random_state=self.random_state)
-        return self.cal_.fit(D, anchor_ids=anchor_ids,
-                             anchor_positions=anchor_positions).embedding_
+        far = C < self.min_co
+        np.fill_diagonal(far, False)
+        self.cals_ = []
+        for link in self.links:
+            D = 1.0 - och if link == "linear" else -np.log(np.maximum(och, 1e-6))
+            D[far] = D.max()  # the saturation value: "far", never a neighbour target
+            np.fill_diagonal(D, 0.0)
+            cal = CalibratedSMACOF(dissimilarity="precomputed", n_neighbors=self.n_neighbors,
+                                   random_state=self.random_state)
+            self.cals_.append(cal.fit(D, anchor_ids=anchor_ids, anchor_positions=anchor_positions))
+        return np.mean([cal.embedding_ for cal in self.cals_], axis=0)
 
 
 class CovisAuto:
@@ -99,6 +112,8 @@ class CovisAuto:
         self.n_neighbors, self.max_iter, self.random_state = n_neighbors, max_iter, random_state
 
     def fit_transform(self, X, mask=None, *, sensor: str, anchor_ids=None, anchor_positions=None):
+        if sensor != "bearing":
+            raise ValueError(f"covis-auto maps bearing histories, got sensor {sensor!r}")
         _, C = co_observation_coefficient(X, mask, sensor)
         sensed = np.diag(C) > 0
         Cs = C[np.ix_(sensed, sensed)]
@@ -110,7 +125,7 @@ class CovisAuto:
                                   random_state=self.random_state)
             return est.fit_transform(X, mask, sensor=sensor, anchor_ids=anchor_ids,
                                      anchor_positions=anchor_positions)
-        self.branch_ = "covis-angle" if sensor == "bearing" else "covis-nonmetric"
+        self.branch_ = "covis-angle"
         result = masked_embedding(X, mask, sensor, self.branch_, anchor_ids=anchor_ids,
                                   anchor_positions=anchor_positions, max_iter=self.max_iter,
                                   min_co=self.min_co)
@@ -119,8 +134,10 @@ class CovisAuto:
         return result.positions
 
 
-def _covis_cal(min_co=3, n_neighbors=12, random_state=0) -> CovisCalibrated:
-    return CovisCalibrated(min_co=min_co, n_neighbors=n_neighbors, random_state=random_state)
+def _covis_cal(min_co=3, n_neighbors=12, links=("linear", "log"),
+               random_state=0) -> CovisCalibrated:
+    return CovisCalibrated(min_co=min_co, n_neighbors=n_neighbors, links=links,
+                           random_state=random_state)
 
 
 def _covis_auto(min_co=3, local_share=0.1, n_neighbors=12, max_iter=300,
@@ -134,6 +151,6 @@ SPECS: tuple[MethodSpec, ...] = (
                description="CAL-SMA of 1 - (angle-weighted) co-observation rates, anchored",
                sensors=_SENSORS, uses_anchors=True, normalize=False, histories=("complete", "masked")),
     MethodSpec("covis-auto", _covis_auto,
-               description="covis-cal when most pairs are seen together, else ordinal SMACOF",
-               sensors=_SENSORS, uses_anchors=True, normalize=False, histories=("complete", "masked")),
+               description="covis-cal when most pairs are seen together, else covis-angle",
+               sensors=("bearing",), uses_anchors=True, normalize=False, histories=("complete", "masked")),
 )

@@ -94,9 +94,10 @@ def test_covis_auto_is_the_masked_bearing_default_through_build_map():
     assert DEFAULT_METHODS[("bearing", True)] == "covis-auto"
     m = build_map(X, a, P[a], mask=mask, sensor="bearing")
     assert m.method == "covis-auto" and _mpe(m.positions, P, a) < 0.2
+    assert DEFAULT_METHODS[("visibility", True)] == "covis-cal"
     vis = (mask[:, 0::2]).astype(float)  # visibility: the co-observation pattern alone
-    m = build_map(vis, a, P[a], "covis-auto", mask=mask[:, 0::2], sensor="visibility")
-    assert np.isfinite(m.positions).all()
+    m = build_map(vis, a, P[a], mask=mask[:, 0::2], sensor="visibility")
+    assert m.method == "covis-cal" and _mpe(m.positions, P, a) < 0.3
 
 
 def test_bad_input_is_refused_with_its_name():
@@ -109,6 +110,10 @@ def test_bad_input_is_refused_with_its_name():
         CovisCalibrated().fit_transform(X[:, ::2], None, sensor="range")
     with pytest.raises(ValueError, match="covis-angle.*bearing"):
         masked_embedding(mask[:, ::2].astype(float), None, "visibility", "covis-angle")
+    with pytest.raises(ValueError, match="links"):
+        CovisCalibrated(links=("cubic",))
+    with pytest.raises(ValueError, match="bearing"):
+        CovisAuto().fit_transform(mask[:, ::2].astype(float), None, sensor="visibility")
     for label in ("covis-cal", "covis-auto", "covis-angle"):
         with pytest.raises(ValueError, match="range"):
             resolve_method(label, "range", masked=True)
