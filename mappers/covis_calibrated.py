@@ -24,8 +24,8 @@ never seen together).
     ``covis-cal`` when the share of pairs (of sensed objects) seen together in fewer than
     ``min_co`` steps is at most ``local_share``, else the ordinal ``covis-angle``. The share is
     read from the data; the chosen branch is in ``branch_``. *Assumes*: what the chosen branch
-    assumes. (A visibility history is always local: the sensor sees only nearby objects; its
-    masked default is ``covis-cal``, as CAL-SMA is its complete default.)
+    assumes. (Visibility is always local, the sensor sees only nearby objects: ``covis-cal`` or
+    ``covis-nonmetric`` directly.)
 """
 
 from __future__ import annotations

@@ -157,7 +157,7 @@ DEFAULT_METHODS: dict[tuple[str, bool], str] = {
     ("visibility", False): "CAL-SMA",
     ("bearing", False): "CAL-SMA",
     ("range", False): "UNFOLD",
-    ("visibility", True): "covis-cal",
+    ("visibility", True): "covis-nonmetric",
     ("bearing", True): "covis-auto",
     ("range", True): "range-quantile",
 }
