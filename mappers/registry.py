@@ -2,7 +2,7 @@
 
 Every method — the paper's ten (:mod:`mappers.methods`), CAL-SMA (:mod:`mappers.calibrated`),
 UNFOLD (:mod:`mappers.unfolding`), the methods for masked histories (:mod:`mappers.masked`,
-:mod:`mappers.ensemble`) and any a user registers — is a :class:`MethodSpec` in :data:`METHODS`.
+:mod:`mappers.ensemble`, :mod:`mappers.covis_calibrated`) and any a user registers — is a :class:`MethodSpec` in :data:`METHODS`.
 A spec says what the method accepts (which sensors, complete and/or masked histories); the
 pipeline, the protocol and the command line choose and check methods by the spec alone
 (:func:`resolve_method`).
@@ -142,10 +142,10 @@ def _load_builtins() -> None:
     if _BUILTINS_LOADED:
         return
     _BUILTINS_LOADED = True
-    from mappers import calibrated, ensemble, masked, methods, scalable, unfolding
+    from mappers import calibrated, covis_calibrated, ensemble, masked, methods, scalable, unfolding
 
     for spec in (*methods.SPECS, calibrated.SPEC, unfolding.SPEC, scalable.SPEC, *masked.SPECS,
-                 ensemble.SPEC):
+                 ensemble.SPEC, *covis_calibrated.SPECS):
         _METHODS.setdefault(spec.label, spec)
 
 
@@ -176,7 +176,7 @@ DEFAULT_METHODS: dict[tuple[str, bool], str] = {
     ("bearing", False): "CAL-SMA",
     ("range", False): "UNFOLD",
     ("visibility", True): "covis-nonmetric",
-    ("bearing", True): "covis-nonmetric",
+    ("bearing", True): "covis-auto",
     ("range", True): "range-quantile",
 }
 """(sensor, masked) -> the label ``build_map`` uses when no method is given. The measured
