@@ -2,7 +2,7 @@
 
 Every method — the paper's ten (:mod:`mappers.methods`), CAL-SMA (:mod:`mappers.calibrated`),
 UNFOLD (:mod:`mappers.unfolding`), the methods for masked histories (:mod:`mappers.masked`,
-:mod:`mappers.ensemble`) and any a user registers — is a :class:`MethodSpec` in :data:`METHODS`.
+:mod:`mappers.ensemble`, :mod:`mappers.covis_calibrated`) and any a user registers — is a :class:`MethodSpec` in :data:`METHODS`.
 A spec says what the method accepts (which sensors, complete and/or masked histories); the
 pipeline, the protocol and the command line choose and check methods by the spec alone
 (:func:`resolve_method`).
@@ -19,6 +19,10 @@ from mappers.sensors import SENSORS, check_sensor
 
 __all__ = [
     "DEFAULT_METHODS",
+    "DENSE_MAX_OBJECTS",
+    "SCALABLE_ABOVE_OBJECTS",
+    "SCALABLE_DEFAULTS",
+    "check_size",
     "HISTORY_KINDS",
     "METHODS",
     "MappingError",
@@ -27,6 +31,14 @@ __all__ = [
     "register_method",
     "resolve_method",
 ]
+
+DENSE_MAX_OBJECTS = 5000
+"""Largest M a method holding (M, M) matrices is given by default (:attr:`MethodSpec.max_objects`):
+one such float64 matrix is 200 MB there and the paper's methods hold several."""
+
+SCALABLE_ABOVE_OBJECTS = 500
+"""Above this many objects ``build_map`` picks the scalable default (:data:`SCALABLE_DEFAULTS`)
+when no method is named: dense CAL-SMA takes about 40 s at M = 1,000, its sparse form 2 s."""
 
 HISTORY_KINDS: tuple[str, ...] = ("complete", "masked")
 """``"complete"``: every entry is a measurement (a 0 is "not visible"); ``"masked"``: a boolean
@@ -57,6 +69,10 @@ class MethodSpec:
             masked histories receives ``mask`` (None for a complete history) and ``sensor``.
         uses_timeline: the estimator takes ``timeline`` ((N, 2) ints: robot and tick of each
             step, or None for one robot stepping once per tick) to group consecutive steps.
+        sparse: ``fit_transform`` accepts a ``scipy.sparse`` X, so ``build_map`` hands compact
+            histories over without building the dense matrix.
+        max_objects: the largest M the method is given (None: no limit); ``build_map`` refuses
+            more with an error naming the scalable methods.
     """
 
     label: str
@@ -69,6 +85,8 @@ class MethodSpec:
     normalize: bool = True
     histories: tuple[str, ...] = ("complete",)
     uses_timeline: bool = False
+    sparse: bool = False
+    max_objects: int | None = DENSE_MAX_OBJECTS
 
     @property
     def parameters(self) -> tuple[str, ...]:
@@ -124,9 +142,10 @@ def _load_builtins() -> None:
     if _BUILTINS_LOADED:
         return
     _BUILTINS_LOADED = True
-    from mappers import calibrated, ensemble, masked, methods, unfolding
+    from mappers import calibrated, covis_calibrated, ensemble, masked, methods, scalable, unfolding
 
-    for spec in (*methods.SPECS, calibrated.SPEC, unfolding.SPEC, *masked.SPECS, ensemble.SPEC):
+    for spec in (*methods.SPECS, calibrated.SPEC, unfolding.SPEC, scalable.SPEC, *masked.SPECS,
+                 ensemble.SPEC, *covis_calibrated.SPECS):
         _METHODS.setdefault(spec.label, spec)
 
 
@@ -157,11 +176,28 @@ DEFAULT_METHODS: dict[tuple[str, bool], str] = {
     ("bearing", False): "CAL-SMA",
     ("range", False): "UNFOLD",
     ("visibility", True): "covis-nonmetric",
-    ("bearing", True): "covis-nonmetric",
+    ("bearing", True): "covis-auto",
     ("range", True): "range-quantile",
 }
 """(sensor, masked) -> the label ``build_map`` uses when no method is given. The measured
 figures behind each choice are in the README and ``benchmarks/``."""
+
+SCALABLE_DEFAULTS: dict[tuple[str, bool], str] = {
+    ("visibility", False): "CAL-SMA-SPARSE",
+    ("bearing", False): "CAL-SMA-SPARSE",
+}
+"""(sensor, masked) -> the default above :data:`SCALABLE_ABOVE_OBJECTS` objects."""
+
+
+def check_size(spec: MethodSpec, n_objects: int) -> None:
+    """ValueError when ``spec`` does not take ``n_objects`` objects, naming the methods that do."""
+    if spec.max_objects is not None and n_objects > spec.max_objects:
+        scalable = [label for label, s in METHODS.items()
+                    if s.max_objects is None or s.max_objects >= n_objects]
+        raise ValueError(
+            f"method {spec.label!r} maps at most {spec.max_objects} objects (it holds M x M "
+            f"matrices), got {n_objects}; use a scalable method: {scalable}"
+        )
 
 
 def register_method(spec: MethodSpec, *, replace: bool = False) -> MethodSpec:
@@ -206,15 +242,19 @@ def methods_for(sensor: str | None = None, masked: bool | None = None) -> tuple[
     )
 
 
-def resolve_method(method: str | None, sensor: str, masked: bool = False) -> MethodSpec:
+def resolve_method(method: str | None, sensor: str, masked: bool = False,
+                   n_objects: int | None = None) -> MethodSpec:
     """The spec of ``method`` (a label, matched case-insensitively; None = the default for
-    ``sensor`` and the kind of history) if it maps such histories, else a ValueError that lists
+    ``sensor`` and the kind of history, the scalable one above :data:`SCALABLE_ABOVE_OBJECTS`
+    objects when ``n_objects`` is given) if it maps such histories, else a ValueError that lists
     the labels which do."""
     check_sensor(sensor)
     kind = "masked" if masked else "complete"
     fits = methods_for(sensor, masked)  # loads the built-ins
     if method is None:
-        method = DEFAULT_METHODS.get((sensor, bool(masked)))
+        large = n_objects is not None and n_objects > SCALABLE_ABOVE_OBJECTS
+        method = ((large and SCALABLE_DEFAULTS.get((sensor, bool(masked))))
+                  or DEFAULT_METHODS.get((sensor, bool(masked))))
         if method is None or method not in _METHODS:
             raise ValueError(f"no default method for {kind} {sensor} histories; choose from {list(fits)}")
     if not isinstance(method, str):
