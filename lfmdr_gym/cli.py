@@ -255,7 +255,8 @@ def _add_compare(sub: Any) -> None:
         description=_text(
             "Compare the table.csv of a run directory with a reference one (e.g. "
             "docs/results/visibility): every method's mean MPE within --mpe-abs metres or "
-            "--mpe-rel of the reference, and its mean MOE within --moe-abs percentage points. "
+            "--mpe-rel of the reference, and its mean MOE within --moe-abs percentage points or "
+            "--moe-rel of the reference. "
             "Exit status 0 when it reproduces, 1 otherwise."
         ),
     )
@@ -264,6 +265,7 @@ def _add_compare(sub: Any) -> None:
     p.add_argument("--mpe-abs", type=float, default=TOLERANCE["mpe_abs"], help="metres")
     p.add_argument("--mpe-rel", type=float, default=TOLERANCE["mpe_rel"], help="fraction")
     p.add_argument("--moe-abs", type=float, default=TOLERANCE["moe_abs"], help="percentage points")
+    p.add_argument("--moe-rel", type=float, default=TOLERANCE["moe_rel"], help="fraction")
     p.set_defaults(handler=_cmd_compare)
 
 
@@ -425,14 +427,15 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     from lfmdr_gym.experiments.reproducibility import compare_tables
 
     problems = compare_tables(args.fresh, args.reference, {
-        "mpe_abs": args.mpe_abs, "mpe_rel": args.mpe_rel, "moe_abs": args.moe_abs})
+        "mpe_abs": args.mpe_abs, "mpe_rel": args.mpe_rel, "moe_abs": args.moe_abs,
+        "moe_rel": args.moe_rel})
     if problems:
         print(f"{args.fresh} does not reproduce {args.reference}:")
         for line in problems:
             print(f"  {line}")
         return 1
     print(f"{args.fresh} reproduces {args.reference} (MPE within {args.mpe_abs} m or "
-          f"{args.mpe_rel:.0%}, MOE within {args.moe_abs} points)")
+          f"{args.mpe_rel:.0%}, MOE within {args.moe_abs} points or {args.moe_rel:.0%})")
     return 0
 
 

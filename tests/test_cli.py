@@ -229,6 +229,26 @@ def test_compare_accepts_a_reproduction_and_names_what_moved(tmp_path, capsys):
     assert main(["compare", str(fresh), str(ref), "--mpe-abs", "0.1"]) == 0
 
 
+def test_compare_moe_within_points_or_a_fraction(tmp_path, capsys):
+    ref = ROOT / "docs" / "results" / "visibility"
+    fresh = tmp_path / "fresh"
+    fresh.mkdir()
+    lines = (ref / "table.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    col, method_col = header.index("moe_mean"), header.index("method")
+    rows = [lines[0]]
+    for line in lines[1:]:
+        cells = line.split(",")
+        if cells[method_col] == "KPCA(POLY)":  # MOE about 15 %: 1 % of it is 0.15 points
+            cells[col] = repr(float(cells[col]) * 1.01)
+        rows.append(",".join(cells))
+    (fresh / "table.csv").write_text("\n".join(rows) + "\n")
+    assert main(["compare", str(fresh), str(ref)]) == 0  # within 2 % of the reference
+    capsys.readouterr()
+    assert main(["compare", str(fresh), str(ref), "--moe-rel", "0"]) == 1  # beyond 0.1 points
+    assert "KPCA(POLY): moe_mean" in capsys.readouterr().out
+
+
 # ------------------------------------------------------------------ single runs
 def test_collect_then_map(tmp_path, capsys):
     path = tmp_path / "walk.npz"

@@ -27,11 +27,14 @@ ENVIRONMENT = "environment.json"
 PACKAGES = ("lfmdr", "numpy", "scipy", "scikit-learn", "cvxpy", "scs", "clarabel", "pymunk",
             "gymnasium", "joblib", "threadpoolctl")
 
-TOLERANCE: dict[str, float] = {"mpe_abs": 0.002, "mpe_rel": 0.02, "moe_abs": 0.1}
+TOLERANCE: dict[str, float] = {"mpe_abs": 0.002, "mpe_rel": 0.02, "moe_abs": 0.1, "moe_rel": 0.02}
 """A fresh table reproduces a reference when, for every method, its mean MPE (all objects and
 non-anchor) is within ``mpe_abs`` metres or ``mpe_rel`` of the reference, and its mean MOE within
-``moe_abs`` percentage points. Measured spread between two machines: up to 1.2e-4 m and 0.026 points
-(LLE, HLLE, LEM); the tolerances leave a wide margin and still catch a real change."""
+``moe_abs`` percentage points or ``moe_rel`` of the reference. Measured spread between machines:
+up to 1.2e-4 m and 0.026 points between two (LLE, HLLE, LEM); on a third, with the same package
+versions, up to 1.6 % of the MPE and 0.8 % of the MOE (0.12 points of KPCA(POLY)'s 15.4 %), since
+a grid search picks another neighbour count when two are nearly tied. The tolerances still
+catch a real change."""
 
 
 def environment() -> dict[str, Any]:
@@ -94,7 +97,7 @@ def compare_tables(fresh: str | os.PathLike, reference: str | os.PathLike,
     for method in (m for m in b if m in a):
         for column, abs_tol, rel_tol in (("mpe_mean", tol["mpe_abs"], tol["mpe_rel"]),
                                          ("mpe_nonanchor_mean", tol["mpe_abs"], tol["mpe_rel"]),
-                                         ("moe_mean", tol["moe_abs"], 0.0)):
+                                         ("moe_mean", tol["moe_abs"], tol["moe_rel"])):
             if _differs(a[method][column], b[method][column], abs_tol, rel_tol):
                 problems.append(f"{method}: {column} {a[method][column]} (fresh) vs "
                                 f"{b[method][column]} (reference)")
