@@ -151,6 +151,9 @@ class LawOfCosinesSMACOF(TransformerMixin, BaseEstimator):
         else:
             Y, notes = self._place_all(D, W, ids, pos, r, theta)
         self.distances_, self.weights_ = D, W
+        if self.outlier_pairs_:
+            notes.append(f"{len(self.outlier_pairs_)} pair distance(s) {self.outlier_pairs_[:6]} "
+                         "contradicted by the rest of the map were dropped (misread labels?)")
         for msg in notes:
             warnings.warn(msg, RigidityWarning, stacklevel=2)
         self.embedding_ = Y
@@ -172,6 +175,12 @@ class LawOfCosinesSMACOF(TransformerMixin, BaseEstimator):
                                 "by the measured pairs (at least 2 are needed): not placed")
             else:
                 Y[objects] = self._place_part(D, W, objects, anchors, apos, r, theta, notes)
+        parts = [o for o, a in anchored_components(W, ids) if a.size >= 2]
+        if len(parts) > 1:
+            notes.append(f"the measured pairs fall apart into {len(parts)} groups "
+                         f"{[p.tolist() for p in parts]} (a clustered layout?): each is placed by "
+                         "its own anchors, and nothing measured places the groups relative to "
+                         "each other")
         placed = np.flatnonzero(np.isfinite(Y[:, 0]))
         loose = flexible_objects(Y[placed], W[np.ix_(placed, placed)], np.flatnonzero(np.isin(placed, ids)))
         if loose.size:

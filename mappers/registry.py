@@ -141,10 +141,18 @@ def _load_builtins() -> None:
     if _BUILTINS_LOADED:
         return
     _BUILTINS_LOADED = True
-    from mappers import calibrated, ensemble, masked, methods, range_bearing, unfolding
+    from mappers import (
+        calibrated,
+        ensemble,
+        masked,
+        methods,
+        range_bearing,
+        unfolding,
+        visibility_bearing,
+    )
 
     for spec in (*methods.SPECS, calibrated.SPEC, unfolding.SPEC, *masked.SPECS, ensemble.SPEC,
-                 range_bearing.SPEC):
+                 range_bearing.SPEC, visibility_bearing.SPEC):
         _METHODS.setdefault(spec.label, spec)
 
 
@@ -179,6 +187,7 @@ DEFAULT_METHODS: dict[tuple[str | frozenset[str], bool], str] = {
     ("range", True): "range-quantile",
     (frozenset({"range", "bearing"}), False): "LOC-SMA",
     (frozenset({"range", "bearing"}), True): "LOC-SMA",
+    (frozenset({"visibility", "bearing"}), False): "VB-SMA",
 }
 """(sensor, masked) -> the label ``build_map`` uses when no method is given; a fused set of
 sensors is keyed by its frozenset. The measured figures behind each choice are in the README
