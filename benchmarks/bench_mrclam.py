@@ -24,8 +24,8 @@ Settings grids: covis-nonmetric (visibility, bearing): bin width {1, 2, 3, 5} s 
 covis-ensemble/nonmetric: the set of bin widths, {1, 2, 3, 5} / {1, 1.5, 2, 3, 4, 5} /
 {0.5, ..., 8} s; covis-ensemble: power {0.35, 0.5, 0.7, 1}; range-quantile: bin width
 {0.25, 0.5, 1} s x quantile {0.95, 0.98, 0.99}; range-bounds: the same x slack {0.5, 1}.
-LOC-SMA (range-bearing, the default of both measurements fused): bin width {0.25, 0.5, 1} s x
-min_count {1, 3, 10}.
+LOC-SMA (range-bearing, the default of both measurements fused): bin width {0.25, 0.5} s x
+min_count {3, 10} x trim {None (weighted median), 3}.
 What was tried for bearings and lost is in docs/bearing-on-real-data.md.
 """
 
@@ -62,7 +62,8 @@ GRIDS = {
     ],
     "masked-euclidean": [],
     "LOC-SMA": [
-        {"bin_width": bw, "min_count": mc} for bw, mc in itertools.product([0.25, 0.5, 1.0], [1, 3, 10])
+        {"bin_width": bw, "min_count": mc, "trim": tr}
+        for bw, mc, tr in itertools.product([0.25, 0.5], [3, 10], [None, 3.0])
     ],
 }
 CANDIDATES = {

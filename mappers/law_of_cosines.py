@@ -106,10 +106,12 @@ def sample_variance_model(
 
 
 def pooled_frame_distances(
-    r: np.ndarray, theta: np.ndarray, *, max_range: float | None = None
+    r: np.ndarray, theta: np.ndarray, *, max_range: float | None = None, trim: float | None = 3.0
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per pair, the precision-weighted median law-of-cosines distance over the steps that
-    sensed both objects.
+    """Per pair, the precision-weighted, trimmed mean law-of-cosines distance over the steps
+    that sensed both objects: the mean of the samples within 3 robust scales of their weighted
+    median (Huber & Ronchetti 2009, §3: trimming keeps a misread sample from moving it), or
+    with ``trim=None`` that weighted median.
 
     A sample's weight is the inverse of its modelled variance (:func:`sample_variance_model`):
     a bearing error moves an object sideways in proportion to its range, so samples taken near
@@ -119,9 +121,11 @@ def pooled_frame_distances(
     Args:
         r, theta: (M, N) ranges [m] and bearings [rad] per object and step, NaN where not sensed.
         max_range: ignore readings farther than this (None: keep all).
+        trim: keep the samples within this many robust scales of the median (None: the
+            weighted median itself, for errors far from Gaussian).
 
     Returns:
-        ``(distance, spread, count)``, each (M, M) and symmetric: the weighted median distance
+        ``(distance, spread, count)``, each (M, M) and symmetric: the trimmed mean distance
         (0 where no sample), the samples' robust scale (1.4826 x weighted median absolute
         deviation) and their effective number ``(sum w)^2 / sum w^2`` (0: never sensed together).
     """
@@ -142,9 +146,14 @@ def pooled_frame_distances(
         d, q = _pair_samples(r, c, s, i, js)
         w = np.where(np.isfinite(d), 1.0 / (alpha + beta * np.nan_to_num(q)), 0.0)
         med = _row_weighted_medians(d, w)
-        mad = _row_weighted_medians(np.abs(d - med[:, None]), w)
+        sigma = _MAD_TO_SIGMA * _row_weighted_medians(np.abs(d - med[:, None]), w)
+        dist[i, js], spread[i, js] = med, sigma
+        if trim is not None:  # a median alone keeps only 64 % of a Gaussian sample's information
+            kept = np.where(np.abs(d - med[:, None]) <= trim * sigma[:, None] + 1e-12, w, 0.0)
+            sk = kept.sum(axis=1)
+            mean = np.einsum("ij,ij->i", kept, np.nan_to_num(d)) / np.where(sk > 0, sk, 1.0)
+            dist[i, js] = np.where(sk > 0, mean, med)
         sw, sw2 = w.sum(axis=1), (w**2).sum(axis=1)
-        dist[i, js], spread[i, js] = med, _MAD_TO_SIGMA * mad
         count[i, js] = np.where(sw2 > 0, sw**2 / np.where(sw2 > 0, sw2, 1.0), 0.0)
     return dist + dist.T, spread + spread.T, count + count.T
 

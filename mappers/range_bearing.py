@@ -91,6 +91,8 @@ class LawOfCosinesSMACOF(TransformerMixin, BaseEstimator):
     Parameters:
         min_count: a pair needs this many steps that sensed both objects to be used.
         max_range: readings farther than this [m] are ignored (None: all are used).
+        trim: a pair's distance is the precision-weighted mean of its samples within ``trim``
+            robust scales of their median (None: the weighted median itself).
         outlier: a pair whose fitted distance is off its measured one by more than this many
             robust scales (its spread combined with the median spread) is dropped and the map
             refitted, worst first, for at most ``max_rounds`` fits (a misread label gives a
@@ -107,6 +109,7 @@ class LawOfCosinesSMACOF(TransformerMixin, BaseEstimator):
     _parameter_constraints: dict = {
         "min_count": [Interval(Integral, 1, None, closed="left")],
         "max_range": [Interval(Real, 0, None, closed="neither"), None],
+        "trim": [Interval(Real, 0, None, closed="neither"), None],
         "max_iter": [Interval(Integral, 1, None, closed="left")],
         "tol": [Interval(Real, 0, None, closed="left")],
         "outlier": [Interval(Real, 0, None, closed="neither")],
@@ -116,10 +119,11 @@ class LawOfCosinesSMACOF(TransformerMixin, BaseEstimator):
     }
 
     def __init__(self, *, min_count: int = 3, max_range: float | None = None,
-                 outlier: float = 4.0, max_rounds: int = 10, n_init: int = 4,
+                 trim: float | None = 3.0, outlier: float = 4.0, max_rounds: int = 10, n_init: int = 4,
                  max_iter: int = 500, tol: float = 1e-7, random_state=None) -> None:
         self.min_count = min_count
         self.max_range = max_range
+        self.trim = trim
         self.outlier = outlier
         self.max_rounds = max_rounds
         self.n_init = n_init
@@ -135,7 +139,7 @@ class LawOfCosinesSMACOF(TransformerMixin, BaseEstimator):
         r, theta = frame_values(X, masks)
         m = r.shape[0]
         ids, pos = check_anchors(anchor_ids, anchor_positions, m)
-        D, S, C = pooled_frame_distances(r, theta, max_range=self.max_range)
+        D, S, C = pooled_frame_distances(r, theta, max_range=self.max_range, trim=self.trim)
         W = pair_weights(S, C, self.min_count)
         scale = _residual_scale(D, S, W)
         self.outlier_pairs_ = []
@@ -233,17 +237,17 @@ class LawOfCosinesSMACOF(TransformerMixin, BaseEstimator):
                         anchor_positions=anchor_positions).embedding_
 
 
-def _loc_sma(*, min_count: int = 3, max_range: float | None = None, outlier: float = 4.0,
-             n_init: int = 4, random_state=None) -> LawOfCosinesSMACOF:
-    return LawOfCosinesSMACOF(min_count=min_count, max_range=max_range, outlier=outlier,
-                              n_init=n_init, random_state=random_state)
+def _loc_sma(*, min_count: int = 3, max_range: float | None = None, trim: float | None = 3.0,
+             outlier: float = 4.0, n_init: int = 4, random_state=None) -> LawOfCosinesSMACOF:
+    return LawOfCosinesSMACOF(min_count=min_count, max_range=max_range, trim=trim,
+                              outlier=outlier, n_init=n_init, random_state=random_state)
 
 
 SPEC = MethodSpec(
     "LOC-SMA",
     _loc_sma,
     {},
-    {"min_count": [1, 3, 10], "max_range": [None, 4.0]},
+    {"min_count": [1, 3, 10], "trim": [None, 3.0]},
     "anchored weighted SMACOF of law-of-cosines distances (fused range + bearing)",
     uses_anchors=True,
     sensors=(frozenset({"range", "bearing"}),),

@@ -3,9 +3,11 @@
 Every method — the paper's ten (:mod:`mappers.methods`), CAL-SMA (:mod:`mappers.calibrated`),
 UNFOLD (:mod:`mappers.unfolding`), the methods for masked histories (:mod:`mappers.masked`,
 :mod:`mappers.ensemble`) and any a user registers — is a :class:`MethodSpec` in :data:`METHODS`.
-A spec says what the method accepts (which sensors, complete and/or masked histories); the
-pipeline, the protocol and the command line choose and check methods by the spec alone
-(:func:`resolve_method`).
+A spec says what the method accepts (which sensors or fused sets of sensors, complete and/or
+masked histories); the pipeline, the protocol and the command line choose and check methods by
+the spec alone (:func:`resolve_method`). Fused methods — LOC-SMA (:mod:`mappers.range_bearing`)
+for range + bearing, VB-SMA (:mod:`mappers.visibility_bearing`) for visibility + bearing — are
+registered like the others, keyed by their frozenset of sensors.
 """
 
 from __future__ import annotations
