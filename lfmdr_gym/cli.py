@@ -93,6 +93,14 @@ def _add_method_options(p: argparse.ArgumentParser, default: str) -> None:
                         "n_neighbors=7, sigma2=1, d=4")
 
 
+def _add_env_keywords(p: argparse.ArgumentParser, flag: str) -> None:
+    """The env keywords option (``--env`` for reproduce, ``--env-kw`` where --env is an id)."""
+    p.add_argument(flag, action="append", default=None, metavar="NAME=VALUE", dest="env_kwargs",
+                   help="env keyword (repeatable), e.g. fov_deg=90, max_range=1.5, "
+                        "bearing_noise_deg=2, miss_rate=0.5, line_of_sight=true: imperfect "
+                        "sensing (see LFMDREnv); values are read as numbers, true/false or none")
+
+
 def _add_reproduce(sub: Any) -> None:
     p = sub.add_parser(
         "reproduce", formatter_class=_Formatter,
@@ -109,6 +117,8 @@ def _add_reproduce(sub: Any) -> None:
             "command resumes where it stopped, after Ctrl-C or a kill alike, and computes again "
             "any unit whose mapper failed. Other settings on the same --out are refused. "
             "Episodes are cached in --out/histories.",
+            "With --env keywords that limit sensing (fov_deg, max_range, noise, dropouts) the "
+            "histories are masked and the methods default to those that map masked histories.",
         ),
     )
     _add_sensor_option(p, "visibility (Table 1), bearing (Table 2) or range (beyond the paper: "
@@ -125,6 +135,7 @@ def _add_reproduce(sub: Any) -> None:
                         "comma-separated, case-insensitive (default: every method made for "
                         "complete histories)")
     p.add_argument("--seed", type=int, default=0, help="base seed of layouts and poses")
+    _add_env_keywords(p, "--env")
     p.add_argument("--jobs", type=_jobs, default=1,
                    help="worker processes on this machine (-1: all cores); BLAS is kept to one "
                         "thread per worker")
@@ -154,6 +165,7 @@ def _add_run(sub: Any) -> None:
     p.add_argument("--every", type=_positive_int, default=None,
                    help="checkpoint interval; must divide --steps (default: 500 for visibility, "
                         "200 otherwise, plus N itself)")
+    _add_env_keywords(p, "--env-kw")
     p.add_argument("--out", default="lfmdr-run", metavar="DIR", help="output directory")
     p.set_defaults(handler=_cmd_run)
 
@@ -188,6 +200,7 @@ def _add_collect(sub: Any) -> None:
     p.add_argument("--env", default="LFMDR-Visibility-v0", metavar="ID", help="environment id")
     p.add_argument("--steps", type=_positive_int, default=2000, help="episode length N")
     p.add_argument("--seed", type=int, default=0, help="seed of layout, start pose and walk")
+    _add_env_keywords(p, "--env-kw")
     p.add_argument("--out", required=True, metavar="FILE.npz", help="history file to write")
     p.set_defaults(handler=_cmd_collect)
 
@@ -259,11 +272,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 # --------------------------------------------------------------------------- handlers
 def _cmd_reproduce(args: argparse.Namespace) -> int:
+    from lfmdr_gym.experiments.env_settings import parse_env_kwargs
     from lfmdr_gym.experiments.protocol import ProtocolConfig, run_protocol
 
     config = ProtocolConfig(
         sensor=args.sensor, layouts=args.layouts, poses=args.poses, steps=args.steps,
         every=args.every, methods=_method_list(args.methods), seed=args.seed,
+        env_kwargs=parse_env_kwargs(args.env_kwargs),
     )
     out = args.out or f"results/{args.sensor}"
     try:
@@ -292,10 +307,12 @@ def _print_scores(rows: Sequence[dict[str, Any]]) -> None:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    from lfmdr_gym.experiments.env_settings import parse_env_kwargs
     from lfmdr_gym.experiments.mapping import run_episode
 
     rows = run_episode(args.env, args.steps, args.method, seed=args.seed, every=args.every,
-                       params=args.param, out=args.out)
+                       params=args.param, out=args.out,
+                       env_kwargs=parse_env_kwargs(args.env_kwargs))
     print(f"{args.env}, seed {args.seed}, {rows[-1]['method']} ({rows[-1]['param']})")
     _print_scores(rows)
     print(f"wrote {args.out}/history.npz, scores.csv, map.csv, map.png")
@@ -323,9 +340,11 @@ def _cmd_map(args: argparse.Namespace) -> int:
 
 
 def _cmd_collect(args: argparse.Namespace) -> int:
+    from lfmdr_gym.experiments.env_settings import parse_env_kwargs
     from lfmdr_gym.experiments.episodes import collect_history, describe_history
 
-    history = collect_history(args.env, args.steps, args.seed, out=args.out)
+    history = collect_history(args.env, args.steps, args.seed, out=args.out,
+                              env_kwargs=parse_env_kwargs(args.env_kwargs))
     print(describe_history(history))
     print(f"wrote {args.out}")
     return 0

@@ -10,6 +10,7 @@ import numpy as np
 from gymnasium import spaces
 
 from lfmdr_gym import sensors
+from lfmdr_gym.imperfect import SensingLimits
 from lfmdr_gym.render import HumanViewer, available_render_modes, draw_frame, human_rendering_error
 from lfmdr_gym.world import World, check_int, check_real
 from mappers.sensors import SENSORS, check_sensor
@@ -64,7 +65,8 @@ class RangeObservation:
     def __init__(self, env: LFMDREnv) -> None:
         self.max_range = env.max_range
         high = env.max_range if env.max_range is not None else env.world.arena_size * math.sqrt(2.0)
-        self.space = spaces.Box(0.0, high, (env.world.n_objects,), np.float32)
+        self.high = high + 10.0 * env.range_noise  # room for noise (see SensingLimits)
+        self.space = spaces.Box(0.0, self.high, (env.world.n_objects,), np.float32)
 
     def observe(self, rel, d2, heading, cand, rc, dc2, q) -> np.ndarray:
         return sensors.ranges_from_rel(d2, self.max_range, np.float32)
@@ -111,7 +113,7 @@ class LFMDREnv(gym.Env):
       bearing relative to the heading, counter-clockwise positive (left is ``sin > 0``).
     - ``"range"``: ``Box(0, high, (M,), float32)``: distance from the robot's centre to each
       object's centre; with ``max_range`` an object farther away is not sensed and reads 0.
-      ``high`` is ``max_range``, or the arena's diagonal without one.
+      ``high`` is ``max_range``, or the arena's diagonal without one (plus ``10 * range_noise``).
     - ``"proximity"``: ``Box(0, proximity_range, (n_proximity_rays,), float32)``: ray k points at
       ``heading + 2 pi k / n_proximity_rays`` (CCW, ray 0 straight ahead); its value is the
       distance from the robot's centre to the first obstacle (object surface or wall), capped at
@@ -119,6 +121,22 @@ class LFMDREnv(gym.Env):
       reading below ``step_length + robot_radius`` on the ray a move follows means that move
       hits something. Rays are thin and the robot is not, so an object lying between rays can
       still block a move; the physics then stops the robot short (``info["blocked"]``).
+    - ``"observed"`` (only with a sensing limit on, see *Imperfect sensing*): ``MultiBinary(M)``
+      (int8), 1 for the objects the mapping sensor reported on this step.
+
+    ## Imperfect sensing
+
+    All off by default (the paper's perfect sensors); see :class:`lfmdr_gym.imperfect.SensingLimits`.
+    ``fov_deg`` (field of view centred on the heading, in (0, 360]) and ``max_range`` (centre to
+    centre) limit every sensor; ``bearing_noise_deg`` (Gaussian, std of the bearing angle),
+    ``range_noise`` (Gaussian, std in metres), ``miss_rate`` / ``false_rate`` (a visible object
+    reported not visible / an invisible one reported visible, each entry independently, rates in
+    [0, 1)) and ``line_of_sight`` (occlusion for bearing and range: an object hidden behind
+    another is not measured; visibility has its own ``occlusion``) apply to their sensor only.
+    With any of them on, the observation gains ``"observed"``; entries not observed read 0. For
+    visibility, ``observed`` marks where the camera looked (inside the view and range), not what
+    it saw. Noise and dropouts are drawn from a generator seeded from the reset seed, apart from
+    ``np_random``: the same seed and actions give the same trajectory with or without them.
 
     ## Action Space
 
@@ -152,14 +170,15 @@ class LFMDREnv(gym.Env):
              robot_radius=0.05, step_length=0.2, max_turn=pi/4, visual_angle_deg=5.0,
              occlusion=True, anchors="corners", n_anchors=4, object_clearance=0.15,
              wall_clearance=0.15, n_proximity_rays=32, proximity_range=0.5, max_range=None,
-             render_mode=None)
+             fov_deg=360.0, bearing_noise_deg=0.0, range_noise=0.0, miss_rate=0.0,
+             false_rate=0.0, line_of_sight=False, render_mode=None)
     ```
 
     Lengths in metres. ``object_clearance``/``wall_clearance``: least gap between two objects'
     surfaces / between an object and a wall in random layouts. ``anchors``: ``"corners"`` (the
     objects nearest ``n_anchors`` points spread along the walls from a corner; the four corners
     by default) or ``"random"``; ``n_anchors >= 3``. ``visual_angle_deg`` and ``occlusion``
-    shape the visibility sensor, ``max_range`` the range sensor; the others ignore them. Every
+    shape the visibility sensor (the others ignore them); the sensing limits are above. Every
     argument is checked on construction (``ValueError`` naming it).
 
     ## Version History
@@ -190,6 +209,12 @@ class LFMDREnv(gym.Env):
         n_proximity_rays: int = 32,
         proximity_range: float = 0.5,
         max_range: float | None = None,
+        fov_deg: float = 360.0,
+        bearing_noise_deg: float = 0.0,
+        range_noise: float = 0.0,
+        miss_rate: float = 0.0,
+        false_rate: float = 0.0,
+        line_of_sight: bool = False,
         render_mode: str | None = None,
     ) -> None:
         check_sensor(sensor)
@@ -217,6 +242,10 @@ class LFMDREnv(gym.Env):
         self.max_range = (
             None if max_range is None else check_real("max_range", max_range, low=0.0, low_open=True)
         )
+        limits = dict(fov_deg=fov_deg, max_range=self.max_range, bearing_noise_deg=bearing_noise_deg,
+                      range_noise=range_noise, miss_rate=miss_rate, false_rate=false_rate,
+                      line_of_sight=line_of_sight)
+        self.range_noise = check_real("range_noise", range_noise, low=0.0)
         if render_mode == "human" and human_rendering_error() is not None:
             raise human_rendering_error()
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -227,6 +256,10 @@ class LFMDREnv(gym.Env):
 
         self._obs_type = observation_factory(self, sensor)
         self._key = self._obs_type.key
+        # Imperfect sensing (lfmdr_gym.imperfect): built only when a limit is on.
+        self._limits = (SensingLimits(sensor, self.world.n_objects, self.world.object_radius,
+                                      range_high=getattr(self._obs_type, "high", 1.0), **limits)
+                        if SensingLimits.active(limits) else None)
         self._dirs = sensors.ray_directions(self.n_proximity_rays)
         # One candidate prefilter serves the proximity ring and a nearby-only sensor.
         self._reach = max(self.proximity_range + self.world.object_radius, self._obs_type.reach)
@@ -240,6 +273,7 @@ class LFMDREnv(gym.Env):
                 "proximity": spaces.Box(
                     0.0, self.proximity_range, (self.n_proximity_rays,), np.float32
                 ),
+                **({"observed": spaces.MultiBinary(self.world.n_objects)} if self._limits else {}),
             }
         )
         self._anchor_positions = np.zeros((0, 2))
@@ -251,6 +285,8 @@ class LFMDREnv(gym.Env):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         super().reset(seed=seed)
+        if self._limits is not None:
+            self._limits.reset(seed)
         layout = self.world.layout(self.np_random, options)
         self.world.build(layout)
         self._anchor_positions = layout.object_positions[layout.anchor_ids]
@@ -298,6 +334,8 @@ class LFMDREnv(gym.Env):
             self._key: self._obs_type.observe(rel, d2, h, cand, rc, dc2, q),
             "proximity": prox.astype(np.float32),
         }
+        if self._limits is not None:
+            obs[self._key], obs["observed"] = self._limits.apply(obs[self._key], rel, d2, h)
         self._last_obs = obs
         return obs
 

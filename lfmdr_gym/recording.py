@@ -3,7 +3,9 @@
 :func:`collect` runs one episode of one env; :func:`collect_vector` runs episodes in every
 sub-env of a Gymnasium vector env and copes with each autoreset mode. Both record, per move,
 the mapping sensor's reading, the robot's true pose (for scoring only) and whether the move was
-blocked; the reset observation is not a move and is never recorded.
+blocked; the reset observation is not a move and is never recorded. An env with imperfect
+sensing (:mod:`lfmdr_gym.imperfect`) also reports which objects it measured (``"observed"``):
+that becomes the history's mask, True on every column of a measured object's step.
 """
 
 from __future__ import annotations
@@ -95,6 +97,13 @@ def _steps_to_matrix(buffer: np.ndarray, sensor: str) -> np.ndarray:
     return np.moveaxis(buffer, 0, 1).reshape(m, n * per_step).astype(np.float64)
 
 
+def _steps_to_mask(observed: np.ndarray, sensor: str) -> np.ndarray:
+    """(N, M) per-step ``observed`` flags -> the (M, N * c) History mask: a step's flag covers
+    each of its c columns (bearing: cos and sin)."""
+    c = COLUMNS_PER_STEP[sensor]
+    return np.repeat(observed.T.astype(bool), c, axis=1)
+
+
 def _truth(info: dict[str, Any], index: int | None = None) -> dict[str, np.ndarray]:
     """Object positions and anchors from an env's info (row ``index`` of a vector env's info)."""
     out = {}
@@ -133,8 +142,11 @@ def _check_episodes(n_episodes: int) -> int:
 class _Episode:
     """What one episode's moves leave behind, move by move."""
 
-    def __init__(self, n_steps: int, sample: np.ndarray, truth: dict[str, np.ndarray]) -> None:
+    def __init__(self, n_steps: int, sample: np.ndarray, truth: dict[str, np.ndarray],
+                 masked: bool = False) -> None:
         self.values = np.empty((n_steps, *sample.shape), dtype=sample.dtype)
+        # the env's "observed" flags (imperfect sensing), one row per move; None without them
+        self.observed = np.empty((n_steps, sample.shape[0]), dtype=bool) if masked else None
         self.poses = np.empty((n_steps, 3), dtype=np.float64)
         self.truth = truth
         self.count = 0
@@ -144,17 +156,20 @@ class _Episode:
     def full(self) -> bool:
         return self.count >= len(self.values)
 
-    def record(self, value: Any, pose: Any, blocked: Any) -> None:
+    def record(self, value: Any, pose: Any, blocked: Any, observed: Any = None) -> None:
         """Store one move (moves past ``n_steps`` are not recorded)."""
         if self.full:
             return
         self.values[self.count] = value
+        if self.observed is not None:
+            self.observed[self.count] = observed
         self.poses[self.count] = pose
         self.blocked += bool(blocked)
         self.count += 1
 
     def history(self, sensor: str, meta: dict[str, Any]) -> History:
-        return History(sensor=sensor, matrix=_steps_to_matrix(self.values, sensor),
+        mask = None if self.observed is None else _steps_to_mask(self.observed, sensor)
+        return History(sensor=sensor, matrix=_steps_to_matrix(self.values, sensor), mask=mask,
                        robot_poses=self.poses, meta={**meta, "blocked_moves": int(self.blocked)},
                        **self.truth)
 
@@ -219,11 +234,12 @@ def collect(
         obs, info = env.reset(seed=seed)
         sensor = _sensor_key(obs)
         _reset_policy(pol, seed)
-        episode = _Episode(n_steps, np.asarray(obs[sensor]), _truth(info))
+        episode = _Episode(n_steps, np.asarray(obs[sensor]), _truth(info), "observed" in obs)
         for t in range(n_steps):
             action = _shaped_actions(pol(obs), env.action_space, None)
             obs, _, terminated, truncated, info = env.step(action)
-            episode.record(obs[sensor], info["robot_pose"], info.get("blocked", False))
+            episode.record(obs[sensor], info["robot_pose"], info.get("blocked", False),
+                           obs.get("observed"))
             if (terminated or truncated) and t < n_steps - 1:
                 raise ValueError(
                     f"the episode ended after {t + 1} of n_steps={n_steps} moves "
@@ -244,19 +260,24 @@ def _check_limit(n_steps: int, limit: int | None, whose: str) -> None:
 class _VectorRecorder:
     """Episodes of every sub-env of a vector env, filled as the sub-envs step and reset."""
 
-    def __init__(self, n_steps: int, n_episodes: int, sample: np.ndarray, info: dict) -> None:
+    def __init__(self, n_steps: int, n_episodes: int, sample: np.ndarray, info: dict,
+                 masked: bool) -> None:
         self.n_steps, self.n_episodes = n_steps, n_episodes
         self.batch = len(sample)
+        self.masked = masked  # the sub-envs report "observed" (imperfect sensing)
         self.sample = np.empty_like(sample[0])  # the shape and dtype of one sub-env's reading
-        self.episodes = [[_Episode(n_steps, sample[i], _truth(info, i))] for i in range(self.batch)]
+        self.episodes = [[_Episode(n_steps, sample[i], _truth(info, i), masked)]
+                         for i in range(self.batch)]
         self.starts = np.ones(self.batch, dtype=bool)  # episode_start flags for SB3-style policies
 
-    def record(self, rows: Any, observed: np.ndarray, step_info: dict[str, Any]) -> None:
+    def record(self, rows: Any, values: np.ndarray, step_info: dict[str, Any],
+               observed: np.ndarray | None = None) -> None:
         blocked = step_info.get("blocked")
         for i in rows:
             if len(self.episodes[i]) <= self.n_episodes:
-                self.episodes[i][-1].record(observed[i], step_info["robot_pose"][i],
-                                            False if blocked is None else blocked[i])
+                self.episodes[i][-1].record(values[i], step_info["robot_pose"][i],
+                                            False if blocked is None else blocked[i],
+                                            None if observed is None else observed[i])
 
     def new_episode(self, rows: Any, reset_info: dict[str, Any]) -> None:
         for i in rows:
@@ -268,7 +289,8 @@ class _VectorRecorder:
                 )
             self.starts[i] = True
             # past the last wanted episode, an empty placeholder marks the sub-env as finished
-            self.episodes[i].append(_Episode(self.n_steps, self.sample, _truth(reset_info, i))
+            self.episodes[i].append(_Episode(self.n_steps, self.sample, _truth(reset_info, i),
+                                             self.masked)
                                     if done < self.n_episodes else _Episode(0, self.sample, {}))
 
     def finished(self) -> bool:
@@ -284,23 +306,27 @@ def _vector_step(envs: Any, mode: Any, action: np.ndarray, sensor: str, rec: _Ve
 
     obs, _, terminated, truncated, info = envs.step(action)
     done = np.asarray(terminated) | np.asarray(truncated)
+    seen = np.asarray(obs["observed"]) if rec.masked else None
     if mode == AutoresetMode.NEXT_STEP:  # the step after an end only resets: not a move
-        rec.record(np.flatnonzero(~pending), np.asarray(obs[sensor]), info)
+        rec.record(np.flatnonzero(~pending), np.asarray(obs[sensor]), info, seen)
         rec.new_episode(np.flatnonzero(pending), info)
         return obs, done & ~pending
     if mode == AutoresetMode.SAME_STEP:  # the move's own observation is in final_obs
-        observed = np.asarray(obs[sensor]).copy()
+        values = np.asarray(obs[sensor]).copy()
+        seen = None if seen is None else seen.copy()
         step_info = {k: np.array(v, copy=True) for k, v in info.items()
                      if k in ("robot_pose", "blocked")}
         ended = np.flatnonzero(done)
         for i in ended:
-            observed[i] = info["final_obs"][i][sensor]
+            values[i] = info["final_obs"][i][sensor]
+            if seen is not None:
+                seen[i] = info["final_obs"][i]["observed"]
             for key in step_info:
                 step_info[key][i] = info["final_info"][key][i]
-        rec.record(range(rec.batch), observed, step_info)
+        rec.record(range(rec.batch), values, step_info, seen)
         rec.new_episode(ended, info)
         return obs, pending
-    rec.record(range(rec.batch), np.asarray(obs[sensor]), info)  # DISABLED: we reset ourselves
+    rec.record(range(rec.batch), np.asarray(obs[sensor]), info, seen)  # DISABLED: we reset ourselves
     if done.any():
         obs, reset_info = envs.reset(options={"reset_mask": done})
         rec.new_episode(np.flatnonzero(done), reset_info)
@@ -348,7 +374,7 @@ def collect_vector(
     obs, info = envs.reset(seed=seed)
     sensor = _sensor_key(obs)
     _reset_policy(pol, seed)
-    rec = _VectorRecorder(n_steps, n_episodes, np.asarray(obs[sensor]), info)
+    rec = _VectorRecorder(n_steps, n_episodes, np.asarray(obs[sensor]), info, "observed" in obs)
     pending = np.zeros(rec.batch, dtype=bool)  # NEXT_STEP: this sub-env's next step is a reset
     while not rec.finished():
         starts, rec.starts = rec.starts, np.zeros(rec.batch, dtype=bool)

@@ -93,11 +93,49 @@ def parallel(
         yield lambda calls: (fn(*args, **kwargs) for fn, args, kwargs in calls)
         return
     with parallel_config(backend="loky", n_jobs=jobs, inner_max_num_threads=1), \
-            warnings.catch_warnings():
+            warnings.catch_warnings(), _remembered_interrupt() as interrupted:
         # On Ctrl-C joblib warns that running tasks were cancelled: expected, they are redone.
         warnings.filterwarnings("ignore", message=".*still being processed by the workers")
+
+        def run(calls: Iterable[Any]) -> Iterator[Any]:
+            for result in Parallel(return_as="generator_unordered", batch_size=1)(calls):
+                yield result
+                interrupted.raise_if_set()
+
         try:
-            yield lambda calls: Parallel(return_as="generator_unordered", batch_size=1)(calls)
+            yield run
+            interrupted.raise_if_set()
         except KeyboardInterrupt:
             _stop_local_workers()
             raise
+
+
+class _Interrupt:
+    """Whether SIGINT arrived: set by the handler, which also raises KeyboardInterrupt."""
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+
+    def handler(self, signum: int, frame: Any) -> None:
+        self.event.set()
+        raise KeyboardInterrupt
+
+    def raise_if_set(self) -> None:
+        if self.event.is_set():
+            raise KeyboardInterrupt
+
+
+@contextmanager
+def _remembered_interrupt() -> Iterator[_Interrupt]:
+    """Remember a Ctrl-C as well as raising it. The KeyboardInterrupt a signal raises can land
+    inside a library's cleanup code (a finaliser, a callback) that reports and swallows it; the
+    remembered flag stops the run at the next result all the same."""
+    interrupt = _Interrupt()
+    if threading.current_thread() is not threading.main_thread():
+        yield interrupt
+        return
+    previous = signal.signal(signal.SIGINT, interrupt.handler)
+    try:
+        yield interrupt
+    finally:
+        signal.signal(signal.SIGINT, previous)

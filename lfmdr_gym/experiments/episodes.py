@@ -37,6 +37,7 @@ class Episode:
     layout_seed: int
     pose_seed: int
     steps: int
+    env_kwargs: tuple[tuple[str, Any], ...] = ()  # env keywords, e.g. (("fov_deg", 90),)
 
     @property
     def name(self) -> str:
@@ -73,7 +74,7 @@ def collect_episode(episode: Episode) -> History:
     from lfmdr_gym.policies import RandomWalkPolicy
     from lfmdr_gym.recording import collect
 
-    env = make_env(episode.env_id, episode.steps)
+    env = make_env(episode.env_id, episode.steps, dict(episode.env_kwargs))
     try:
         _, info = env.reset(seed=episode.layout_seed)
         layout = {
@@ -92,9 +93,16 @@ def collect_episode(episode: Episode) -> History:
 
 
 def collect_history(
-    env_id: str, steps: int, seed: int | None = 0, out: str | os.PathLike | None = None
+    env_id: str, steps: int, seed: int | None = 0, out: str | os.PathLike | None = None,
+    env_kwargs: Mapping[str, Any] | None = None,
 ) -> History:
-    """One random-walk episode of ``env_id`` (layout and pose from ``seed``), saved to ``out``."""
+    """One random-walk episode of ``env_id`` (layout and pose from ``seed``; ``env_kwargs``:
+    env keywords such as ``{"fov_deg": 90}``, checked for the LFMDR ids), saved to ``out``."""
+    from lfmdr_gym import ENV_IDS
+    from lfmdr_gym.experiments.env_settings import check_env_kwargs
+
+    if env_kwargs and env_id in ENV_IDS:
+        env_kwargs, _ = check_env_kwargs(ENV_IDS[env_id], env_kwargs)
     from lfmdr_gym.policies import RandomWalkPolicy
     from lfmdr_gym.recording import collect
 
@@ -105,7 +113,7 @@ def collect_history(
         if out.suffix != ".npz":
             raise ValueError(f"the history file must end in .npz, got {out.name!r}")
         ensure_writable_dir(out.parent)
-    env = make_env(env_id, steps)
+    env = make_env(env_id, steps, env_kwargs)
     try:
         policy = RandomWalkPolicy.for_env(env, seed=seed)
         history = collect(env, policy, int(steps), seed=seed)

@@ -69,14 +69,18 @@ def run_episode(
     every: int | None = None,
     params: Iterable[str] | Mapping[str, Any] | None = None,
     out: str | os.PathLike | None = None,
+    env_kwargs: Mapping[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
     """One episode, mapped with ``method`` (None: the default for its history) at every
-    checkpoint; rows of scores per checkpoint. With ``out``: writes ``history.npz``,
-    ``scores.csv``, ``map.csv`` and ``map.png`` (the map at the last checkpoint) there."""
-    points = checkpoints_for(steps, every, _sensor_of(env_id))
+    checkpoint; rows of scores per checkpoint. ``env_kwargs``: env keywords such as
+    ``{"fov_deg": 90}`` (checked; a sensing limit makes the history masked). With ``out``:
+    writes ``history.npz``, ``scores.csv``, ``map.csv`` and ``map.png`` (the map at the last
+    checkpoint) there."""
+    sensor = _sensor_of(env_id)
+    points = checkpoints_for(steps, every, sensor)
     if out is not None:
         out = ensure_writable_dir(out)
-    history = collect_history(env_id, steps, seed)
+    history = collect_history(env_id, steps, seed, env_kwargs=env_kwargs)
     method, params = _method_and_params(method, history, params)
     rows, last = [], None
     for n in points:

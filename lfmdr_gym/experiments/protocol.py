@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from lfmdr_gym.experiments.engine import check_jobs, engine_name, parallel, worker_context
+from lfmdr_gym.experiments.env_settings import check_env_kwargs
 from lfmdr_gym.experiments.episodes import Episode, collect_episode, derived_seed
 from lfmdr_gym.experiments.params import (
     default_params,
@@ -83,9 +84,13 @@ class ProtocolConfig:
         steps: episode length N (2000 in the paper).
         every: checkpoint interval (None: 500 for visibility, 200 otherwise); must divide steps.
         methods: method labels of ``mappers.METHODS`` that map the sensor's histories,
-            case-insensitive (None: every method made for complete histories of the sensor).
+            case-insensitive (None: every method made for complete histories of the sensor, or
+            with a sensing limit on, every method that maps masked histories).
         seed: base seed; layout ``i`` uses seed ``f(seed, i)`` and its pose ``j`` uses
             ``f(seed, i, j)`` (numpy ``SeedSequence``), so runs never share random streams.
+        env_kwargs: env keywords, e.g. ``{"fov_deg": 90, "max_range": 1.5}`` (imperfect
+            sensing, :mod:`lfmdr_gym.imperfect`); unknown keywords and bad values are refused.
+            With a sensing limit on the histories are masked (:attr:`masked`).
     """
 
     sensor: str = "visibility"
@@ -96,6 +101,8 @@ class ProtocolConfig:
     methods: tuple[str, ...] | None = None
     seed: int = 0
     mode: InitVar[str | None] = None
+    env_kwargs: Mapping[str, Any] | tuple[tuple[str, Any], ...] | None = None
+    masked: bool = field(default=False, init=False)
     _grids: dict[str, list[dict[str, Any]]] = field(
         default_factory=dict, init=False, repr=False, compare=False
     )
@@ -121,7 +128,10 @@ class ProtocolConfig:
         if not isinstance(self.seed, int | np.integer):
             raise ValueError(f"seed must be an integer, got {self.seed!r}")
         object.__setattr__(self, "every", int(every))
-        object.__setattr__(self, "methods", resolve_methods(self.methods, self.sensor))
+        kwargs, masked = check_env_kwargs(self.sensor, dict(self.env_kwargs or ()))
+        object.__setattr__(self, "env_kwargs", tuple(sorted(kwargs.items())))
+        object.__setattr__(self, "masked", masked)
+        object.__setattr__(self, "methods", resolve_methods(self.methods, self.sensor, masked))
         self._grids.update({m: grid_params(m) for m in self.methods})
 
     @property
@@ -141,7 +151,7 @@ class ProtocolConfig:
     def episodes(self) -> list[Episode]:
         return [
             Episode(self.env_id, i, j, derived_seed(self.seed, i), derived_seed(self.seed, i, j),
-                    self.steps)
+                    self.steps, self.env_kwargs)
             for i in range(self.layouts)
             for j in range(self.poses)
         ]
@@ -168,8 +178,11 @@ class ProtocolConfig:
                 unit.n_steps)
 
     def settings(self) -> dict[str, Any]:
-        """What ``manifest.json`` records: a run directory is resumed only with equal settings."""
+        """What ``manifest.json`` records: a run directory is resumed only with equal settings
+        (env keywords only when given, so that earlier run directories still resume)."""
+        env = {"env_kwargs": dict(self.env_kwargs)} if self.env_kwargs else {}
         return {
+            **env,
             "format": "lfmdr-protocol",
             "version": 1,
             "sensor": self.sensor,
