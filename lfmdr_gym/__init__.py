@@ -14,11 +14,11 @@ from gymnasium.envs.registration import register, registry
 
 from lfmdr_gym.env import LFMDREnv
 from lfmdr_gym.history import History
-from lfmdr_gym.policies import RandomWalkPolicy, as_policy
+from lfmdr_gym.policies import POLICIES, RandomWalkPolicy, as_policy
 from lfmdr_gym.recording import collect, collect_vector
 from mappers.sensors import SENSORS, check_sensor
 
-__all__ = ["ENV_IDS", "History", "LFMDREnv", "RandomWalkPolicy", "as_policy", "collect",
+__all__ = ["ENV_IDS", "POLICIES", "History", "LFMDREnv", "RandomWalkPolicy", "as_policy", "collect",
            "collect_vector", "env_id_for"]
 
 MAX_EPISODE_STEPS = 2000

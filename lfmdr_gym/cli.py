@@ -167,6 +167,12 @@ def _add_run(sub: Any) -> None:
                         "200 otherwise, plus N itself)")
     _add_env_keywords(p, "--env-kw")
     p.add_argument("--out", default="lfmdr-run", metavar="DIR", help="output directory")
+    p.add_argument("--online", action="store_true",
+                   help="map online as the robot moves (mappers.OnlineMapper, updated every 10 "
+                        "steps) and write the growing map beside the robot as DIR/live.gif "
+                        "(needs matplotlib: pip install lfmdr[plots])")
+    p.add_argument("--policy", default="random-walk", metavar="NAME",
+                   help="exploration policy, a name of lfmdr_gym.POLICIES (random-walk, coverage)")
     p.set_defaults(handler=_cmd_run)
 
 
@@ -191,10 +197,11 @@ def _add_map(sub: Any) -> None:
 def _add_collect(sub: Any) -> None:
     p = sub.add_parser(
         "collect", formatter_class=_Formatter,
-        help="record one random-walk episode as a history file and summarise it",
+        help="record one episode as a history file and summarise it",
         description=_text(
-            "Run one episode with the paper's random-walk agent and save what the robot sensed "
-            "(and the ground truth for scoring) as a History .npz; print a summary."
+            "Run one episode with an exploration policy (default: the paper's random walk) and "
+            "save what the robot sensed (and the ground truth for scoring) as a History .npz; "
+            "print a summary."
         ),
     )
     p.add_argument("--env", default="LFMDR-Visibility-v0", metavar="ID", help="environment id")
@@ -202,6 +209,8 @@ def _add_collect(sub: Any) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of layout, start pose and walk")
     _add_env_keywords(p, "--env-kw")
     p.add_argument("--out", required=True, metavar="FILE.npz", help="history file to write")
+    p.add_argument("--policy", default="random-walk", metavar="NAME",
+                   help="exploration policy, a name of lfmdr_gym.POLICIES (random-walk, coverage)")
     p.set_defaults(handler=_cmd_collect)
 
 
@@ -310,12 +319,40 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from lfmdr_gym.experiments.env_settings import parse_env_kwargs
     from lfmdr_gym.experiments.mapping import run_episode
 
+    if args.online:
+        return _cmd_run_online(args)
     rows = run_episode(args.env, args.steps, args.method, seed=args.seed, every=args.every,
-                       params=args.param, out=args.out,
+                       params=args.param, out=args.out, policy=args.policy,
                        env_kwargs=parse_env_kwargs(args.env_kwargs))
     print(f"{args.env}, seed {args.seed}, {rows[-1]['method']} ({rows[-1]['param']})")
     _print_scores(rows)
     print(f"wrote {args.out}/history.npz, scores.csv, map.csv, map.png")
+    return 0
+
+
+def _cmd_run_online(args: argparse.Namespace) -> int:
+    from lfmdr_gym.experiments.env_settings import check_env_kwargs, parse_env_kwargs
+    from lfmdr_gym.experiments.live import online_episode, save_gif
+    from lfmdr_gym.experiments.mapping import _sensor_of, checkpoints_for
+    from lfmdr_gym.experiments.params import user_params
+    from lfmdr_gym.experiments.store import ensure_writable_dir
+    from mappers import resolve_method
+
+    sensor = _sensor_of(args.env)
+    points = set(checkpoints_for(args.steps, args.every, sensor))
+    out = ensure_writable_dir(args.out)
+    env_kwargs, masked = check_env_kwargs(sensor, parse_env_kwargs(args.env_kwargs))
+    label = resolve_method(args.method, sensor, masked=masked).label
+    frames, rows, _ = online_episode(args.env, args.steps, seed=args.seed, policy=args.policy,
+                                     method=args.method, params=user_params(label, args.param),
+                                     frame_every=max(args.steps // 50, 1), env_kwargs=env_kwargs)
+    print(f"{args.env}, seed {args.seed}, policy {args.policy}, online {label}")
+    print(f"{'steps':>6s} {'MPE non-anchor [m]':>19s} {'mapped':>7s}")
+    for r in rows:
+        if r["n_steps"] in points:
+            print(f"{r['n_steps']:6d} {r['mpe']:19.4f} {r['mapped']:7d}")
+    path = save_gif(frames, rows, out / "live.gif", title=f"{args.env} ({args.policy})")
+    print(f"wrote {path}")
     return 0
 
 
@@ -344,7 +381,7 @@ def _cmd_collect(args: argparse.Namespace) -> int:
     from lfmdr_gym.experiments.episodes import collect_history, describe_history
 
     history = collect_history(args.env, args.steps, args.seed, out=args.out,
-                              env_kwargs=parse_env_kwargs(args.env_kwargs))
+                              env_kwargs=parse_env_kwargs(args.env_kwargs), policy=args.policy)
     print(describe_history(history))
     print(f"wrote {args.out}")
     return 0

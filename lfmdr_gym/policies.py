@@ -15,12 +15,13 @@ that meets one of two shapes can drive an :class:`~lfmdr_gym.env.LFMDREnv`:
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from types import MappingProxyType
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["Policy", "PredictPolicy", "RandomWalkPolicy", "as_policy"]
+__all__ = ["POLICIES", "Policy", "PredictPolicy", "RandomWalkPolicy", "as_policy", "check_policy"]
 
 
 @runtime_checkable
@@ -438,3 +439,46 @@ class RandomWalkPolicy:
             f"n_tries={self.n_tries}, seed={self.seed!r})"
         )
 
+
+
+def _coverage(env: Any, **kwargs: Any) -> Any:
+    from lfmdr_gym.exploration import CoveragePolicy
+
+    return CoveragePolicy.for_env(env, **kwargs)
+
+
+POLICIES: Mapping[str, Callable[..., Any]] = MappingProxyType({
+    "random-walk": RandomWalkPolicy.for_env,
+    "coverage": _coverage,
+})
+"""Name -> factory ``factory(env, **kwargs) -> policy``: the exploration policies ``lfmdr collect
+--policy NAME`` offers. A factory reads only the env's geometry (turn limit, step length, robot
+and object radii) and spaces; the policy then sees observations only (:func:`check_policy`).
+
+- ``"random-walk"``: the paper's agent (:class:`RandomWalkPolicy`).
+- ``"coverage"``: even coverage from a dead-reckoned visit memory
+  (:class:`lfmdr_gym.exploration.CoveragePolicy`).
+"""
+
+
+def check_policy(policy: Any, env: Any, n_steps: int = 20, seed: int = 0) -> None:
+    """Drive ``env`` with ``policy`` for ``n_steps`` moves, handing it observations only, and
+    check the contract: every action lies in the env's action space, and with ``reset(seed)`` the
+    same seed gives the same actions. AssertionError naming the breach otherwise.
+    """
+    pol = as_policy(policy)
+    runs = []
+    for _ in range(2):
+        obs, _ = env.reset(seed=seed)
+        if callable(getattr(pol, "reset", None)):
+            pol.reset(seed=seed)
+        actions = []
+        for _ in range(n_steps):
+            action = np.asarray(pol(obs), dtype=np.float32).reshape(env.action_space.shape)
+            assert env.action_space.contains(action), f"action {action} outside {env.action_space}"
+            actions.append(action)
+            obs, _, terminated, truncated, _ = env.step(action)  # info is never handed on
+            if terminated or truncated:
+                break
+        runs.append(np.array(actions))
+    assert np.array_equal(runs[0], runs[1]), "the same seed gave different actions"

@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike
 
 from lfmdr_gym.sensors import ray_directions
 
-__all__ = ["HumanViewer", "draw_frame", "human_rendering_error"]
+__all__ = ["HumanViewer", "draw_frame", "draw_map", "human_rendering_error"]
 
 BACKGROUND = (250, 250, 247)
 WALL = (60, 60, 60)
@@ -27,6 +27,8 @@ HEADING = (10, 10, 40)
 SIGHT = (120, 200, 140)
 BEARING_RAY = (205, 215, 235)
 PROXIMITY_RAY = (240, 150, 40)
+ESTIMATE = (40, 90, 200)
+ERROR_LINE = (230, 120, 120)
 
 
 class _Canvas:
@@ -140,6 +142,41 @@ def draw_frame(
     side = np.array((-ahead[1], ahead[0])) / canvas.scale  # one pixel sideways, in metres
     for k in (-1.0, 0.0, 1.0):
         canvas.lines(robot + k * side, robot + k * side + 2.0 * robot_radius * ahead, HEADING)
+    return canvas.img
+
+
+def draw_map(
+    *,
+    arena_half: float,
+    estimates: ArrayLike,
+    object_radius: float,
+    truth: ArrayLike | None = None,
+    anchor_ids: ArrayLike = (),
+    size: int = 480,
+) -> np.ndarray:
+    """Draw a map as an (size, size, 3) uint8 RGB image, in the arena's frame.
+
+    The estimated positions (M, 2) are blue discs (NaN rows, objects not mapped yet, are left
+    out); with ``truth`` (M, 2) the true objects are grey and a red line joins each estimate to
+    its truth; anchors are ringed in red at their (known) positions.
+    """
+    if size < 32:
+        raise ValueError(f"size must be >= 32 pixels, got {size}")
+    est = np.asarray(estimates, dtype=np.float64).reshape(-1, 2)
+    canvas = _Canvas(size, arena_half)
+    a = arena_half
+    corners = np.array([(-a, -a), (a, -a), (a, a), (-a, a)])
+    canvas.lines(corners, np.roll(corners, -1, axis=0), WALL)
+    placed = np.all(np.isfinite(est), axis=1)
+    ids = np.asarray(anchor_ids, dtype=np.int64).reshape(-1)
+    if truth is not None:
+        true = np.asarray(truth, dtype=np.float64).reshape(-1, 2)
+        canvas.discs(true, object_radius, OBJECT)
+        canvas.lines(true[placed], est[placed], ERROR_LINE)
+    canvas.discs(est[placed], object_radius, ESTIMATE)
+    ring = est[ids] if truth is None else np.asarray(truth, dtype=np.float64).reshape(-1, 2)[ids]
+    canvas.discs(ring[np.all(np.isfinite(ring), axis=1)], object_radius * 2.2, ANCHOR,
+                 min_px=4.0, ring=True)
     return canvas.img
 
 

@@ -44,6 +44,7 @@ _LAZY: dict[str, str] = {
     "MaskedMapWarning": "mappers.masked",
     "masked_embedding": "mappers.masked",
     "CovisEnsemble": "mappers.ensemble",
+    "OnlineMapper": "mappers.online",
 }
 
 __all__ = sorted(_LAZY)

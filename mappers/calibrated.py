@@ -138,7 +138,7 @@ def fold_score(
     Dx = euclidean_distance_matrix(X)
     if not np.all(np.isfinite(Dx)):
         return float(m)
-    med = np.array([np.median(Dx[i, loc[i]]) if loc[i].any() else 0.0 for i in range(m)])
+    med = _row_medians(Dx, loc)
     scale = np.median(med[med > 0]) if np.any(med > 0) else 0.0
     if scale <= 0:
         return float(m)  # everything on one point: a collapse
@@ -156,6 +156,17 @@ def fold_score(
             rel = np.sqrt(np.where(ref > 0, res / ref, 0.0))
         count += int(np.sum(rel > strain))
     return float(count / m)
+
+
+def _row_medians(A: np.ndarray, sel: np.ndarray) -> np.ndarray:
+    """``np.median(A[i, sel[i]])`` for every row at once (0 for a row with nothing selected):
+    sorted rows with the unselected entries last, then the middle one or two."""
+    count = sel.sum(axis=1)
+    S = np.sort(np.where(sel, A, np.inf), axis=1)
+    rows = np.arange(len(A))
+    lo = S[rows, np.maximum(count - 1, 0) // 2]
+    hi = S[rows, count // 2]
+    return np.where(count > 0, 0.5 * (lo + hi), 0.0)
 
 
 def _log_floor(delta: np.ndarray) -> float:

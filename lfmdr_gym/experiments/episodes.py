@@ -95,16 +95,21 @@ def collect_episode(episode: Episode) -> History:
 def collect_history(
     env_id: str, steps: int, seed: int | None = 0, out: str | os.PathLike | None = None,
     env_kwargs: Mapping[str, Any] | None = None,
+    policy: str = "random-walk",
 ) -> History:
-    """One random-walk episode of ``env_id`` (layout and pose from ``seed``; ``env_kwargs``:
-    env keywords such as ``{"fov_deg": 90}``, checked for the LFMDR ids), saved to ``out``."""
+    """One episode of ``env_id`` (layout and pose from ``seed``; ``env_kwargs``: env keywords
+    such as ``{"fov_deg": 90}``, checked for the LFMDR ids) driven by the exploration policy
+    named ``policy`` (:data:`lfmdr_gym.POLICIES`), saved to ``out``."""
     from lfmdr_gym import ENV_IDS
     from lfmdr_gym.experiments.env_settings import check_env_kwargs
 
     if env_kwargs and env_id in ENV_IDS:
         env_kwargs, _ = check_env_kwargs(ENV_IDS[env_id], env_kwargs)
-    from lfmdr_gym.policies import RandomWalkPolicy
+    from lfmdr_gym.policies import POLICIES
     from lfmdr_gym.recording import collect
+
+    if policy not in POLICIES:
+        raise ValueError(f"unknown policy {policy!r}; choose from {list(POLICIES)}")
 
     if not isinstance(steps, int | np.integer) or steps < 1:
         raise ValueError(f"steps must be a positive integer, got {steps!r}")
@@ -115,8 +120,8 @@ def collect_history(
         ensure_writable_dir(out.parent)
     env = make_env(env_id, steps, env_kwargs)
     try:
-        policy = RandomWalkPolicy.for_env(env, seed=seed)
-        history = collect(env, policy, int(steps), seed=seed)
+        agent = POLICIES[policy](env, seed=seed)
+        history = collect(env, agent, int(steps), seed=seed)
     finally:
         env.close()
     history = dataclasses.replace(history, meta={**history.meta, "env_id": env_id, "seed": seed})

@@ -70,8 +70,10 @@ def run_episode(
     params: Iterable[str] | Mapping[str, Any] | None = None,
     out: str | os.PathLike | None = None,
     env_kwargs: Mapping[str, Any] | None = None,
+    policy: str = "random-walk",
 ) -> list[dict[str, Any]]:
-    """One episode, mapped with ``method`` (None: the default for its history) at every
+    """One episode driven by the exploration policy named ``policy`` (:data:`lfmdr_gym.POLICIES`),
+    mapped with ``method`` (None: the default for its history) at every
     checkpoint; rows of scores per checkpoint. ``env_kwargs``: env keywords such as
     ``{"fov_deg": 90}`` (checked; a sensing limit makes the history masked). With ``out``:
     writes ``history.npz``, ``scores.csv``, ``map.csv`` and ``map.png`` (the map at the last
@@ -80,7 +82,7 @@ def run_episode(
     points = checkpoints_for(steps, every, sensor)
     if out is not None:
         out = ensure_writable_dir(out)
-    history = collect_history(env_id, steps, seed, env_kwargs=env_kwargs)
+    history = collect_history(env_id, steps, seed, env_kwargs=env_kwargs, policy=policy)
     method, params = _method_and_params(method, history, params)
     rows, last = [], None
     for n in points:

@@ -1,0 +1,102 @@
+"""Map error against steps for each exploration policy of ``lfmdr_gym.POLICIES``, both sensors.
+
+For each sensor (visibility, bearing) and each policy it walks fresh layouts (seeds never used
+to tune a policy), the same layout and start pose for every policy, and maps the first 250,
+500, 1,000 and 2,000 steps with the default mapper (CAL-SMA). It prints the mean MPE over the
+non-anchor objects [m] per policy and number of steps, then the goal: the best policy's map
+after 500 steps at least as good as the random walk's after 2,000. ``--plot FILE`` draws the
+figure (matplotlib, the ``plots`` extra).
+
+    PYTHONPATH=. python benchmarks/bench_exploration.py --plot docs/exploration.png  # 25 layouts
+    PYTHONPATH=. python benchmarks/bench_exploration.py --runs 5 --sensors visibility
+"""
+
+from __future__ import annotations
+
+import argparse
+import warnings
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+import mappers
+from lfmdr_gym import POLICIES, collect, env_id_for
+from lfmdr_gym.experiments.episodes import derived_seed, make_env
+
+STEPS = (250, 500, 1000, 2000)
+
+
+def _mpe(hist, n: int) -> float:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = mappers.build_map(hist.head(n), hist.anchor_ids, hist.anchor_positions)
+    truth = hist.object_positions
+    keep = np.setdiff1d(np.arange(len(truth)), [*hist.anchor_ids, *m.unmapped])
+    return mappers.mean_position_error(m.positions[keep], truth[keep])
+
+
+def run(sensor: str, runs: int, seed: int) -> dict[str, np.ndarray]:
+    out: dict[str, list] = {name: [] for name in POLICIES}
+    for r in range(runs):
+        s = derived_seed(seed, r)
+        for name, factory in POLICIES.items():
+            env = make_env(env_id_for(sensor), max(STEPS))
+            try:
+                hist = collect(env, factory(env, seed=s), max(STEPS), seed=s)
+            finally:
+                env.close()
+            with threadpool_limits(limits=1):
+                out[name].append([_mpe(hist, n) for n in STEPS])
+    return {name: np.array(rows) for name, rows in out.items()}
+
+
+def plot(results: dict[str, dict[str, np.ndarray]], path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from lfmdr_gym.atomic import atomic_write
+
+    fig, axes = plt.subplots(1, len(results), figsize=(4.2 * len(results), 3.4), squeeze=False)
+    for ax, (sensor, res) in zip(axes[0], results.items(), strict=True):
+        for name, rows in res.items():
+            ax.plot(STEPS, rows.mean(axis=0), marker="o", label=name)
+        ax.set(title=f"{sensor} (CAL-SMA, {len(rows)} layouts)", xlabel="steps",
+               ylabel="mean MPE [m]", xscale="log")
+        ax.set_xticks(STEPS, [str(n) for n in STEPS])
+        ax.minorticks_off()
+        ax.grid(alpha=0.3)
+        ax.legend()
+    fig.tight_layout()
+    with atomic_write(path, "wb") as fh:
+        fig.savefig(fh, format="png", dpi=90)
+    plt.close(fig)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sensors", nargs="+", default=["visibility", "bearing"])
+    ap.add_argument("--runs", type=int, default=25, help="fresh layouts (one start pose each)")
+    ap.add_argument("--seed", type=int, default=4711, help="never used for tuning")
+    ap.add_argument("--plot", default=None, metavar="FILE.png")
+    args = ap.parse_args()
+    results = {}
+    for sensor in args.sensors:
+        res = results[sensor] = run(sensor, args.runs, args.seed)
+        print(f"\n{sensor}: mean MPE [m] over {args.runs} fresh layouts (seed {args.seed})")
+        print(f"  {'policy':12s}" + "".join(f"{n:>9d}" for n in STEPS))
+        for name, rows in res.items():
+            print(f"  {name:12s}" + "".join(f"{v:9.4f}" for v in rows.mean(axis=0)))
+        target = res["random-walk"][:, STEPS.index(2000)].mean()
+        best, value = min(((n, r[:, STEPS.index(500)].mean()) for n, r in res.items()),
+                          key=lambda t: t[1])
+        print(f"  goal: best at 500 steps ({best}, {value:.4f}) <= random walk at 2000 "
+              f"({target:.4f}): {'met' if value <= target else 'NOT met'}")
+    if args.plot:
+        plot(results, args.plot)
+        print(f"wrote {args.plot}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,98 @@
+"""The online map against rebuilding it: cost per update and accuracy as the run grows.
+
+For each sensor (visibility, bearing) it collects fresh layouts (seeds never used to tune
+anything) with the random walk, feeds :class:`mappers.OnlineMapper` (default method, CAL-SMA)
+the columns of 10 new steps at a time and prints, over the runs:
+
+- the CPU time of one update, median and mean (the mean includes the occasional full refits),
+  against ``build_map`` on the whole history at N steps (one BLAS thread), and their ratio;
+- the MPE of the online map at 500, 1,000, 1,500 and N steps over the offline map's of the
+  same steps (mean and max of the ratio), and both mean MPEs [m].
+
+    PYTHONPATH=. python benchmarks/bench_online.py                  # 25 layouts per sensor
+    PYTHONPATH=. python benchmarks/bench_online.py --runs 5 --sensors bearing
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+import mappers
+from lfmdr_gym.experiments.protocol import ProtocolConfig, collect_episode
+from mappers.sensors import COLUMNS_PER_STEP
+
+GOAL_SPEEDUP, GOAL_FINAL, GOAL_CHECKPOINT = 20.0, 1.05, 1.1
+
+
+def _mpe(result, hist) -> float:
+    truth = hist.object_positions
+    keep = np.setdiff1d(np.arange(len(truth)), [*hist.anchor_ids, *result.unmapped])
+    return mappers.mean_position_error(result.positions[keep], truth[keep])
+
+
+def one_run(hist, steps: int, batch: int, checkpoints: tuple[int, ...]) -> dict:
+    c = COLUMNS_PER_STEP[hist.sensor]
+    om = mappers.OnlineMapper(hist.anchor_ids, hist.anchor_positions, sensor=hist.sensor)
+    times, ratios, online, offline = [], [], [], []
+    for s in range(0, steps, batch):
+        t0 = time.process_time()
+        current = om.update(hist.matrix[:, s * c:(s + batch) * c])
+        times.append(time.process_time() - t0)
+        if s + batch in checkpoints:
+            ref = mappers.build_map(hist.head(s + batch), hist.anchor_ids, hist.anchor_positions)
+            online.append(_mpe(current, hist))
+            offline.append(_mpe(ref, hist))
+            ratios.append(online[-1] / offline[-1])
+    t0 = time.process_time()
+    mappers.build_map(hist.head(steps), hist.anchor_ids, hist.anchor_positions)
+    rebuild = time.process_time() - t0
+    return {"median": np.median(times), "mean": np.mean(times), "rebuild": rebuild,
+            "ratios": ratios, "online": online, "offline": offline, "refits": om.n_full_fits}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sensors", nargs="+", default=["visibility", "bearing"])
+    ap.add_argument("--runs", type=int, default=25, help="fresh layouts (one start pose each)")
+    ap.add_argument("--seed", type=int, default=31337, help="never used for tuning")
+    ap.add_argument("--steps", type=int, default=2000)
+    ap.add_argument("--batch", type=int, default=10, help="new steps per update")
+    args = ap.parse_args()
+    checkpoints = tuple(n for n in (500, 1000, 1500) if n < args.steps) + (args.steps,)
+    for sensor in args.sensors:
+        cfg = ProtocolConfig(sensor=sensor, layouts=args.runs, poses=1, steps=args.steps,
+                             seed=args.seed, methods=("LPCA",))
+        with threadpool_limits(limits=1):
+            rows = [one_run(collect_episode(ep), args.steps, args.batch, checkpoints)
+                    for ep in cfg.episodes()]
+        med = np.median([r["median"] for r in rows])
+        mean = np.mean([r["mean"] for r in rows])
+        rebuild = np.median([r["rebuild"] for r in rows])
+        R = np.array([r["ratios"] for r in rows])
+        print(f"\n{sensor}: {len(rows)} fresh layouts (seed {args.seed}), updates of {args.batch} "
+              f"steps, N = {args.steps}")
+        print(f"  rebuild at N: {rebuild * 1e3:.1f} ms;  update: median {med * 1e3:.2f} ms "
+              f"({rebuild / med:.1f}x cheaper), mean incl. refits {mean * 1e3:.2f} ms "
+              f"({rebuild / mean:.1f}x); full refits per run {np.mean([r['refits'] for r in rows]):.1f}")
+        print(f"  {'steps':>6s} {'online MPE':>10s} {'offline MPE':>11s} {'ratio mean':>10s} "
+              f"{'ratio max':>9s}")
+        for j, n in enumerate(checkpoints):
+            on = np.mean([r["online"][j] for r in rows])
+            off = np.mean([r["offline"][j] for r in rows])
+            print(f"  {n:6d} {on:10.4f} {off:11.4f} {on / off:10.3f} {R[:, j].max():9.3f}")
+        final = np.mean([r["online"][-1] for r in rows]) / np.mean([r["offline"][-1] for r in rows])
+        mid = max(np.mean([r["online"][j] for r in rows]) / np.mean([r["offline"][j] for r in rows])
+                  for j in range(len(checkpoints) - 1))
+        print(f"  goals: update >= {GOAL_SPEEDUP:.0f}x cheaper (median: "
+              f"{'met' if rebuild / med >= GOAL_SPEEDUP else 'NOT met'}; mean: "
+              f"{'met' if rebuild / mean >= GOAL_SPEEDUP else 'NOT met'}), final MPE <= "
+              f"{GOAL_FINAL} x offline ({'met' if final <= GOAL_FINAL else 'NOT met'}), checkpoints "
+              f"<= {GOAL_CHECKPOINT} x ({'met' if mid <= GOAL_CHECKPOINT else 'NOT met'})")
+
+
+if __name__ == "__main__":
+    main()

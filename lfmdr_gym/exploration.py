@@ -1,0 +1,124 @@
+"""An exploration policy that maps fast: even coverage from a dead-reckoned visit memory.
+
+A map built from observation histories is best where the robot's viewpoints sample the ground
+evenly: a visibility history measures how much two objects' visibility discs overlap, and a
+random walk (the paper's agent, §4.1) samples that overlap unevenly, dwelling where it happens to
+be. :class:`CoveragePolicy` keeps a count of its visits per cell of a grid and steers toward the
+least-visited ground it can see is free, so its viewpoints spread evenly over the arena.
+
+It knows only what it senses and what it did, never the pose or the layout in ``info``:
+
+- the grid is in its own odometry frame (its start is the origin): it dead-reckons from its own
+  turns and from the proximity ring, which says before each move how far the robot can advance
+  (the full step when the way is clear; the room before the obstacle otherwise);
+- each candidate turn is scored by the visit counts of the cells one and two steps ahead along
+  it, counting only points the proximity ring reports free, nearer cells weighing more; the
+  best-scored candidate that passes :class:`~lfmdr_gym.policies.RandomWalkPolicy`'s collision
+  check is taken.
+
+Dead reckoning drifts a little on moves the physics cuts short (an object hidden between two
+rays); the visit memory only needs to be right over a few cells, so this does not matter much.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from lfmdr_gym.policies import RandomWalkPolicy
+
+__all__ = ["CoveragePolicy"]
+
+
+class CoveragePolicy(RandomWalkPolicy):
+    """Steer toward the least-visited free ground of a dead-reckoned grid (module docstring).
+
+    Args:
+        cell: side of a grid cell [m].
+        extent: half-width of the grid around the start [m]; must exceed the arena's width so
+            that any start keeps the arena inside (the default fits the paper's 2.5 m arena).
+        max_turn, step_length, robot_radius, margin, obstacle_radius, plan_ahead, n_tries, seed:
+            as for :class:`~lfmdr_gym.policies.RandomWalkPolicy`.
+
+    One observation at a time (it keeps per-episode memory); :meth:`reset` forgets it.
+    Attributes: ``visits`` (the grid of visit counts), ``odometry`` (x, y, heading) in the frame
+    of the start.
+    """
+
+    def __init__(self, max_turn: float = math.pi / 4, step_length: float = 0.2,
+                 robot_radius: float = 0.05, *, cell: float = 0.25, extent: float = 3.0,
+                 **kwargs: Any) -> None:
+        super().__init__(max_turn, step_length, robot_radius, **kwargs)
+        for name, value in (("cell", cell), ("extent", extent)):
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+        if extent < cell:
+            raise ValueError(f"extent must be at least one cell ({cell}), got {extent!r}")
+        self.cell = float(cell)
+        self.extent = float(extent)
+        self._n = 2 * int(math.ceil(extent / cell))
+        self._forget()
+
+    def _forget(self) -> None:
+        self.visits = np.zeros((self._n, self._n))
+        self.odometry = np.zeros(3)
+        self._moved = False
+
+    def reset(self, seed: int | None = None) -> None:
+        """Start an episode: forget the visits and the odometry; reseed as the random walk does."""
+        super().reset(seed)
+        self._forget()
+
+    def _cells(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        idx = np.floor((xy + self.extent) / self.cell).astype(int)
+        return tuple(np.clip(idx, 0, self._n - 1).T)
+
+    def _scores(self, proximity: np.ndarray, turns: np.ndarray) -> np.ndarray:
+        """Visit counts ahead along each turn (cells one and two steps on, the nearer weighing
+        double), over the points the proximity ring reports free; lower is better."""
+        x, y, heading = self.odometry
+        room = self.clearance(proximity[None, :], turns[None, :])[0]
+        score = np.zeros(turns.size)
+        for k, weight in ((1, 1.0), (2, 0.5)):
+            d = k * self.step_length
+            ahead = np.column_stack([x + d * np.cos(heading + turns), y + d * np.sin(heading + turns)])
+            counts = self.visits[self._cells(ahead)]
+            # a point beyond an obstacle is unknown ground: scored as the most visited cell seen
+            score += weight * np.where(room >= d, counts, self.visits.max())
+        return score
+
+    def __call__(self, observation: Mapping[str, Any]) -> np.ndarray:
+        """The heading change for one observation, shape (1,)."""
+        if not isinstance(observation, Mapping) or "proximity" not in observation:
+            raise ValueError("CoveragePolicy needs a dict observation with a 'proximity' entry, "
+                             f"got {type(observation).__name__}")
+        prox = np.asarray(observation["proximity"], dtype=np.float64)
+        if prox.ndim != 1:
+            raise ValueError("CoveragePolicy takes one observation at a time (it keeps "
+                             f"per-episode memory), got proximity of shape {prox.shape}")
+        if self._stuck_sign is None or self._stuck_sign.shape != (1,):
+            self._stuck_sign = np.zeros(1)
+        self.visits[self._cells(self.odometry[None, :2])] += 1
+        mt = self.max_turn
+        turns = self.rng.uniform(-mt, mt, self.n_tries)
+        turns = turns[np.argsort(self._scores(prox, turns), kind="stable")]
+        first = self._first_choice(prox, turns)
+        if first < 0:
+            turn = self._unstick(0, prox)
+        else:
+            turn = float(turns[first])
+            self._stuck_sign[0] = 0.0
+        # dead reckoning: the move advances the step, or the room the ring reports if less
+        room = float(self.clearance(prox[None, :], np.array([[turn]]))[0, 0])
+        heading = self.odometry[2] + turn
+        advance = min(self.step_length, max(room, 0.0))
+        self.odometry = np.array([self.odometry[0] + advance * math.cos(heading),
+                                  self.odometry[1] + advance * math.sin(heading),
+                                  math.remainder(heading, 2.0 * math.pi)])
+        return np.array([turn], np.float32)
+
+    def __repr__(self) -> str:
+        return f"CoveragePolicy(cell={self.cell:g}, extent={self.extent:g}, seed={self.seed!r})"

@@ -1,0 +1,180 @@
+"""Tests of the online mapper (mappers.online, issue 14)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mappers import OnlineMapper, build_map, mean_position_error
+from mappers.calibrated import history_dissimilarity
+from mappers.online import gram_dissimilarity
+
+HALF = 1.25
+
+
+def _world(seed: int, m: int = 30):
+    rng = np.random.default_rng(seed)
+    pts = []
+    while len(pts) < m:
+        p = rng.uniform(-HALF + 0.15, HALF - 0.15, 2)
+        if all(np.hypot(*(p - q)) >= 0.25 for q in pts):
+            pts.append(p)
+    pts = np.array(pts)
+    ids = []
+    for c in ([-HALF, -HALF], [HALF, -HALF], [HALF, HALF], [-HALF, HALF]):
+        d = np.hypot(*(pts - np.array(c)).T)
+        d[ids] = np.inf
+        ids.append(int(np.argmin(d)))
+    return pts, np.array(ids), rng
+
+
+def _histories(pts, sensor, n, rng):
+    """A robot at random poses; visibility within 0.6 m, or the bearing relative to the heading."""
+    robot = rng.uniform(-HALF, HALF, (n, 2))
+    d = pts[:, None, :] - robot[None, :, :]
+    if sensor == "visibility":
+        return (np.hypot(d[..., 0], d[..., 1]) < 0.6).astype(float)
+    ang = np.arctan2(d[..., 1], d[..., 0]) - rng.uniform(-np.pi, np.pi, n)[None, :]
+    X = np.empty((len(pts), 2 * n))
+    X[:, 0::2], X[:, 1::2] = np.cos(ang), np.sin(ang)
+    return X
+
+
+@pytest.mark.parametrize("sensor", ["visibility", "bearing"])
+def test_gram_dissimilarity_matches_history_dissimilarity(sensor):
+    pts, _, rng = _world(1)
+    X = _histories(pts, sensor, 300, rng)
+    X = X[np.any(X != 0, axis=1)]
+    Y = X / np.linalg.norm(X, axis=1, keepdims=True)
+    ref, kind = history_dissimilarity(Y)
+    assert np.allclose(gram_dissimilarity(X @ X.T, X.shape[1], kind), ref, atol=1e-10)
+
+
+@pytest.mark.parametrize("sensor", ["visibility", "bearing"])
+def test_one_update_is_build_map(sensor):
+    pts, ids, rng = _world(2)
+    X = _histories(pts, sensor, 400, rng)
+    online = OnlineMapper(ids, pts[ids], sensor=sensor).update(X)
+    offline = build_map(X, ids, pts[ids], sensor=sensor)
+    assert online.method == offline.method == "CAL-SMA"
+    assert online.unmapped == offline.unmapped
+    assert np.allclose(online.positions, offline.positions, atol=1e-8, equal_nan=True)
+
+
+@pytest.mark.parametrize("sensor", ["visibility", "bearing"])
+def test_batches_track_build_map(sensor):
+    pts, ids, rng = _world(3)
+    X = _histories(pts, sensor, 600, rng)
+    cols = 1 if sensor == "visibility" else 2
+    om = OnlineMapper(ids, pts[ids], sensor=sensor)
+    for s in range(0, 600, 20):
+        current = om.update(X[:, s * cols:(s + 20) * cols])
+    assert om.n_steps == 600 and om.n_full_fits >= 1
+    keep = np.setdiff1d(np.arange(len(pts)), ids)
+    offline = build_map(X, ids, pts[ids], sensor=sensor)
+    err_on = mean_position_error(current.positions[keep], pts[keep])
+    err_off = mean_position_error(offline.positions[keep], pts[keep])
+    assert err_on <= 1.25 * err_off + 0.01
+    assert np.allclose(current.positions[ids], pts[ids])
+
+
+def test_early_updates_map_nothing_and_say_why():
+    pts, ids, _ = _world(4)
+    om = OnlineMapper(ids, pts[ids], sensor="visibility")
+    result = om.update(np.zeros((len(pts), 5)))
+    assert len(result.unmapped) == len(pts) and np.isnan(result.positions).all()
+    assert "sensed" in result.warnings[0]
+
+
+def test_sensor_inferred_once_something_is_sensed():
+    pts, ids, rng = _world(5)
+    X = _histories(pts, "bearing", 300, rng)
+    om = OnlineMapper(ids, pts[ids])
+    om.update(np.zeros((len(pts), 4)))  # two steps with nothing sensed: held back
+    result = om.update(X)
+    assert om.sensor == "bearing" and om.n_steps == 302
+    assert not result.unmapped
+
+
+@pytest.mark.slow
+def test_masked_histories_refit_with_their_method():
+    pts, ids, rng = _world(6)
+    X = _histories(pts, "visibility", 400, rng)
+    mask = rng.random(X.shape) < 0.7
+    om = OnlineMapper(ids, pts[ids], sensor="visibility", refit_growth=1.5)
+    maps = [om.update(X[:, s:s + 50], mask[:, s:s + 50]) for s in range(0, 400, 50)]
+    assert not om.incremental and maps[-1].method == "covis-nonmetric"
+    offline = build_map(X, ids, pts[ids], sensor="visibility", mask=mask)
+    assert om.n_full_fits >= 3 and om._last_full == om.n_steps == 400
+    assert np.allclose(maps[-1].positions, offline.positions, equal_nan=True)
+    stale = [m for m in maps if any("online map of the first" in w for w in m.warnings)]
+    assert stale  # between refits the last map is returned, and says so
+
+
+@pytest.mark.parametrize("bad, match", [
+    (np.zeros(30), "2-D"),
+    (np.zeros((30, 0)), "at least one column"),
+    (np.zeros((29, 4)), "30 rows"),
+    (np.zeros((30, 3)), "groups of 2"),
+    (np.full((30, 2), np.nan), "NaN"),
+])
+def test_bad_column_shapes_refused(bad, match):
+    pts, ids, rng = _world(7)
+    om = OnlineMapper(ids, pts[ids], sensor="bearing")
+    om.update(_histories(pts, "bearing", 10, rng))
+    with pytest.raises(ValueError, match=match):
+        om.update(bad)
+
+
+def test_bad_arguments_refused():
+    pts, ids, rng = _world(8)
+    with pytest.raises(ValueError, match="refit_growth"):
+        OnlineMapper(ids, pts[ids], refit_growth=1.0)
+    with pytest.raises(ValueError, match="warm_rounds"):
+        OnlineMapper(ids, pts[ids], warm_rounds=0)
+    with pytest.raises(ValueError, match="anchor_positions"):
+        OnlineMapper(ids, pts[ids][:2])
+    om = OnlineMapper(ids, pts[ids], sensor="visibility")
+    X = _histories(pts, "visibility", 50, rng)
+    with pytest.raises(ValueError, match="mask"):
+        om.update(X, np.ones(X.shape, dtype=int))
+    om.update(X)
+    with pytest.raises(ValueError, match="first update"):
+        om.update(X, rng.random(X.shape) < 0.5)
+    with pytest.raises(ValueError, match="unknown parameter"):
+        OnlineMapper(ids, pts[ids], sensor="visibility", bogus=1).update(X)
+    with pytest.raises(ValueError, match="anchor"):
+        OnlineMapper([0, 1, 99], pts[[0, 1, 2]], sensor="visibility").update(X)
+
+
+# ----------------------------------------------------------------------------- live maps
+def test_online_episode_frames_and_gif(tmp_path):
+    pytest.importorskip("matplotlib")
+    from PIL import Image
+
+    from lfmdr_gym.experiments.live import online_episode, save_gif
+
+    frames, rows, final = online_episode("LFMDR-Bearing-v0", 60, seed=2, every=10,
+                                         frame_every=20, size=96)
+    assert [t for t, _ in frames] == [20, 40, 60]
+    assert frames[0][1].shape == (96, 192, 3) and frames[0][1].dtype == np.uint8
+    assert [r["n_steps"] for r in rows] == [10, 20, 30, 40, 50, 60]
+    assert rows[-1]["mapped"] == 50 and 0 < rows[-1]["mpe"] < 1.0
+    assert final.method == "CAL-SMA"
+    path = save_gif(frames, rows, tmp_path / "live.gif")
+    with Image.open(path) as im:
+        assert im.n_frames == 3
+    with pytest.raises(ValueError, match="gif"):
+        save_gif(frames, rows, tmp_path / "live.mp4")
+    with pytest.raises(ValueError, match="every"):
+        online_episode("LFMDR-Bearing-v0", 60, every=0)
+
+
+def test_cli_run_online(tmp_path, capsys):
+    pytest.importorskip("matplotlib")
+    from lfmdr_gym.cli import main
+
+    assert main(["run", "--online", "--env", "LFMDR-Bearing-v0", "--steps", "40", "--every",
+                 "20", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "online CAL-SMA" in out and (tmp_path / "live.gif").exists()
