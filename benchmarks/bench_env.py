@@ -5,6 +5,8 @@ Prints medians over several repeats (single process) for:
 * ``LFMDR-Visibility-v0`` at M = 50 (default arena) and at M = 500 in an arena enlarged to the
   same object density (side 2.5 * sqrt(10) m), with the RandomWalkPolicy (policy time included)
   and with a fixed action (env alone);
+* ``LFMDR-Visibility-v0`` at M = 10,000 (arena side 2.5 * sqrt(200) m), with the agent: a step
+  touches only nearby objects (a cell grid), so the ratio to M = 50 should stay near 1;
 * ``LFMDR-Bearing-v0`` at M = 50;
 * a straightforward pure-numpy simulation of the same world written below (move checked against
   every object, visibility with occlusion tested object by object), for the ratio.
@@ -30,6 +32,7 @@ from lfmdr_gym.policies import RandomWalkPolicy
 
 ARENA = 2.5
 BIG_ARENA = 2.5 * math.sqrt(10.0)  # 10x the area for 10x the objects: same density
+HUGE_ARENA = 2.5 * math.sqrt(200.0)  # M = 10,000 at the same density
 
 
 class ReferenceWorld:
@@ -213,6 +216,9 @@ def main() -> None:
         "vis500_env": ("LFMDR-Visibility-v0, M=500, fixed action (env alone)",
                        env_runner("LFMDR-Visibility-v0", big_steps, policy=False, **big),
                        big_steps),
+        "vis10k": (f"LFMDR-Visibility-v0, M=10000, arena {HUGE_ARENA:.1f} m, RandomWalkPolicy",
+                   env_runner("LFMDR-Visibility-v0", big_steps, policy=True, n_objects=10_000,
+                              arena_size=HUGE_ARENA), big_steps),
         "ref50": ("reference numpy world, M=50, visibility, RandomWalkPolicy",
                   reference_runner(steps, n_objects=50, arena_size=ARENA), steps),
         "ref500": ("reference numpy world, M=500, visibility, RandomWalkPolicy",
@@ -234,6 +240,10 @@ def main() -> None:
     for key, (label, _, _) in cases.items():
         print(f"  {label:<66s} {med[key]:>9,.0f}")
     print(f"  env / reference (per-repeat ratio, median): M=50 {ratio50:.2f}x, M=500 {ratio500:.2f}x")
+    ratio10k = statistics.median(
+        a / b for a, b in zip(rates["vis10k"], rates["vis50"], strict=True)
+    )
+    print(f"  M=10000 / M=50 with the agent (per-repeat ratio, median): {ratio10k:.2f} (goal >= 0.5)")
     goal = "meets" if med["vis50"] >= 10_000 else "misses"
     print(f"  goal >= 10,000 steps/s at M=50 with the agent: {goal} ({med['vis50']:,.0f})")
 

@@ -10,6 +10,7 @@ import numpy as np
 from gymnasium import spaces
 
 from lfmdr_gym import sensors
+from lfmdr_gym.grid import CellGrid
 from lfmdr_gym.imperfect import SensingLimits
 from lfmdr_gym.render import HumanViewer, available_render_modes, draw_frame, human_rendering_error
 from lfmdr_gym.world import World, check_int, check_real
@@ -34,6 +35,7 @@ class VisibilityObservation:
         self.reach = math.hypot(d_vis, self.radius)
         self.d_vis2 = d_vis * d_vis
         self.space = spaces.MultiBinary(env.world.n_objects)
+        self.local = True  # reads only the objects within `reach`: the env may use a cell grid
 
     def observe(self, rel, d2, heading, cand, rc, dc2, q) -> np.ndarray:
         return sensors.visibility_kernel(self.n_objects, cand, rc, dc2, self.d_vis2, q, self.occlusion)
@@ -44,6 +46,7 @@ class BearingObservation:
 
     key = "bearing"
     reach = 0.0  # needs every object, not a nearby subset
+    local = False
 
     def __init__(self, env: LFMDREnv) -> None:
         self.space = spaces.Box(-1.0, 1.0, (env.world.n_objects, 2), np.float32)
@@ -61,6 +64,7 @@ class RangeObservation:
 
     key = "range"
     reach = 0.0  # needs every object, not a nearby subset
+    local = False
 
     def __init__(self, env: LFMDREnv) -> None:
         self.max_range = env.max_range
@@ -177,8 +181,12 @@ class LFMDREnv(gym.Env):
     Lengths in metres. ``object_clearance``/``wall_clearance``: least gap between two objects'
     surfaces / between an object and a wall in random layouts. ``anchors``: ``"corners"`` (the
     objects nearest ``n_anchors`` points spread along the walls from a corner; the four corners
-    by default) or ``"random"``; ``n_anchors >= 3``. ``visual_angle_deg`` and ``occlusion``
-    shape the visibility sensor (the others ignore them); the sensing limits are above. Every
+    by default), ``"grid"`` (the objects nearest a lattice of ``n_anchors`` points spread over
+    the arena) or ``"random"``; ``n_anchors >= 3``. For a larger world at the same object
+    density, scale ``arena_size`` with ``sqrt(n_objects / 50)``: with the visibility sensor and
+    no sensing limits a step costs the same at any ``n_objects`` (only nearby objects are
+    touched). ``visual_angle_deg`` and ``occlusion`` shape the visibility sensor (the others
+    ignore them); the sensing limits are above. Every
     argument is checked on construction (``ValueError`` naming it).
 
     ## Version History
@@ -277,6 +285,7 @@ class LFMDREnv(gym.Env):
             }
         )
         self._anchor_positions = np.zeros((0, 2))
+        self._grid: CellGrid | None = None
         self._last_obs: dict[str, np.ndarray] | None = None
         self._viewer: HumanViewer | None = None
 
@@ -289,6 +298,11 @@ class LFMDREnv(gym.Env):
             self._limits.reset(seed)
         layout = self.world.layout(self.np_random, options)
         self.world.build(layout)
+        # A nearby-only sensor touches only the objects in the robot's 3 x 3 block of grid cells,
+        # so a step costs the same at any M; readings are bit-identical to a scan of all objects.
+        # (The sensing limits read every object's offset, so they keep the full scan.)
+        self._grid = (CellGrid(layout.object_positions, self.world.arena_half, self._reach)
+                      if self._obs_type.local and self._limits is None else None)
         self._anchor_positions = layout.object_positions[layout.anchor_ids]
         obs = self._observe()
         if self.render_mode == "human":
@@ -321,11 +335,19 @@ class LFMDREnv(gym.Env):
         xy = self._xy
         xy[0] = x
         xy[1] = y
-        rel = w.object_positions - xy
-        sq = rel * rel
-        d2 = sq[:, 0] + sq[:, 1]  # == einsum("ij,ij->i", rel, rel), at half its overhead
-        cand = (d2 < self._reach2).nonzero()[0]
-        rc, dc2 = rel.take(cand, axis=0), d2.take(cand)  # take: as rel[cand], cheaper
+        if self._grid is None:
+            rel = w.object_positions - xy
+            sq = rel * rel
+            d2 = sq[:, 0] + sq[:, 1]  # == einsum("ij,ij->i", rel, rel), at half its overhead
+            cand = (d2 < self._reach2).nonzero()[0]
+            rc, dc2 = rel.take(cand, axis=0), d2.take(cand)  # take: as rel[cand], cheaper
+        else:  # the same rows, in the same (ascending) order, from the nearby block alone
+            near = self._grid.near(x, y)
+            rel = w.object_positions.take(near, axis=0) - xy
+            sq = rel * rel
+            d2 = sq[:, 0] + sq[:, 1]
+            sel = (d2 < self._reach2).nonzero()[0]
+            cand, rc, dc2 = near.take(sel), rel.take(sel, axis=0), d2.take(sel)
         q = dc2 - self._r2  # d^2 - r^2, shared by the proximity ring and visibility
         prox = sensors.proximity_kernel(
             x, y, h, rc, q, w.arena_half, self._dirs, self.proximity_range, xy

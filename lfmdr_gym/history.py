@@ -21,12 +21,14 @@ from typing import Any
 
 import numpy as np
 
+from lfmdr_gym import compact
 from lfmdr_gym.atomic import atomic_write
 from mappers.align import check_anchor_ids
 from mappers.sensors import COLUMNS_PER_STEP, check_sensor, check_timeline
 
 FORMAT = "lfmdr-history"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+READABLE_VERSIONS = (1, 2)  # 1: dense float64 matrix only; 2: also the compact (sparse) form
 _ZIP_MAGIC = b"PK\x03\x04"  # an .npz is a zip archive
 
 
@@ -40,7 +42,11 @@ class History:
 
     Attributes:
         sensor: ``"visibility"``, ``"bearing"`` or ``"range"``.
-        matrix: (M, N * columns_per_step) float64, one row per object.
+        matrix: (M, N * columns_per_step) float64, one row per object. May be given in a
+            compact form (a ``scipy.sparse`` matrix, or float32), which is kept as given
+            (:attr:`compact`); reading ``matrix`` then builds the float64 matrix if it fits in
+            :data:`lfmdr_gym.compact.MAX_DENSE_BYTES` (else DenseTooLargeError naming
+            :attr:`sparse`, the accessor that always works).
         object_positions: (M, 2) true object positions [m] (NaN where unknown).
         anchor_ids: (A,) indices of the anchor objects, A >= 3.
         anchor_positions: (A, 2) known positions of the anchors [m].
@@ -66,7 +72,7 @@ class History:
     def __post_init__(self) -> None:
         check_sensor(self.sensor)
         columns = COLUMNS_PER_STEP[self.sensor]
-        matrix = np.asarray(self.matrix, dtype=np.float64)
+        matrix = compact.check_compact(self.__dict__["_data"])
         if matrix.ndim != 2:
             raise ValueError(f"matrix must be 2-D (objects x columns), got shape {matrix.shape}")
         m, d = matrix.shape
@@ -97,6 +103,7 @@ class History:
                     f"mask must be a bool array of shape {matrix.shape}, got {mask.dtype} {mask.shape}"
                 )
         object.__setattr__(self, "matrix", matrix)
+        self.__dict__.pop("_dense", None)
         object.__setattr__(self, "object_positions", obj)
         object.__setattr__(self, "anchor_ids", ids)
         object.__setattr__(self, "anchor_positions", apos)
@@ -112,11 +119,43 @@ class History:
 
     @property
     def n_objects(self) -> int:
-        return self.matrix.shape[0]
+        return self.shape[0]
 
     @property
     def n_steps(self) -> int:
-        return self.matrix.shape[1] // self.columns_per_step
+        return self.shape[1] // self.columns_per_step
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(M, N * columns_per_step), without building the dense matrix."""
+        return tuple(self.__dict__["_data"].shape)
+
+    @property
+    def compact(self) -> bool:
+        """Whether the matrix is stored compactly (sparse, or float32) rather than as float64."""
+        data = self.__dict__["_data"]
+        return compact.is_sparse(data) or data.dtype != np.float64
+
+    @property
+    def is_sparse(self) -> bool:
+        """Whether the matrix is stored as a scipy sparse matrix (visibility, limited range)."""
+        return compact.is_sparse(self.__dict__["_data"])
+
+    @property
+    def sparse(self):
+        """The matrix as a float64 ``scipy.sparse.csr_array`` (zeros not stored): works at any size."""
+        return compact.to_sparse(self.__dict__["_data"])
+
+    def dense(self, max_bytes: int | None = None) -> np.ndarray:
+        """The (M, D) float64 matrix; for a compact history built once (cached) if it needs at most
+        ``max_bytes`` (default :data:`lfmdr_gym.compact.MAX_DENSE_BYTES`), else DenseTooLargeError."""
+        data = self.__dict__["_data"]
+        if "_dense" not in self.__dict__:
+            out = compact.to_dense(data, max_bytes)
+            if out is data:
+                return out
+            self.__dict__["_dense"] = out
+        return self.__dict__["_dense"]
 
     def head(self, n_steps: int) -> History:
         """The history of the first ``n_steps`` steps (a checkpoint of the same episode)."""
@@ -125,7 +164,7 @@ class History:
         cols = n_steps * self.columns_per_step
         return History(
             sensor=self.sensor,
-            matrix=self.matrix[:, :cols],
+            matrix=self.__dict__["_data"][:, :cols],
             object_positions=self.object_positions,
             anchor_ids=self.anchor_ids,
             anchor_positions=self.anchor_positions,
@@ -149,9 +188,10 @@ class History:
             raise ValueError(f"history files end in .npz, got {path.name!r}")
         arrays: dict[str, np.ndarray] = {
             "format": np.array(FORMAT),
-            "format_version": np.array(FORMAT_VERSION),
+            # version 1 where it suffices, so that older lfmdr still reads today's dense files
+            "format_version": np.array(FORMAT_VERSION if self.compact else 1),
             "sensor": np.array(self.sensor),
-            "matrix": self.matrix,
+            **compact.compact_fields(self.__dict__["_data"]),
             "object_positions": self.object_positions,
             "anchor_ids": self.anchor_ids,
             "anchor_positions": self.anchor_positions,
@@ -182,9 +222,10 @@ class History:
                 if "format" not in files or str(data["format"]) != FORMAT:
                     raise HistoryFileError(f"{path} is not an lfmdr history file (no '{FORMAT}' tag)")
                 version = int(data["format_version"])
-                if version != FORMAT_VERSION:
+                if version not in READABLE_VERSIONS:
                     raise HistoryFileError(
-                        f"{path} has history format version {version}; this lfmdr reads {FORMAT_VERSION}"
+                        f"{path} has history format version {version}; this lfmdr reads "
+                        f"versions {', '.join(map(str, READABLE_VERSIONS))}"
                     )
                 fields = {k: data[k] for k in files}
         except HistoryFileError:
@@ -195,7 +236,7 @@ class History:
         try:
             return cls(
                 sensor=str(fields["sensor"]),
-                matrix=fields["matrix"],
+                matrix=compact.from_fields(fields),
                 object_positions=fields["object_positions"],
                 anchor_ids=fields["anchor_ids"],
                 anchor_positions=fields["anchor_positions"],
@@ -208,6 +249,20 @@ class History:
             raise HistoryFileError(f"{path} lacks the field {exc.args[0]!r}") from exc
         except ValueError as exc:
             raise HistoryFileError(f"{path} holds an inconsistent history: {exc}") from exc
+
+
+def _matrix_get(self: History) -> np.ndarray:
+    return self.dense()
+
+
+def _matrix_set(self: History, value: Any) -> None:
+    self.__dict__["_data"] = value
+
+
+# ``matrix`` is a dataclass field (History(matrix=...) and the frozen __init__ set it) whose value
+# is kept as stored; reading it goes through History.dense, so a compact history densifies only
+# on demand and refuses a matrix beyond the memory budget.
+History.matrix = property(_matrix_get, _matrix_set, doc="The (M, D) float64 matrix (History.dense).")
 
 
 def __getattr__(name: str):

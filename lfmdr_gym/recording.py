@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from lfmdr_gym.compact import COMPACT_ABOVE_BYTES, CompactSteps
 from lfmdr_gym.history import History
 from mappers.sensors import COLUMNS_PER_STEP, SENSORS
 
@@ -143,8 +144,9 @@ class _Episode:
     """What one episode's moves leave behind, move by move."""
 
     def __init__(self, n_steps: int, sample: np.ndarray, truth: dict[str, np.ndarray],
-                 masked: bool = False) -> None:
-        self.values = np.empty((n_steps, *sample.shape), dtype=sample.dtype)
+                 masked: bool = False, values: Any = None) -> None:
+        self.values: Any = (np.empty((n_steps, *sample.shape), dtype=sample.dtype)
+                            if values is None else values)
         # the env's "observed" flags (imperfect sensing), one row per move; None without them
         self.observed = np.empty((n_steps, sample.shape[0]), dtype=bool) if masked else None
         self.poses = np.empty((n_steps, 3), dtype=np.float64)
@@ -168,8 +170,10 @@ class _Episode:
         self.count += 1
 
     def history(self, sensor: str, meta: dict[str, Any]) -> History:
+        matrix = (self.values.matrix(sensor) if isinstance(self.values, CompactSteps)
+                  else _steps_to_matrix(self.values, sensor))
         mask = None if self.observed is None else _steps_to_mask(self.observed, sensor)
-        return History(sensor=sensor, matrix=_steps_to_matrix(self.values, sensor), mask=mask,
+        return History(sensor=sensor, matrix=matrix, mask=mask,
                        robot_poses=self.poses, meta={**meta, "blocked_moves": int(self.blocked)},
                        **self.truth)
 
@@ -212,6 +216,7 @@ def collect(
     seed: int | None = None,
     *,
     make_kwargs: dict[str, Any] | None = None,
+    compact: bool | None = None,
 ) -> History:
     """Run one episode of ``n_steps`` moves and return what the robot sensed as a :class:`History`.
 
@@ -222,6 +227,10 @@ def collect(
     derived from ``seed``, so one seed fixes layout, start pose and walk. The observation after
     each move is column (or column pair) t of the matrix; the reset observation is not a move and
     is not recorded. Raises ValueError if the episode ends before ``n_steps`` moves.
+
+    ``compact``: record the history in compact form (visibility and range sparse, bearing
+    float32; see :mod:`lfmdr_gym.compact`); None (default) does so only when the float64 matrix
+    would exceed :data:`~lfmdr_gym.compact.COMPACT_ABOVE_BYTES`, so small histories are as before.
     """
     from lfmdr_gym.policies import as_policy
 
@@ -234,7 +243,13 @@ def collect(
         obs, info = env.reset(seed=seed)
         sensor = _sensor_key(obs)
         _reset_policy(pol, seed)
-        episode = _Episode(n_steps, np.asarray(obs[sensor]), _truth(info), "observed" in obs)
+        sample = np.asarray(obs[sensor])
+        if compact is None:
+            compact = 8 * n_steps * sample.size > COMPACT_ABOVE_BYTES
+        elif not isinstance(compact, bool | np.bool_):
+            raise ValueError(f"compact must be True, False or None, got {compact!r}")
+        episode = _Episode(n_steps, sample, _truth(info), "observed" in obs,
+                           CompactSteps(n_steps, sample, sensor) if compact else None)
         for t in range(n_steps):
             action = _shaped_actions(pol(obs), env.action_space, None)
             obs, _, terminated, truncated, info = env.step(action)

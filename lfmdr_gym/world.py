@@ -28,9 +28,11 @@ from typing import Any
 import numpy as np
 import pymunk
 
+from lfmdr_gym.grid import sample_separated
+
 __all__ = ["ANCHOR_CHOICES", "Layout", "World", "wrap_angle"]
 
-ANCHOR_CHOICES = ("corners", "random")
+ANCHOR_CHOICES = ("corners", "random", "grid")
 LAYOUT_OPTIONS = ("object_positions", "anchor_ids", "robot_pose")
 
 ROBOT_GROUP = 1
@@ -62,6 +64,10 @@ Random sequential placement jams near 0.547 for discs and slows down sharply bef
 layout denser than this is refused on construction rather than after a long search."""
 
 _BATCH = 64  # candidates drawn per rejection-sampling round (fixed, so layouts are reproducible)
+
+GRID_SAMPLER_MIN_OBJECTS = 400
+"""From this many objects random layouts are sampled with a background grid (O(M) rather than
+O(M^2) distance checks); the draws and decisions are the same either way (tests/test_world.py)."""
 
 
 def wrap_angle(angle: float) -> float:
@@ -100,6 +106,22 @@ def collinear(points: np.ndarray, rtol: float = 1e-6) -> bool:
     return bool(sv[0] == 0.0 or sv[-1] <= rtol * sv[0])
 
 
+def nearest_distinct(positions: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """For each target in turn, the index of the nearest position not taken by an earlier one."""
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(positions)
+    taken: set[int] = set()
+    out = []
+    for t in targets:
+        k = min(len(taken) + 1, positions.shape[0])  # enough neighbours to find a free one
+        _, idx = tree.query(t, k=k)
+        j = next(int(i) for i in np.atleast_1d(idx) if int(i) not in taken)
+        taken.add(j)
+        out.append(j)
+    return np.array(out, dtype=np.int64)
+
+
 @dataclass(frozen=True, eq=False)
 class Layout:
     """One episode's world: object centres (M, 2), anchor indices (A,), robot pose (x, y, heading)."""
@@ -116,8 +138,9 @@ class World:
     ``object_clearance`` apart (surface to surface) and every cylinder at least
     ``wall_clearance`` from the walls; with the defaults the robot (diameter 0.1 m) fits between
     any two. Anchors are the objects nearest ``n_anchors`` points spread evenly along the wall
-    starting at the corner (-a, -a) — the four corners for the default 4 — or a random set; they
-    are never collinear.
+    starting at the corner (-a, -a) — the four corners for the default 4 — (``"corners"``), the
+    objects nearest a lattice of points spread over the arena (``"grid"``, for many anchors in a
+    large arena), or a random set (``"random"``); they are never collinear.
 
     Call :meth:`layout` (with the env's ``np_random``) then :meth:`build` to start an episode,
     then :meth:`move` once per step.
@@ -212,15 +235,28 @@ class World:
     def sample_objects(self, rng: np.random.Generator) -> np.ndarray:
         """Uniform random centres (n_objects, 2) with the clearances, by rejection sampling."""
         n, a = self.n_objects, self.place_half
+        budget = 2000 * n + 20000
+        if n >= GRID_SAMPLER_MIN_OBJECTS:
+            pts, drawn = sample_separated(rng, n, a, self.min_separation, _BATCH, budget)
+        else:
+            pts, drawn = self._sample_dense(rng, n, a, budget)
+        if pts.shape[0] < n:
+            raise ValueError(
+                f"could not place n_objects={n} with the clearances after {drawn} random "
+                "draws; reduce n_objects or the clearances, or enlarge the arena"
+            )
+        return pts
+
+    def _sample_dense(self, rng: np.random.Generator, n: int, a: float,
+                      budget: int) -> tuple[np.ndarray, int]:
+        """:func:`~lfmdr_gym.grid.sample_separated` checking each batch against every accepted
+        point at once (fastest for small M)."""
         s2 = self.min_separation**2
         pts = np.empty((n, 2))
-        k, drawn, budget = 0, 0, 2000 * n + 20000
+        k, drawn = 0, 0
         while k < n:
             if drawn >= budget:
-                raise ValueError(
-                    f"could not place n_objects={n} with the clearances after {drawn} random "
-                    "draws; reduce n_objects or the clearances, or enlarge the arena"
-                )
+                return pts[:k], drawn
             batch = rng.uniform(-a, a, size=(_BATCH, 2))
             drawn += _BATCH
             if k:
@@ -239,7 +275,7 @@ class World:
                 k += 1
                 if k == n:
                     break
-        return pts
+        return pts, drawn
 
     def anchor_targets(self) -> np.ndarray:
         """Points (n_anchors, 2) evenly spaced along the walls from corner (-a, -a), anticlockwise."""
@@ -249,6 +285,19 @@ class World:
         side = np.floor(t).astype(int)
         frac = (t - side)[:, None]
         return corners[side] * (1.0 - frac) + corners[side + 1] * frac
+
+    def grid_targets(self) -> np.ndarray:
+        """Points (n_anchors, 2) spread over the placement square: the centres of a ceil(sqrt(A))
+        column lattice, row by row from (-a, -a), the last row's points spread over its width."""
+        n, a = self.n_anchors, self.place_half
+        cols = math.ceil(math.sqrt(n))
+        rows = math.ceil(n / cols)
+        out = []
+        for row in range(rows):
+            k = min(cols, n - row * cols)  # points in this row
+            y = -a + (row + 0.5) * 2.0 * a / rows
+            out += [(-a + (i + 0.5) * 2.0 * a / k, y) for i in range(k)]
+        return np.array(out)
 
     def choose_anchors(self, positions: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Anchor indices for ``positions`` by the ``anchors`` rule; never collinear."""
@@ -264,6 +313,14 @@ class World:
                 raise ValueError(
                     "the objects nearest the corners are collinear; use anchors='random' or give "
                     "anchor_ids in the reset options"
+                )
+            return out
+        if self.anchors == "grid":
+            out = nearest_distinct(positions, self.grid_targets())
+            if collinear(positions[out]):
+                raise ValueError(
+                    "the objects nearest the grid points are collinear; use anchors='random' or "
+                    "give anchor_ids in the reset options"
                 )
             return out
         for _ in range(1000):

@@ -31,6 +31,7 @@ _LAZY: dict[str, str] = {
     "fit_affine": "mappers.align",
     "mean_orientation_error": "mappers.scores",
     "mean_position_error": "mappers.scores",
+    "sampled_orientation_error": "mappers.scores",
     "GraphRepairWarning": "mappers.graph",
     "LaplacianEigenmap": "mappers.methods",
     "LocallyLinear": "mappers.methods",

@@ -14,6 +14,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
 __all__ = [
+    "angle_covisibility_dissimilarity",
     "co_observation_components",
     "co_observation_counts",
     "covisibility_dissimilarity",
@@ -52,6 +53,32 @@ def covisibility_dissimilarity(seen: np.ndarray) -> tuple[np.ndarray, np.ndarray
     with np.errstate(divide="ignore", invalid="ignore"):
         och = C / np.sqrt(np.outer(n, n))
     och = np.nan_to_num(och, nan=0.0)
+    delta = -np.log(np.clip(och, 1e-6, 1.0))
+    np.fill_diagonal(delta, 0.0)
+    return delta, C
+
+
+def angle_covisibility_dissimilarity(
+    seen: np.ndarray, angles: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``-log`` of the angle-weighted Ochiai coefficient of bearing histories, and the counts.
+
+    ``G_ij = sum_t cos(b_i(t) - b_j(t))`` over the steps that sensed both (bearings ``angles``
+    [rad]), ``delta_ij = -log(max(G_ij, 0) / sqrt(n_i n_j))`` with ``n_i`` the steps that sensed
+    i: the Ochiai coefficient of :func:`covisibility_dissimilarity` in which a co-observation
+    counts by how close the two bearings were (1 in the same direction, 0 at right angles).
+    It is the cosine of the zero-filled (cos, sin) rows, so on a complete history it is the
+    paper's L2-normalised comparison (eq. 7). Returns ``(delta, C)``; pairs never seen together
+    (or with ``G_ij <= 0``) get ``delta = -log(1e-6)``.
+    """
+    S = np.asarray(seen, dtype=float)
+    a = np.where(seen, angles, 0.0)
+    c, s = np.cos(a) * S, np.sin(a) * S
+    C = S @ S.T
+    G = np.maximum(c @ c.T + s @ s.T, 0.0)
+    n = np.diag(C).copy()
+    with np.errstate(divide="ignore", invalid="ignore"):
+        och = np.nan_to_num(G / np.sqrt(np.outer(n, n)), nan=0.0)
     delta = -np.log(np.clip(och, 1e-6, 1.0))
     np.fill_diagonal(delta, 0.0)
     return delta, C

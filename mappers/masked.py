@@ -37,6 +37,14 @@ look far from everything. The methods here use only what was observed (the pair 
     into groups, one link cannot be calibrated across them and the ``covis-nonmetric`` map is
     kept (with a warning). *Assumes* additionally: one power law over the whole layout.
 
+``"covis-angle"`` (bearing)
+    ``covis-nonmetric`` with an angle-weighted co-observation: a step that sensed both counts
+    ``cos`` of their bearing difference (:func:`mappers.coobservation.angle_covisibility_dissimilarity`),
+    so two landmarks seen together in one direction are closer than two seen at the edges of a
+    wide view. Weights ``C_ij`` (the co-observation count, not its square root: a pair seen
+    together often is measured better). *Assumes*: the angle-weighted rate of seeing two
+    landmarks together falls monotonically with their distance, the same way everywhere.
+
 ``"masked-euclidean"`` (any sensor; the textbook recipe, kept as a comparison)
     Root-mean-square difference of the two histories over the steps that observed both,
     weighted SMACOF over the pairs that have it. *Assumes*: a history difference is comparable
@@ -62,20 +70,24 @@ from scipy.sparse.csgraph import shortest_path
 
 from mappers.align import apply_affine, check_anchors, fit_affine
 from mappers.coobservation import (
+    angle_covisibility_dissimilarity,
     covisibility_dissimilarity,
     masked_euclidean_dissimilarity,
     pair_components,
     range_pair_bounds,
     range_pair_distances,
 )
-from mappers.registry import DEFAULT_METHODS, MethodSpec
+from mappers.registry import MethodSpec
 from mappers.sensors import step_observations
 from mappers.smacof import classical_mds, weighted_smacof
 from mappers.smacof_variants import bounded_smacof, nonmetric_smacof, power_link_smacof
 
 __all__ = ["MASKED_METHODS", "MaskedMap", "MaskedMapWarning", "MaskedMapper", "masked_embedding"]
 
-_COVIS = ("covis-nonmetric", "covis-power")
+_COVIS = ("covis-nonmetric", "covis-power", "covis-angle")
+_OWN_DEFAULT = {"visibility": "covis-nonmetric", "bearing": "covis-nonmetric", "range": "range-quantile"}
+"""What :func:`masked_embedding` uses when no method is given (``build_map``'s masked defaults,
+:data:`mappers.registry.DEFAULT_METHODS`, may be methods of other modules)."""
 
 
 class MaskedMapWarning(UserWarning):
@@ -122,7 +134,7 @@ class _Pairs:
 
 
 def _method_params(method: str | None, sensor: str, params: dict[str, Any]) -> tuple[str, dict]:
-    method = DEFAULT_METHODS[(sensor, True)] if method is None else method
+    method = _OWN_DEFAULT[sensor] if method is None else method
     if method not in MASKED_METHODS:
         raise ValueError(f"method must be one of {sorted(MASKED_METHODS)}, got {method!r}")
     unknown = set(params) - set(MASKED_METHODS[method])
@@ -130,6 +142,8 @@ def _method_params(method: str | None, sensor: str, params: dict[str, Any]) -> t
         raise ValueError(f"unknown parameter(s) {sorted(unknown)} for method {method!r}")
     if method.startswith("range-") and sensor != "range":
         raise ValueError(f"method {method!r} needs a range history, got sensor {sensor!r}")
+    if method == "covis-angle" and sensor != "bearing":
+        raise ValueError(f"method 'covis-angle' needs a bearing history, got sensor {sensor!r}")
     p = {**MASKED_METHODS[method], **params}
     if method == "range-bounds" and p["slack"] < 0:
         raise ValueError(f"slack must be >= 0, got {p['slack']}")
@@ -151,10 +165,13 @@ def _pair_statistics(method: str, seen: np.ndarray, values: np.ndarray, sensor: 
         delta, counts = masked_euclidean_dissimilarity(values, seen, sensor,
                                                        min_pairs=p["min_pairs"])
         return _Pairs(delta, (counts > 0).astype(float), counts)
-    delta, C = covisibility_dissimilarity(seen)
+    if method == "covis-angle":
+        delta, C = angle_covisibility_dissimilarity(seen, values)
+    else:
+        delta, C = covisibility_dissimilarity(seen)
     Cn = C.copy()
     np.fill_diagonal(Cn, 0)
-    W = np.sqrt(np.maximum(Cn, 1.0))
+    W = np.maximum(Cn, 1.0) if method == "covis-angle" else np.sqrt(np.maximum(Cn, 1.0))
     W /= W.max()
     np.fill_diagonal(W, 0.0)
     censored = Cn < p["min_co"]
@@ -253,7 +270,8 @@ def masked_embedding(
         mask: (M, N * c) bool, True where observed; None = every entry observed (then a
             visibility 0 / range 0 / bearing (0, 0) counts as not sensed).
         sensor: ``"visibility"``, ``"bearing"`` or ``"range"``.
-        method: a key of :data:`MASKED_METHODS`; None = the masked default of the sensor.
+        method: a key of :data:`MASKED_METHODS`; None = ``range-quantile`` for range, else
+            ``covis-nonmetric``.
         anchor_ids, anchor_positions: anchors held fixed at their positions (recommended; the
             non-metric method needs them to know the scale of the map).
         **params: overrides of the method's defaults.
@@ -341,6 +359,10 @@ def _covis_power(min_co=3, power=0.5, n_rounds=60, max_iter=300):
                         max_iter=max_iter)
 
 
+def _covis_angle(min_co=3, max_iter=300):
+    return MaskedMapper("covis-angle", min_co=min_co, max_iter=max_iter)
+
+
 def _masked_euclidean(min_pairs=5, max_iter=300):
     return MaskedMapper("masked-euclidean", min_pairs=min_pairs, max_iter=max_iter)
 
@@ -350,6 +372,7 @@ _FACTORIES = {
     "range-bounds": _range_bounds,
     "covis-nonmetric": _covis_nonmetric,
     "covis-power": _covis_power,
+    "covis-angle": _covis_angle,
     "masked-euclidean": _masked_euclidean,
 }
 MASKED_METHODS: dict[str, dict[str, Any]] = {
@@ -372,6 +395,8 @@ SPECS: tuple[MethodSpec, ...] = (
     _spec("covis-nonmetric", _covis_nonmetric,
           "ordinal SMACOF of -log co-observation rates, anchored"),
     _spec("covis-power", _covis_power, "power-link SMACOF of -log co-observation rates, anchored"),
+    _spec("covis-angle", _covis_angle,
+          "ordinal SMACOF of -log angle-weighted co-observation rates, anchored", ("bearing",)),
     _spec("masked-euclidean", _masked_euclidean,
           "RMS history difference over co-observed steps, weighted SMACOF"),
 )

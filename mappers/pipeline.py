@@ -13,11 +13,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import scipy.sparse as sp
 from threadpoolctl import ThreadpoolController
 
 from mappers.align import apply_affine, check_anchors, check_not_collinear, fit_affine
 from mappers.fused import check_fused
-from mappers.registry import MappingError, MethodSpec, resolve_method
+from mappers.registry import MappingError, MethodSpec, check_size, resolve_method
 from mappers.sensors import (
     COLUMNS_PER_STEP,
     check_sensor,
@@ -98,14 +99,36 @@ def _check_mask(mask: Any, shape: tuple[int, int]) -> np.ndarray | None:
     return None if mask.all() else mask
 
 
+def _sparse_inputs(X: Any, sensor: str | None, mask: Any) -> tuple[Any, str]:
+    """A scipy sparse history as a float64 csr_array (checked as :func:`_check_histories`)."""
+    if mask is not None:
+        raise ValueError("a mask cannot be given with sparse histories: pass dense arrays")
+    X = sp.csr_array(X, dtype=np.float64)
+    X.eliminate_zeros()
+    if X.ndim != 2 or X.shape[0] < 3 or X.shape[1] < 1:
+        raise ValueError(f"histories need at least 3 objects and 1 column, got shape {X.shape}")
+    if not np.all(np.isfinite(X.data)):
+        raise ValueError("histories contain NaN or inf (in observed entries)")
+    if sensor is None:
+        sensor = "visibility" if np.all(X.data == 1.0) else infer_sensor(X.toarray())
+    return X, check_sensor(sensor)
+
+
 def _inputs(histories, sensor, mask, timeline):
     """The validated history matrix (unobserved entries zeroed), mask, sensor and timeline; a
-    ``History``-like object (with ``.matrix``) brings its own sensor, mask and timeline."""
-    if hasattr(histories, "matrix") and not isinstance(histories, np.ndarray):
+    ``History``-like object (with ``.matrix``) brings its own sensor, mask and timeline. A
+    ``scipy.sparse`` matrix, or a History stored sparse (``is_sparse``), stays sparse."""
+    # (is_sparse first: hasattr(.., "matrix") would build a History's dense matrix, or refuse to)
+    if getattr(histories, "is_sparse", False) or (
+            hasattr(histories, "matrix") and not isinstance(histories, np.ndarray)):
         sensor = sensor if sensor is not None else getattr(histories, "sensor", None)
         mask = mask if mask is not None else getattr(histories, "mask", None)
         timeline = timeline if timeline is not None else getattr(histories, "timeline", None)
-        histories = histories.matrix
+        sparse_rows = mask is None and getattr(histories, "is_sparse", False)
+        histories = histories.sparse if sparse_rows else histories.matrix
+    if sp.issparse(histories):
+        X, sensor = _sparse_inputs(histories, sensor, mask)
+        return X, None, sensor, timeline
     X = _check_histories(histories)
     mask = _check_mask(mask, X.shape)
     observed = X if mask is None else X[mask]
@@ -120,6 +143,24 @@ def _inputs(histories, sensor, mask, timeline):
                          f"{sensor} histories need a multiple of {COLUMNS_PER_STEP[sensor]} "
                          f"columns, got {X.shape[1]}")
     return X, mask, sensor, timeline
+
+
+DENSE_BUDGET_BYTES = 2 * 2**30
+"""Largest dense float64 matrix ``build_map`` builds from sparse histories for a dense method."""
+
+
+def _for_method(spec: MethodSpec, X: Any) -> Any:
+    """Sparse histories densified for a method that needs a dense matrix (within the budget)."""
+    if not sp.issparse(X) or spec.sparse:
+        return X
+    need = 8 * X.shape[0] * X.shape[1]
+    if need > DENSE_BUDGET_BYTES:
+        raise ValueError(
+            f"method {spec.label!r} needs the dense history matrix, {need / 2**30:.1f} GiB for "
+            f"shape {X.shape} (budget {DENSE_BUDGET_BYTES / 2**30:.0f} GiB); use a method that "
+            "maps sparse histories, e.g. 'CAL-SMA-SPARSE'"
+        )
+    return X.toarray()
 
 
 def _method_params(spec: MethodSpec, params: dict[str, Any], normalize, random_state):
@@ -261,18 +302,26 @@ def build_map(
         return _build_fused_map(histories, anchor_ids, anchor_positions, method, sensor, mask,
                                 timeline, normalize, random_state, params)
     X, mask, sensor, timeline = _inputs(histories, sensor, mask, timeline)
-    spec = resolve_method(method, sensor, masked=mask is not None)
-    merged = _method_params(spec, params, normalize, random_state)
     m = X.shape[0]
+    spec = resolve_method(method, sensor, masked=mask is not None, n_objects=m)
+    merged = _method_params(spec, params, normalize, random_state)
     ids, pos = check_anchors(anchor_ids, anchor_positions, m)
-    has_data = np.any((X != 0) if mask is None else (mask & (X != 0)), axis=1)
+    X = _for_method(spec, X)
+    if sp.issparse(X):
+        has_data = np.diff(X.indptr) > 0
+    else:
+        has_data = np.any((X != 0) if mask is None else (mask & (X != 0)), axis=1)
     unmapped = tuple(int(i) for i in np.flatnonzero(~has_data))
     notes: list[str] = []
     ids, pos = _usable_anchors(ids, pos, has_data[ids], "have empty histories", notes)
     mapped = np.flatnonzero(has_data)
     _check_neighbors(merged, mapped.size)
+    check_size(spec, mapped.size)
     Xm = X[mapped]
-    if spec.normalize if normalize is None else normalize:
+    if (spec.normalize if normalize is None else normalize) and sp.issparse(Xm):
+        norms = np.sqrt(np.asarray(Xm.multiply(Xm).sum(axis=1)).ravel())
+        Xm = sp.csr_array(sp.diags_array(1.0 / norms) @ Xm)  # paper eq. 7
+    elif spec.normalize if normalize is None else normalize:
         Xm = Xm / np.linalg.norm(Xm, axis=1, keepdims=True)  # paper eq. 7
     try:
         est = spec.factory(**merged)

@@ -2,12 +2,13 @@
 
 Every method — the paper's ten (:mod:`mappers.methods`), CAL-SMA (:mod:`mappers.calibrated`),
 UNFOLD (:mod:`mappers.unfolding`), the methods for masked histories (:mod:`mappers.masked`,
-:mod:`mappers.ensemble`) and any a user registers — is a :class:`MethodSpec` in :data:`METHODS`.
-A spec says what the method accepts (which sensors or fused sets of sensors, complete and/or
-masked histories); the pipeline, the protocol and the command line choose and check methods by
-the spec alone (:func:`resolve_method`). Fused methods — LOC-SMA (:mod:`mappers.range_bearing`)
-for range + bearing, VB-SMA (:mod:`mappers.visibility_bearing`) for visibility + bearing — are
-registered like the others, keyed by their frozenset of sensors.
+:mod:`mappers.ensemble`, :mod:`mappers.covis_calibrated`) and any a user registers — is a
+:class:`MethodSpec` in :data:`METHODS`. A spec says what the method accepts (which sensors or
+fused sets of sensors, complete and/or masked histories); the pipeline, the protocol and the
+command line choose and check methods by the spec alone (:func:`resolve_method`). Fused methods
+— LOC-SMA (:mod:`mappers.range_bearing`) for range + bearing, VB-SMA
+(:mod:`mappers.visibility_bearing`) for visibility + bearing — are registered like the others,
+keyed by their frozenset of sensors.
 """
 
 from __future__ import annotations
@@ -21,6 +22,10 @@ from mappers.sensors import SENSORS, check_sensor_set, sensor_name
 
 __all__ = [
     "DEFAULT_METHODS",
+    "DENSE_MAX_OBJECTS",
+    "SCALABLE_ABOVE_OBJECTS",
+    "SCALABLE_DEFAULTS",
+    "check_size",
     "HISTORY_KINDS",
     "METHODS",
     "MappingError",
@@ -29,6 +34,14 @@ __all__ = [
     "register_method",
     "resolve_method",
 ]
+
+DENSE_MAX_OBJECTS = 5000
+"""Largest M a method holding (M, M) matrices is given by default (:attr:`MethodSpec.max_objects`):
+one such float64 matrix is 200 MB there and the paper's methods hold several."""
+
+SCALABLE_ABOVE_OBJECTS = 500
+"""Above this many objects ``build_map`` picks the scalable default (:data:`SCALABLE_DEFAULTS`)
+when no method is named: dense CAL-SMA takes about 40 s at M = 1,000, its sparse form 2 s."""
 
 HISTORY_KINDS: tuple[str, ...] = ("complete", "masked")
 """``"complete"``: every entry is a measurement (a 0 is "not visible"); ``"masked"``: a boolean
@@ -62,6 +75,10 @@ class MethodSpec:
             masked histories receives ``mask`` (None for a complete history) and ``sensor``.
         uses_timeline: the estimator takes ``timeline`` ((N, 2) ints: robot and tick of each
             step, or None for one robot stepping once per tick) to group consecutive steps.
+        sparse: ``fit_transform`` accepts a ``scipy.sparse`` X, so ``build_map`` hands compact
+            histories over without building the dense matrix.
+        max_objects: the largest M the method is given (None: no limit); ``build_map`` refuses
+            more with an error naming the scalable methods.
     """
 
     label: str
@@ -74,6 +91,8 @@ class MethodSpec:
     normalize: bool = True
     histories: tuple[str, ...] = ("complete",)
     uses_timeline: bool = False
+    sparse: bool = False
+    max_objects: int | None = DENSE_MAX_OBJECTS
 
     @property
     def parameters(self) -> tuple[str, ...]:
@@ -145,16 +164,19 @@ def _load_builtins() -> None:
     _BUILTINS_LOADED = True
     from mappers import (
         calibrated,
+        covis_calibrated,
         ensemble,
         masked,
         methods,
         range_bearing,
+        scalable,
         unfolding,
         visibility_bearing,
     )
 
-    for spec in (*methods.SPECS, calibrated.SPEC, unfolding.SPEC, *masked.SPECS, ensemble.SPEC,
-                 range_bearing.SPEC, visibility_bearing.SPEC):
+    for spec in (*methods.SPECS, calibrated.SPEC, unfolding.SPEC, scalable.SPEC, *masked.SPECS,
+                 ensemble.SPEC, *covis_calibrated.SPECS, range_bearing.SPEC,
+                 visibility_bearing.SPEC):
         _METHODS.setdefault(spec.label, spec)
 
 
@@ -185,7 +207,7 @@ DEFAULT_METHODS: dict[tuple[str | frozenset[str], bool], str] = {
     ("bearing", False): "CAL-SMA",
     ("range", False): "UNFOLD",
     ("visibility", True): "covis-nonmetric",
-    ("bearing", True): "covis-nonmetric",
+    ("bearing", True): "covis-auto",
     ("range", True): "range-quantile",
     (frozenset({"range", "bearing"}), False): "LOC-SMA",
     (frozenset({"range", "bearing"}), True): "LOC-SMA",
@@ -194,6 +216,23 @@ DEFAULT_METHODS: dict[tuple[str | frozenset[str], bool], str] = {
 """(sensor, masked) -> the label ``build_map`` uses when no method is given; a fused set of
 sensors is keyed by its frozenset. The measured figures behind each choice are in the README
 and ``benchmarks/``."""
+
+SCALABLE_DEFAULTS: dict[tuple[str, bool], str] = {
+    ("visibility", False): "CAL-SMA-SPARSE",
+    ("bearing", False): "CAL-SMA-SPARSE",
+}
+"""(sensor, masked) -> the default above :data:`SCALABLE_ABOVE_OBJECTS` objects."""
+
+
+def check_size(spec: MethodSpec, n_objects: int) -> None:
+    """ValueError when ``spec`` does not take ``n_objects`` objects, naming the methods that do."""
+    if spec.max_objects is not None and n_objects > spec.max_objects:
+        scalable = [label for label, s in METHODS.items()
+                    if s.max_objects is None or s.max_objects >= n_objects]
+        raise ValueError(
+            f"method {spec.label!r} maps at most {spec.max_objects} objects (it holds M x M "
+            f"matrices), got {n_objects}; use a scalable method: {scalable}"
+        )
 
 
 def register_method(spec: MethodSpec, *, replace: bool = False) -> MethodSpec:
@@ -248,16 +287,20 @@ def methods_for(sensor=None, masked: bool | None = None) -> tuple[str, ...]:
     )
 
 
-def resolve_method(method: str | None, sensor, masked: bool = False) -> MethodSpec:
+def resolve_method(method: str | None, sensor, masked: bool = False,
+                   n_objects: int | None = None) -> MethodSpec:
     """The spec of ``method`` (a label, matched case-insensitively; None = the default for
-    ``sensor`` — a sensor, or a fused set of them — and the kind of history) if it maps such
+    ``sensor`` — a sensor, or a fused set of them — and the kind of history, the scalable one
+    above :data:`SCALABLE_ABOVE_OBJECTS` objects when ``n_objects`` is given) if it maps such
     histories, else a ValueError that lists the labels which do."""
     key = check_sensor_set(sensor)
     sensor = sensor_name(key)
     kind = "masked" if masked else "complete"
     fits = methods_for(key, masked)  # loads the built-ins
     if method is None:
-        method = DEFAULT_METHODS.get((key, bool(masked)))
+        large = n_objects is not None and n_objects > SCALABLE_ABOVE_OBJECTS
+        method = ((large and SCALABLE_DEFAULTS.get((key, bool(masked))))
+                  or DEFAULT_METHODS.get((key, bool(masked))))
         if method is None or method not in _METHODS:
             raise ValueError(f"no default method for {kind} {sensor} histories; choose from {list(fits)}")
     if not isinstance(method, str):

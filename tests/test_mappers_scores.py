@@ -275,3 +275,19 @@ def test_check_anchors_returns_int64_ids_and_float_positions():
     ids, pos = check_anchors(np.array([4, 0, 2], dtype=np.int32), [[0, 0], [1, 0], [0, 1]], 5)
     assert ids.dtype == np.int64 and ids.tolist() == [4, 0, 2]
     assert pos.dtype == np.float64 and pos.shape == (3, 2)
+
+
+def test_sampled_orientation_error_brackets_the_exact_one():
+    from mappers.scores import mean_orientation_error, sampled_orientation_error
+
+    rng = np.random.default_rng(4)
+    truth = rng.uniform(0, 1, (300, 2))
+    est = truth + rng.normal(0, 0.03, truth.shape)
+    exact = mean_orientation_error(est, truth, exclude=[0, 1])
+    moe, (lo, hi) = sampled_orientation_error(est, truth, exclude=[0, 1], n_triangles=400_000)
+    assert lo <= exact <= hi and lo < moe < hi and hi - lo < 0.5
+    assert sampled_orientation_error(truth, truth)[0] == 0.0
+    with pytest.raises(ValueError, match="confidence"):
+        sampled_orientation_error(est, truth, confidence=1.0)
+    with pytest.raises(ValueError, match="n_triangles"):
+        sampled_orientation_error(est, truth, n_triangles=0)

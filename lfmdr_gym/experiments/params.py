@@ -37,12 +37,14 @@ def _methods() -> Mapping[str, Any]:
 def resolve_methods(names: Iterable[str] | None, sensor: str, masked: bool = False) -> tuple[str, ...]:
     """Canonical labels of ``names`` (case-insensitive), each checked to map ``sensor``'s histories
     (complete, or masked); for None, every method made for complete histories of ``sensor`` (the
-    methods of the paper's tables and ours, not the masked-data methods)."""
+    methods of the paper's tables and ours, not the masked-data methods nor the scalable forms
+    for large M, ``MethodSpec.sparse``, which the protocol's M = 50 has no use for)."""
     from mappers import methods_for, resolve_method
 
     if names is None:
         return tuple(label for label in methods_for(sensor, masked)
-                     if masked or not _methods()[label].takes_masks)
+                     if (masked or not _methods()[label].takes_masks)
+                     and not _methods()[label].sparse)
     out: list[str] = []
     for name in names:
         label = resolve_method(str(name).strip(), sensor, masked).label

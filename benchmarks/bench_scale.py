@@ -1,0 +1,146 @@
+"""Time and peak memory of collecting and of mapping against the number of objects M.
+
+The world at the paper's density (arena side 2.5 sqrt(M / 50) m), 8 % of the objects as random
+anchors (at least 4), the random-walk agent, the visibility sensor. Steps N per M follow the
+issue's figures: 2,000 at M = 50 (the paper), then 8,000, 20,000 and, with ``--full``, 400,000
+at M = 10,000 (the paper's path length per square metre). Each case runs in its own
+subprocess, so its peak resident memory (``resource.getrusage``, ru_maxrss) is its own; the
+import baseline (the RSS before the work) is printed beside it. A method that refuses a size
+prints its reason; one that runs past ``--timeout`` is reported as such.
+
+    PYTHONPATH=. python benchmarks/bench_scale.py                  # M = 50, 200, 1000
+    PYTHONPATH=. python benchmarks/bench_scale.py --full           # and M = 10,000 (~5 CPU-min)
+    PYTHONPATH=. python benchmarks/bench_scale.py --sensor bearing --max-range 1.5
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+STEPS = {50: 2000, 200: 8000, 1000: 20000, 10000: 400000}
+METHODS = ("CAL-SMA-SPARSE", "CAL-SMA", "SMA(WGT)", "ISOMAP", "LEM")
+ENV_IDS = {"visibility": "LFMDR-Visibility-v0", "bearing": "LFMDR-Bearing-v0"}
+
+
+def _rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB on Linux
+
+
+def run_collect(m: int, path: str, sensor: str, max_range: float | None, seed: int) -> dict:
+    """Collect one history at M = m and save it to ``path`` (compact above 64 MiB)."""
+    from lfmdr_gym.policies import RandomWalkPolicy
+    from lfmdr_gym.recording import collect
+
+    n = STEPS[m]
+    kwargs = {"n_objects": m, "arena_size": 2.5 * math.sqrt(m / 50), "anchors": "random",
+              "n_anchors": max(4, round(0.08 * m)), "max_episode_steps": n}
+    if max_range is not None:
+        kwargs["max_range"] = max_range
+    base = _rss_mb()
+    t0 = time.perf_counter()
+    cpu0 = time.process_time()
+    h = collect(ENV_IDS[sensor], RandomWalkPolicy(seed=0), n, seed=seed, make_kwargs=kwargs)
+    out = {"seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - cpu0}
+    h.save(path)
+    return {**out, "steps": n, "compact": h.compact, "peak_mb": _rss_mb(), "base_mb": base}
+
+
+def run_method(path: str, method: str) -> dict:
+    """Map the saved history with ``method``; time, peak memory, MPE and MOE (non-anchors)."""
+    import mappers
+    from lfmdr_gym.history import History
+    from mappers.scores import (
+        mean_orientation_error,
+        mean_position_error,
+        sampled_orientation_error,
+    )
+
+    h = History.load(path)
+    _ = mappers.METHODS[method]  # load the registry (scikit-learn, cvxpy) before timing
+    base = _rss_mb()
+    t0 = time.perf_counter()
+    cpu0 = time.process_time()
+    try:
+        m = mappers.build_map(h, h.anchor_ids, h.anchor_positions, method=method)
+    except ValueError as exc:
+        return {"refused": str(exc)}
+    out = {"seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - cpu0,
+           "peak_mb": _rss_mb(), "base_mb": base}
+    ex = sorted({*h.anchor_ids.tolist(), *m.unmapped})
+    out["mpe"] = mean_position_error(m.positions, h.object_positions, exclude=ex)
+    t0 = time.perf_counter()
+    if h.n_objects <= 2000:
+        out["moe"], out["moe_how"] = mean_orientation_error(m.positions, h.object_positions, exclude=ex), "exact"
+    else:
+        moe, (lo, hi) = sampled_orientation_error(m.positions, h.object_positions, exclude=ex)
+        out["moe"], out["moe_how"] = moe, f"sampled, 95% CI [{lo:.3f}, {hi:.3f}]"
+    out["moe_seconds"] = time.perf_counter() - t0
+    return out
+
+
+def _child(args: list[str], timeout: float) -> dict:
+    cmd = [sys.executable, __file__, "--child", *args]
+    try:
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, check=False)
+    except subprocess.TimeoutExpired:
+        return {"refused": f"did not finish within {timeout:.0f} s"}
+    if done.returncode != 0:
+        tail = (done.stderr.strip().splitlines() or ["?"])[-1]
+        return {"refused": f"failed (exit {done.returncode}): {tail}"}
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--full", action="store_true", help="also M = 10,000 (N = 400,000)")
+    parser.add_argument("--sizes", type=int, nargs="*", default=None, help="values of M")
+    parser.add_argument("--methods", nargs="*", default=list(METHODS))
+    parser.add_argument("--sensor", choices=sorted(ENV_IDS), default="visibility")
+    parser.add_argument("--max-range", type=float, default=None)
+    parser.add_argument("--seed", type=int, default=101, help="episode seed (not tuned on)")
+    parser.add_argument("--timeout", type=float, default=900.0, help="seconds per method case")
+    parser.add_argument("--child", nargs="+", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child:
+        kind, *rest = args.child
+        if kind == "collect":
+            mr = None if rest[3] == "none" else float(rest[3])
+            out = run_collect(int(rest[0]), rest[1], rest[2], mr, int(rest[4]))
+        else:
+            out = run_method(rest[0], rest[1])
+        print(json.dumps(out))
+        return
+    sizes = args.sizes or ([50, 200, 1000, 10000] if args.full else [50, 200, 1000])
+    print(f"{args.sensor} histories, 8 % random anchors, seed {args.seed}; wall s (CPU s), peak RSS MB "
+          f"(import baseline)")
+    with tempfile.TemporaryDirectory() as tmp:
+        for m in sizes:
+            path = str(Path(tmp) / f"h{m}.npz")
+            c = _child(["collect", str(m), path, args.sensor, str(args.max_range).lower(),
+                        str(args.seed)], 4 * 3600)
+            if "refused" in c:
+                print(f"M={m:>6} collect: {c['refused']}")
+                continue
+            print(f"M={m:>6} N={c['steps']:>7} collect {c['seconds']:8.1f} s ({c['cpu_seconds']:.1f}) "
+                  f"peak {c['peak_mb']:7.0f} MB ({c['base_mb']:.0f}) compact={c['compact']}")
+            for method in args.methods:
+                r = _child(["map", path, method], args.timeout)
+                if "refused" in r:
+                    print(f"         {method:<15} cannot run: {r['refused'][:150]}")
+                    continue
+                print(f"         {method:<15} {r['seconds']:8.1f} s ({r['cpu_seconds']:.1f}) peak "
+                      f"{r['peak_mb']:7.0f} MB ({r['base_mb']:.0f})  MPE {r['mpe']:.4f} m  "
+                      f"MOE {r['moe']:.3f} % ({r['moe_how']}, {r['moe_seconds']:.1f} s)")
+            sys.stdout.flush()
+
+
+if __name__ == "__main__":
+    main()

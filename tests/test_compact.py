@@ -1,0 +1,101 @@
+"""Compact histories: the same matrices and maps as dense ones, files old and new, memory bounds."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import mappers
+from lfmdr_gym.compact import DenseTooLargeError
+from lfmdr_gym.history import History
+from lfmdr_gym.policies import RandomWalkPolicy
+from lfmdr_gym.recording import collect
+
+DATA = Path(__file__).parent / "data"
+
+
+@pytest.mark.parametrize(
+    ("env_id", "kwargs", "stored"),
+    [("LFMDR-Visibility-v0", {}, "csr"), ("LFMDR-Bearing-v0", {}, "float32"),
+     ("LFMDR-Range-v0", {"max_range": 0.8}, "csr")],
+)
+def test_compact_and_dense_histories_give_the_same_matrix_and_map(env_id, kwargs, stored):
+    dense = collect(env_id, RandomWalkPolicy(seed=0), 400, seed=21, make_kwargs=kwargs)
+    small = collect(env_id, RandomWalkPolicy(seed=0), 400, seed=21, make_kwargs=kwargs, compact=True)
+    assert not dense.compact and small.compact
+    data = small.__dict__["_data"]
+    assert sp.issparse(data) if stored == "csr" else data.dtype == np.float32
+    np.testing.assert_array_equal(small.matrix, dense.matrix)
+    np.testing.assert_array_equal(small.sparse.toarray(), dense.matrix)
+    assert small.shape == dense.matrix.shape and small.n_steps == 400
+    a = mappers.build_map(dense, dense.anchor_ids, dense.anchor_positions)
+    b = mappers.build_map(small, small.anchor_ids, small.anchor_positions)
+    assert a.method == b.method
+    np.testing.assert_array_equal(a.positions, b.positions)
+    np.testing.assert_array_equal(small.head(50).matrix, dense.head(50).matrix)
+
+
+def test_compact_history_file_round_trip(tmp_path):
+    h = collect("LFMDR-Visibility-v0", RandomWalkPolicy(seed=0), 200, seed=5, compact=True)
+    path = h.save(tmp_path / "c.npz")
+    with np.load(path, allow_pickle=False) as data:
+        assert "matrix" not in data.files and int(data["format_version"]) == 2
+        assert data["matrix_data"].size == h.sparse.nnz
+    back = History.load(path)
+    assert back.compact
+    np.testing.assert_array_equal(back.matrix, h.matrix)
+    dense_path = collect("LFMDR-Visibility-v0", RandomWalkPolicy(seed=0), 20, seed=5).save(tmp_path / "d.npz")
+    with np.load(dense_path, allow_pickle=False) as data:  # dense files keep today's format
+        assert int(data["format_version"]) == 1 and "matrix" in data.files
+
+
+@pytest.mark.parametrize(
+    ("name", "env_id", "n_objects", "n_steps", "seed"),
+    [("visibility", "LFMDR-Visibility-v0", 12, 40, 11), ("bearing", "LFMDR-Bearing-v0", 8, 20, 12)],
+)
+def test_files_written_before_compact_histories_still_load(name, env_id, n_objects, n_steps, seed):
+    # written by lfmdr before compact histories existed (format version 1)
+    old = History.load(DATA / f"history_v1_{name}.npz")
+    assert not old.compact
+    again = collect(env_id, RandomWalkPolicy(seed=0), n_steps, seed=seed,
+                    make_kwargs={"n_objects": n_objects})
+    np.testing.assert_array_equal(old.matrix, again.matrix)
+    np.testing.assert_array_equal(old.robot_poses, again.robot_poses)
+
+
+def test_a_dense_matrix_beyond_the_budget_is_refused_naming_the_sparse_accessor():
+    m, d = 10_000, 400_000  # 32 GB as float64
+    rows = np.arange(0, m, 7)
+    data = sp.csr_array((np.ones(rows.size, np.int8), (rows, rows * 3)), shape=(m, d))
+    h = History(sensor="visibility", matrix=data, object_positions=np.zeros((m, 2)),
+                anchor_ids=np.arange(3), anchor_positions=np.zeros((3, 2)))
+    assert h.n_objects == m and h.n_steps == d
+    with pytest.raises(DenseTooLargeError, match="History.sparse"):
+        h.matrix  # noqa: B018
+    assert h.sparse.nnz == rows.size
+    with pytest.raises(ValueError, match="History.sparse"):
+        h.dense(max_bytes=1024)
+
+
+def test_compact_argument_is_checked():
+    with pytest.raises(ValueError, match="compact"):
+        collect("LFMDR-Visibility-v0", RandomWalkPolicy(seed=0), 5, seed=1, compact="yes")
+
+
+def test_build_map_maps_a_history_beyond_the_budget_without_the_dense_matrix(monkeypatch):
+    from lfmdr_gym import compact
+    from mappers import pipeline
+
+    h = collect("LFMDR-Visibility-v0", RandomWalkPolicy(seed=0), 600, seed=8,
+                make_kwargs={"anchors": "random", "n_anchors": 6}, compact=True)
+    monkeypatch.setattr(compact, "MAX_DENSE_BYTES", 1024)  # far below this history's 240 kB
+    monkeypatch.setattr(pipeline, "DENSE_BUDGET_BYTES", 1024)
+    with pytest.raises(DenseTooLargeError, match="History.sparse"):
+        h.matrix  # noqa: B018
+    built = mappers.build_map(h, h.anchor_ids, h.anchor_positions, method="CAL-SMA-SPARSE")
+    assert built.method == "CAL-SMA-SPARSE" and np.isfinite(built.positions).all()
+    with pytest.raises(ValueError, match="CAL-SMA-SPARSE"):
+        mappers.build_map(h, h.anchor_ids, h.anchor_positions, method="CAL-SMA")

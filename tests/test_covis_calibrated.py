@@ -1,0 +1,119 @@
+"""Masked bearing and visibility maps from co-observation: covis-angle (mappers/masked.py),
+covis-cal and covis-auto (mappers/covis_calibrated.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from threadpoolctl import threadpool_limits
+
+from mappers import build_map
+from mappers.coobservation import angle_covisibility_dissimilarity
+from mappers.covis_calibrated import CovisAuto, CovisCalibrated, co_observation_coefficient
+from mappers.masked import masked_embedding
+from mappers.registry import DEFAULT_METHODS, resolve_method
+
+
+@pytest.fixture(autouse=True)
+def _one_blas_thread():
+    """Small problems: one BLAS thread is fastest (as build_map does)."""
+    with threadpool_limits(limits=1):
+        yield
+
+
+def _camera(fov_deg, max_range=None, n_obj=30, n_steps=3000, noise_deg=1.0, seed=0):
+    """Landmarks in a 2.5 m square seen from random poses by a camera of ``fov_deg`` (and
+    ``max_range``): returns positions, the (M, 2N) bearing history and its mask, and anchors."""
+    rng = np.random.default_rng(seed)
+    P = rng.uniform(-1.2, 1.2, size=(n_obj, 2))
+    poses = np.column_stack([rng.uniform(-1.25, 1.25, (n_steps, 2)),
+                             rng.uniform(-np.pi, np.pi, n_steps)])
+    d = P[:, None, :] - poses[None, :, :2]
+    b = np.angle(np.exp(1j * (np.arctan2(d[..., 1], d[..., 0]) - poses[None, :, 2])))
+    seen = np.abs(b) <= np.radians(fov_deg) / 2
+    if max_range is not None:
+        seen &= np.hypot(d[..., 0], d[..., 1]) <= max_range
+    b = b + np.radians(noise_deg) * rng.standard_normal(b.shape)
+    X = (np.stack([np.cos(b), np.sin(b)], -1) * seen[..., None]).reshape(n_obj, -1)
+    anchors = np.array([int(np.argmin(np.linalg.norm(P - c, axis=1)))
+                        for c in [(-1.2, -1.2), (1.2, -1.2), (1.2, 1.2), (-1.2, 1.2)]])
+    return P, X, np.repeat(seen, 2, axis=1), anchors
+
+
+def _mpe(est, P, anchors):
+    na = np.setdiff1d(np.arange(len(P)), anchors)
+    return float(np.mean(np.linalg.norm(est[na] - P[na], axis=1)))
+
+
+def test_angle_weighted_coefficient_by_hand():
+    seen = np.array([[True, True, True, False], [True, True, False, False],
+                     [False, False, False, True]])
+    ang = np.array([[0.0, 0.2, 0.1, 0.0], [0.0, 0.2 + np.pi / 2, 0.0, 0.0], [0, 0, 0, 0.3]])
+    delta, C = angle_covisibility_dissimilarity(seen, ang)
+    assert C[0, 1] == 2 and C[0, 2] == 0 and C[0, 0] == 3
+    # same direction once (cos 0 = 1), at right angles once (cos = 0): G = 1, n = 3 and 2
+    assert delta[0, 1] == pytest.approx(-np.log(1 / np.sqrt(6)))
+    assert delta[0, 2] == pytest.approx(-np.log(1e-6))  # never seen together
+    assert np.all(np.diag(delta) == 0) and np.allclose(delta, delta.T)
+    och, C2 = co_observation_coefficient(
+        np.stack([np.cos(ang), np.sin(ang)], -1).reshape(3, -1) * np.repeat(seen, 2, 1),
+        np.repeat(seen, 2, axis=1), "bearing")
+    assert och[0, 1] == pytest.approx(1 / np.sqrt(6)) and och[0, 2] == 0 and och[1, 1] == 1
+    assert np.array_equal(C, C2)
+
+
+def test_covis_cal_recovers_a_layout_seen_through_a_90_degree_view():
+    P, X, mask, a = _camera(90)
+    Y = CovisCalibrated().fit_transform(X, mask, sensor="bearing", anchor_ids=a,
+                                        anchor_positions=P[a])
+    assert np.allclose(Y[a], P[a])
+    assert _mpe(Y, P, a) < 0.2  # 2.5 m arena; a random map is ~1 m off
+
+
+def test_covis_angle_recovers_a_layout_seen_with_a_range_limit():
+    P, X, mask, a = _camera(90, max_range=1.2, seed=1)
+    mm = masked_embedding(X, mask, "bearing", "covis-angle", anchor_ids=a, anchor_positions=P[a])
+    assert _mpe(mm.positions, P, a) < 0.08
+    plain = masked_embedding(X, mask, "bearing", "covis-nonmetric", anchor_ids=a,
+                             anchor_positions=P[a])
+    assert not np.allclose(mm.delta, plain.delta)  # the angles enter the dissimilarity
+
+
+@pytest.mark.parametrize(("max_range", "branch"), [(None, "covis-cal"), (1.0, "covis-angle")])
+def test_covis_auto_chooses_by_the_share_of_pairs_never_seen_together(max_range, branch):
+    P, X, mask, a = _camera(90, max_range=max_range, seed=2)
+    est = CovisAuto()
+    Y = est.fit_transform(X, mask, sensor="bearing", anchor_ids=a, anchor_positions=P[a])
+    assert est.branch_ == branch
+    assert (est.local_share_ <= 0.1) == (branch == "covis-cal")
+    assert _mpe(Y, P, a) < (0.2 if branch == "covis-cal" else 0.08)
+
+
+def test_covis_auto_is_the_masked_bearing_default_through_build_map():
+    P, X, mask, a = _camera(90, seed=3)
+    assert DEFAULT_METHODS[("bearing", True)] == "covis-auto"
+    m = build_map(X, a, P[a], mask=mask, sensor="bearing")
+    assert m.method == "covis-auto" and _mpe(m.positions, P, a) < 0.2
+    vis = (mask[:, 0::2]).astype(float)  # visibility: the co-observation pattern alone
+    m = build_map(vis, a, P[a], "covis-cal", mask=mask[:, 0::2], sensor="visibility")
+    assert _mpe(m.positions, P, a) < 0.3
+
+
+def test_bad_input_is_refused_with_its_name():
+    P, X, mask, a = _camera(90, n_steps=300)
+    with pytest.raises(ValueError, match="min_co"):
+        CovisCalibrated(min_co=0)
+    with pytest.raises(ValueError, match="local_share"):
+        CovisAuto(local_share=1.5)
+    with pytest.raises(ValueError, match="sensor"):
+        CovisCalibrated().fit_transform(X[:, ::2], None, sensor="range")
+    with pytest.raises(ValueError, match="covis-angle.*bearing"):
+        masked_embedding(mask[:, ::2].astype(float), None, "visibility", "covis-angle")
+    with pytest.raises(ValueError, match="links"):
+        CovisCalibrated(links=("cubic",))
+    with pytest.raises(ValueError, match="bearing"):
+        CovisAuto().fit_transform(mask[:, ::2].astype(float), None, sensor="visibility")
+    for label in ("covis-cal", "covis-auto", "covis-angle"):
+        with pytest.raises(ValueError, match="range"):
+            resolve_method(label, "range", masked=True)
+        assert resolve_method(label, "bearing", masked=True).label == label
