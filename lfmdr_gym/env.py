@@ -191,7 +191,8 @@ class LFMDREnv(gym.Env):
 
     ## Version History
 
-    - v0: initial version.
+    - v0: initial version; the imperfect-sensing keywords came later, off by default (the
+      observations without them are unchanged).
     """
 
     # "human" is offered only where it can work (pygame and a display), so that Gymnasium's
@@ -394,6 +395,7 @@ class LFMDREnv(gym.Env):
             sensor=self._key,
             reading=obs.get(self._key),
             proximity=obs.get("proximity"),
+            observed=obs.get("observed"),
         )
         if self.render_mode == "rgb_array":
             return frame

@@ -53,7 +53,8 @@ class History:
         robot_poses: (N, 3) true robot pose (x, y, heading) after each step, or None for
             logged data without it. Never given to a mapper.
         mask: None when every entry was observed, else a (M, N * columns_per_step) bool array,
-            True where the entry was observed.
+            True where the entry was observed (an env with imperfect sensing always gives one:
+            its ``"observed"`` flags, repeated over a step's columns).
         meta: JSON-serialisable facts about where the history came from (env id, seed, ...).
         timeline: None (one robot, one step per tick) or (N, 2) int64: the robot that took each
             step and the tick of its clock (logged data binned in time, several robots).

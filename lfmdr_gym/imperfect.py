@@ -66,7 +66,8 @@ class SensingLimits:
             bound of 10 standard deviations past the largest true range never happens in practice
             and at 0 keeps the reading a distance.
         miss_rate: probability that a visible object is reported not visible.
-        false_rate: probability that an object that is not visible is reported visible.
+        false_rate: probability that an object inside the view and range that is not visible
+            (too far to see, or occluded) is reported visible.
         line_of_sight: occlusion for bearing and range: an object is observed only if the
             segment from the robot's centre to its centre passes no nearer than r to another
             object's centre (the visibility sensor's ``occlusion`` test).
@@ -127,9 +128,17 @@ class SensingLimits:
         if self.max_range is not None:
             seen &= np.sqrt(d2) <= self.max_range
         if self.line_of_sight:
-            # the visibility test with no distance limit: every object a target and an occluder
-            clear = sensors.visibility_kernel(self.n_objects, np.arange(self.n_objects), rel, d2,
-                                              math.inf, d2 - self.r2, True)
+            # The visibility test with targets within max_range (if any). An occluder of a
+            # target at distance d lies within sqrt(d^2 + r^2) (see sensors), so only objects
+            # that near are candidates: the cost scales with the objects in range, not with M.
+            if self.max_range is None:
+                cand, reach2 = np.arange(self.n_objects), math.inf
+            else:
+                reach2 = self.max_range * self.max_range
+                cand = (d2 < reach2 + self.r2).nonzero()[0]
+            dc2 = d2.take(cand)
+            clear = sensors.visibility_kernel(self.n_objects, cand, rel.take(cand, axis=0), dc2,
+                                              reach2, dc2 - self.r2, True)
             seen &= clear.astype(bool)
         return seen
 

@@ -95,13 +95,16 @@ def draw_frame(
     reading: ArrayLike | None = None,
     proximity: ArrayLike | None = None,
     size: int = 480,
+    observed: ArrayLike | None = None,
 ) -> np.ndarray:
     """Draw the arena as an (size, size, 3) uint8 RGB image.
 
     Shows the walls, the objects (anchors ringed in red), the robot and its heading, and what it
     senses now: for ``"visibility"`` the visible objects in green with their lines of sight; for
     ``"bearing"`` a faint ray to every object; for ``"range"`` a ray to every object sensed
-    (non-zero reading); and the proximity ring's rays (orange) up to what each one hit.
+    (non-zero reading); and the proximity ring's rays (orange) up to what each one hit. With
+    ``observed`` (imperfect sensing: the objects the sensor reported on), bearing rays go to
+    those objects only, drawn as sensed.
     """
     if size < 32:
         raise ValueError(f"size must be >= 32 pixels, got {size}")
@@ -120,7 +123,10 @@ def draw_frame(
             sensed = rd.reshape(-1).astype(bool)
             canvas.lines(np.repeat(robot[None], sensed.sum(), 0), obj[sensed], SIGHT)
         elif sensor == "bearing":
-            canvas.lines(np.repeat(robot[None], obj.shape[0], 0), obj, BEARING_RAY)
+            if observed is not None:
+                sensed = np.asarray(observed).reshape(-1).astype(bool)
+            rays = sensed if observed is not None else np.ones(obj.shape[0], dtype=bool)
+            canvas.lines(np.repeat(robot[None], rays.sum(), 0), obj[rays], BEARING_RAY)
         elif sensor == "range":
             sensed = rd.reshape(-1) > 0
             canvas.lines(np.repeat(robot[None], sensed.sum(), 0), obj[sensed], BEARING_RAY)

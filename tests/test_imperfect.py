@@ -95,13 +95,16 @@ def test_field_of_view_and_range_against_brute_force(sensor, fov, max_range):
     assert 0 < np.mean(counts) < 50  # the limits bite, and something is seen
 
 
-@pytest.mark.parametrize("sensor", ["bearing", "range"])
-def test_line_of_sight_against_brute_force(sensor):
+@pytest.mark.parametrize(("sensor", "max_range"), [("bearing", None), ("range", None),
+                                                   ("bearing", 1.0)])
+def test_line_of_sight_against_brute_force(sensor, max_range):
     # a dense layout, so that objects hide each other often
-    env = LFMDREnv(sensor, n_objects=120, object_clearance=0.02, line_of_sight=True)
+    env = LFMDREnv(sensor, n_objects=120, object_clearance=0.02, line_of_sight=True,
+                   max_range=max_range)
     hidden = 0
     for obs, info in _rollout(env, 40):
-        expect = _brute_clear(info["robot_pose"], info["object_positions"], 0.024)
+        pose, objects = info["robot_pose"], info["object_positions"]
+        expect = _brute_clear(pose, objects, 0.024) & _brute_in_view(pose, objects, 360.0, max_range)
         np.testing.assert_array_equal(obs["observed"], expect.astype(np.int8))
         hidden += (~expect).sum()
     assert hidden > 0
@@ -298,3 +301,19 @@ def test_limited_camera_example(tmp_path, capsys):
     assert history.mask is not None and (tmp_path / "m.png").is_file()
     mpe = float(out.split("MPE ")[1].split(" m")[0])
     assert 0 < mpe < 0.3 and "objects per step" in out
+
+
+def test_render_draws_only_the_observed_bearings():
+    from lfmdr_gym.render import SENSED, draw_frame
+
+    env = LFMDREnv("bearing", fov_deg=90, max_range=1.5, render_mode="rgb_array")
+    obs, info = env.reset(seed=5)
+    assert 0 < obs["observed"].sum() < 50
+    args = dict(arena_half=1.25, object_positions=info["object_positions"], object_radius=0.024,
+                robot_pose=info["robot_pose"], robot_radius=0.05)
+    none = np.zeros(50, dtype=np.int8)
+    # nothing observed: the frame of no sensor at all
+    np.testing.assert_array_equal(draw_frame(**args, sensor="bearing", reading=obs["bearing"],
+                                             observed=none), draw_frame(**args))
+    frame = env.render()
+    assert (frame == np.array(SENSED, dtype=np.uint8)).all(axis=2).any()  # observed: drawn as sensed

@@ -57,6 +57,8 @@ def check_env_kwargs(sensor: str, kwargs: Mapping[str, Any] | None) -> tuple[dic
     from lfmdr_gym.env import LFMDREnv
 
     kwargs = dict(kwargs or {})
+    if not kwargs:
+        return kwargs, False  # the registered env as it is: perfect sensing
     accepted = [n for n in inspect.signature(LFMDREnv).parameters if n not in _RESERVED]
     for name in kwargs:
         if name in _RESERVED:
