@@ -1,6 +1,6 @@
 """MRCLAM: map every run with every sensor and print MPE / MOE per run, with baselines.
 
-    python benchmarks/bench_mrclam.py [--data DIR] [--sensors visibility,bearing,range]
+    python benchmarks/bench_mrclam.py [--data DIR] [--sensors visibility,bearing,range,range-bearing]
         [--candidates covis-ensemble,range-quantile]
 
 For each run and sensor (4 corner anchors, all 5 robots, scores over the 11 non-anchor landmarks):
@@ -24,6 +24,8 @@ Settings grids: covis-nonmetric (visibility, bearing): bin width {1, 2, 3, 5} s 
 covis-ensemble/nonmetric: the set of bin widths, {1, 2, 3, 5} / {1, 1.5, 2, 3, 4, 5} /
 {0.5, ..., 8} s; covis-ensemble: power {0.35, 0.5, 0.7, 1}; range-quantile: bin width
 {0.25, 0.5, 1} s x quantile {0.95, 0.98, 0.99}; range-bounds: the same x slack {0.5, 1}.
+LOC-SMA (range-bearing, the default of both measurements fused): bin width {0.25, 0.5} s x
+min_count {3, 10} x trim {None (weighted median), 3}.
 What was tried for bearings and lost is in docs/bearing-on-real-data.md.
 """
 
@@ -59,12 +61,17 @@ GRIDS = {
                     (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 8.0)]
     ],
     "masked-euclidean": [],
+    "LOC-SMA": [
+        {"bin_width": bw, "min_count": mc, "trim": tr}
+        for bw, mc, tr in itertools.product([0.25, 0.5], [3, 10], [None, 3.0])
+    ],
 }
 CANDIDATES = {
     "visibility": ["covis-nonmetric", "covis-ensemble/nonmetric", "covis-ensemble"],
     "bearing": ["masked-euclidean", "covis-nonmetric", "covis-ensemble/nonmetric",
                 "covis-ensemble"],
     "range": ["masked-euclidean", "range-quantile", "range-bounds"],
+    "range-bearing": ["LOC-SMA"],
 }
 
 
@@ -80,7 +87,7 @@ def main(argv: list[str] | None = None) -> None:
     here = Path(__file__).resolve().parents[1]
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", type=Path, default=here.parent / "shared" / "data" / "mrclam")
-    ap.add_argument("--sensors", "--modes", default="visibility,bearing,range")
+    ap.add_argument("--sensors", "--modes", default="visibility,bearing,range,range-bearing")
     ap.add_argument("--candidates", default=None,
                     help="comma-separated subset of the method columns (default: all)")
     args = ap.parse_args(argv)
@@ -91,7 +98,8 @@ def main(argv: list[str] | None = None) -> None:
     notes: dict[str, list[str]] = {}
     for sensor in args.sensors.split(","):
         cols: list[tuple[str, list]] = []  # (label, per-run results)
-        cols.append(("naive 1s", [_run(run, sensor, "naive", bin_width=1.0) for run in runs]))
+        if sensor != "range-bearing":  # the naive pipeline maps one sensor
+            cols.append(("naive 1s", [_run(run, sensor, "naive", bin_width=1.0) for run in runs]))
         chosen: dict[str, list[str]] = {}
         wanted = CANDIDATES[sensor] if args.candidates is None else [
             c for c in CANDIDATES[sensor] if c in args.candidates.split(",")]

@@ -75,11 +75,12 @@ def _method_list(values: Sequence[str] | None) -> list[str] | None:
     return [name for v in values for name in _csv_list(v)]
 
 
-def _add_sensor_option(p: argparse.ArgumentParser, what: str) -> None:
-    """--sensor (also spelled --mode, its older name)."""
+def _add_sensor_option(p: argparse.ArgumentParser, what: str, fused: Sequence[str] = ()) -> None:
+    """--sensor (also spelled --mode, its older name); ``fused``: fused sets also accepted."""
     from mappers.sensors import SENSORS
 
-    p.add_argument("--sensor", "--mode", dest="sensor", required=True, choices=SENSORS, help=what)
+    p.add_argument("--sensor", "--mode", dest="sensor", required=True,
+                   choices=(*SENSORS, *fused), help=what)
 
 
 def _add_method_options(p: argparse.ArgumentParser, default: str) -> None:
@@ -224,11 +225,13 @@ def _add_mrclam(sub: Any) -> None:
         ),
     )
     p.add_argument("run_dir", metavar="RUN_DIR", help="an MRCLAM run directory")
-    _add_sensor_option(p, "which measurement to map from")
+    _add_sensor_option(p, "which measurement to map from (range-bearing: both measurements of "
+                          "every sighting, fused)", fused=("range-bearing",))
     p.add_argument("--robots", type=_int_list, default=None, metavar="1,2,3,4,5",
                    help="robot subject numbers whose logs are used (default: all five)")
     _add_method_options(p, "covis-ensemble for visibility and bearing, range-quantile for "
-                           "range; 'naive' is SMA(UNWGT) with --zero-fill")
+                           "range, LOC-SMA for range-bearing; 'naive' is SMA(UNWGT) with "
+                           "--zero-fill")
     p.add_argument("--zero-fill", action="store_true",
                    help="map the history with unobserved entries as zeros and no mask (the "
                         "paper's pipeline on logged data), so methods for complete histories apply")

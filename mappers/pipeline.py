@@ -8,7 +8,7 @@ to every object. Objects never sensed are reported in ``Map.unmapped`` and never
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -17,8 +17,15 @@ import scipy.sparse as sp
 from threadpoolctl import ThreadpoolController
 
 from mappers.align import apply_affine, check_anchors, check_not_collinear, fit_affine
+from mappers.fused import check_fused
 from mappers.registry import MappingError, MethodSpec, check_size, resolve_method
-from mappers.sensors import COLUMNS_PER_STEP, check_sensor, infer_sensor
+from mappers.sensors import (
+    COLUMNS_PER_STEP,
+    check_sensor,
+    check_sensor_set,
+    infer_sensor,
+    sensor_name,
+)
 
 __all__ = ["Map", "build_map"]
 
@@ -51,7 +58,8 @@ class Map:
         embedding: (M, 2) the method's 2-D embedding before the anchor fit (NaN rows likewise).
         method: label of the method used.
         params: the method's parameters (defaults merged with the ones given).
-        sensor: sensor kind of the histories (given or inferred).
+        sensor: sensor kind of the histories (given or inferred); for fused histories the name
+            of the set (``"range-bearing"``, :data:`mappers.sensors.FUSED_SENSORS`).
         warnings: repairs and degradations worth knowing (graph joined, anchors dropped, ...).
         affine: (3, 2) affine map with ``positions = [embedding, 1] @ affine``.
         anchor_ids: the anchors actually used for the fit.
@@ -172,9 +180,8 @@ def _check_neighbors(merged: dict[str, Any], n: int) -> None:
         )
 
 
-def _embed(method: str, est: Any, X: np.ndarray, fit_params: dict[str, Any],
-           allow_nan_rows: bool) -> tuple[np.ndarray, list[str]]:
-    n = X.shape[0]
+def _embed(method: str, est: Any, X: Any, fit_params: dict[str, Any],
+           allow_nan_rows: bool, n: int) -> tuple[np.ndarray, list[str]]:
     with warnings.catch_warnings(record=True) as caught, _thread_limit(n):
         warnings.simplefilter("always")
         try:
@@ -216,7 +223,7 @@ def _fit_inputs(spec: MethodSpec, mapped, ids, pos, mask, sensor, timeline) -> d
     inputs: dict[str, Any] = {}
     if spec.uses_anchors:  # the anchors as rows of the mapped objects
         inputs.update(anchor_ids=np.searchsorted(mapped, ids), anchor_positions=pos)
-    if spec.takes_masks:
+    if spec.takes_masks and not spec.fused:  # fused methods get ``masks`` (_build_fused_map)
         inputs.update(mask=None if mask is None else mask[mapped], sensor=sensor)
     if spec.uses_timeline:
         inputs["timeline"] = timeline
@@ -263,15 +270,19 @@ def build_map(
         histories: (M, D) history matrix (one row per object; visibility 0/1, bearing
             interleaved cos/sin, or range), or any object with a ``.matrix`` attribute such as
             ``lfmdr_gym.History`` (its ``sensor``, ``mask`` and ``timeline`` are then used
-            unless given).
+            unless given); or fused histories, a mapping sensor -> matrix (or History) of the
+            same objects and steps, e.g. ``{"range": R, "bearing": B}`` (:mod:`mappers.fused`),
+            mapped by a method that takes that set of sensors.
         anchor_ids: (A,) ids of the anchor objects, A >= 3, distinct, in [0, M).
         anchor_positions: (A, 2) their known positions [m]; not collinear.
         method: a label of :data:`mappers.METHODS` (case-insensitive) that maps this kind of
             history; None = the default for the sensor and for complete or masked histories
             (:data:`mappers.DEFAULT_METHODS`). A label that does not fit is a ValueError listing
             the labels that do.
-        sensor: "visibility", "bearing" or "range"; None = inferred (:func:`infer_sensor`).
-        mask: optional (M, D) bool, True where observed; an all-True mask is no mask.
+        sensor: "visibility", "bearing" or "range"; None = inferred (:func:`infer_sensor`); for
+            fused histories the keys name the sensors (a given ``sensor`` must agree).
+        mask: optional (M, D) bool, True where observed; an all-True mask is no mask. Fused
+            histories take a mapping with one entry per sensor (None: complete).
         timeline: optional (N, 2) ints, robot and tick of each step, for methods that group
             consecutive steps (``covis-ensemble``).
         normalize: divide each row by its norm (paper eq. 7); None = the method's choice (on for
@@ -287,6 +298,9 @@ def build_map(
         ValueError: bad input, naming the problem. MappingError (a ValueError) when the method
         itself fails (e.g. Hessian LLE's eigenproblem), naming the method and the cause.
     """
+    if isinstance(histories, Mapping):
+        return _build_fused_map(histories, anchor_ids, anchor_positions, method, sensor, mask,
+                                timeline, normalize, random_state, params)
     X, mask, sensor, timeline = _inputs(histories, sensor, mask, timeline)
     m = X.shape[0]
     spec = resolve_method(method, sensor, masked=mask is not None, n_objects=m)
@@ -314,8 +328,14 @@ def build_map(
     except (TypeError, ValueError) as exc:
         raise ValueError(f"bad parameters for method {spec.label!r}: {exc}") from exc
     inputs = _fit_inputs(spec, mapped, ids, pos, mask, sensor, timeline)
-    Y, caught = _embed(spec.label, est, Xm, inputs, allow_nan_rows=spec.takes_masks)
+    Y, caught = _embed(spec.label, est, Xm, inputs, allow_nan_rows=spec.takes_masks, n=mapped.size)
     notes.extend(caught)
+    return _finish(spec, merged, sensor, Y, m, mapped, ids, pos, unmapped, notes)
+
+
+def _finish(spec, merged, sensor, Y, m, mapped, ids, pos, unmapped, notes) -> Map:
+    """The Map of an embedding ``Y`` of the ``mapped`` rows: objects a method left unplaced join
+    ``unmapped``, and the affine fit onto the anchors takes the rest to world coordinates."""
     Y, mapped, ids, pos, unmapped = _placed(Y, mapped, ids, pos, unmapped, notes)
     T = _anchor_fit(spec, Y, np.searchsorted(mapped, ids), pos)
     positions = np.full((m, 2), np.nan)
@@ -325,3 +345,34 @@ def build_map(
     return Map(positions=positions, unmapped=unmapped, embedding=embedding, method=spec.label,
                params=merged, sensor=sensor, warnings=tuple(notes), affine=T,
                anchor_ids=tuple(int(i) for i in ids))
+
+
+def _build_fused_map(histories, anchor_ids, anchor_positions, method, sensor, mask, timeline,
+                     normalize, random_state, params) -> Map:
+    """``build_map`` for fused histories (a mapping sensor -> matrix, :mod:`mappers.fused`)."""
+    Xs, masks, key, timeline = check_fused(histories, mask, timeline)
+    if sensor is not None and check_sensor_set(sensor) != key:
+        raise ValueError(f"sensor {sensor!r} does not name the sensors of the fused histories "
+                         f"{sorted(key)}")
+    spec = resolve_method(method, key, masked=any(v is not None for v in masks.values()))
+    merged = _method_params(spec, params, normalize, random_state)
+    m = next(iter(Xs.values())).shape[0]
+    ids, pos = check_anchors(anchor_ids, anchor_positions, m)
+    has_data = np.zeros(m, dtype=bool)
+    for s, X in Xs.items():
+        has_data |= np.any((X != 0) if masks[s] is None else (masks[s] & (X != 0)), axis=1)
+    unmapped = tuple(int(i) for i in np.flatnonzero(~has_data))
+    notes: list[str] = []
+    ids, pos = _usable_anchors(ids, pos, has_data[ids], "have empty histories", notes)
+    mapped = np.flatnonzero(has_data)
+    _check_neighbors(merged, mapped.size)
+    try:
+        est = spec.factory(**merged)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"bad parameters for method {spec.label!r}: {exc}") from exc
+    inputs = _fit_inputs(spec, mapped, ids, pos, None, key, timeline)
+    inputs["masks"] = {s: None if v is None else v[mapped] for s, v in masks.items()}
+    Y, caught = _embed(spec.label, est, {s: X[mapped] for s, X in Xs.items()}, inputs,
+                       allow_nan_rows=True, n=mapped.size)
+    notes.extend(caught)
+    return _finish(spec, merged, sensor_name(key), Y, m, mapped, ids, pos, unmapped, notes)

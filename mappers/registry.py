@@ -2,10 +2,13 @@
 
 Every method — the paper's ten (:mod:`mappers.methods`), CAL-SMA (:mod:`mappers.calibrated`),
 UNFOLD (:mod:`mappers.unfolding`), the methods for masked histories (:mod:`mappers.masked`,
-:mod:`mappers.ensemble`, :mod:`mappers.covis_calibrated`) and any a user registers — is a :class:`MethodSpec` in :data:`METHODS`.
-A spec says what the method accepts (which sensors, complete and/or masked histories); the
-pipeline, the protocol and the command line choose and check methods by the spec alone
-(:func:`resolve_method`).
+:mod:`mappers.ensemble`, :mod:`mappers.covis_calibrated`) and any a user registers — is a
+:class:`MethodSpec` in :data:`METHODS`. A spec says what the method accepts (which sensors or
+fused sets of sensors, complete and/or masked histories); the pipeline, the protocol and the
+command line choose and check methods by the spec alone (:func:`resolve_method`). Fused methods
+— LOC-SMA (:mod:`mappers.range_bearing`) for range + bearing, VB-SMA
+(:mod:`mappers.visibility_bearing`) for visibility + bearing — are registered like the others,
+keyed by their frozenset of sensors.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from mappers.sensors import SENSORS, check_sensor
+from mappers.sensors import SENSORS, check_sensor_set, sensor_name
 
 __all__ = [
     "DEFAULT_METHODS",
@@ -62,7 +65,10 @@ class MethodSpec:
         grid: the parameter grid the protocol sweeps.
         uses_anchors: the estimator takes ``anchor_ids`` (rows of X) and ``anchor_positions``
             and holds them fixed, so its embedding is already in world coordinates.
-        sensors: the sensors whose histories it maps (None: any).
+        sensors: the sensors whose histories it maps (None: any single sensor). An entry that
+            is a frozenset of sensors (e.g. ``frozenset({"range", "bearing"})``) means fused
+            histories of exactly that set: ``build_map`` then hands ``fit_transform`` the
+            mapping sensor -> matrix as X and ``masks`` keyed alike (None values: complete).
         normalize: whether ``build_map`` divides each row by its norm first (paper eq. 7) unless
             told otherwise; False for methods whose model needs the raw values (UNFOLD).
         histories: the kinds of history it maps (:data:`HISTORY_KINDS`). A method that maps
@@ -81,7 +87,7 @@ class MethodSpec:
     grid: Mapping[str, Sequence[Any]] = field(default_factory=dict)
     description: str = ""
     uses_anchors: bool = False
-    sensors: tuple[str, ...] | None = None
+    sensors: tuple[str | frozenset[str], ...] | None = None
     normalize: bool = True
     histories: tuple[str, ...] = ("complete",)
     uses_timeline: bool = False
@@ -124,10 +130,24 @@ class MethodSpec:
     def takes_masks(self) -> bool:
         return "masked" in self.histories
 
-    def accepts(self, sensor: str, masked: bool) -> bool:
-        """Whether the method maps ``sensor`` histories of that kind (masked or complete)."""
+    def accepts(self, sensor: str | frozenset[str], masked: bool) -> bool:
+        """Whether the method maps ``sensor`` histories (a sensor, or a fused set of them) of
+        that kind (masked or complete)."""
         kind = "masked" if masked else "complete"
-        return (self.sensors is None or sensor in self.sensors) and kind in self.histories
+        return _maps(self, check_sensor_set(sensor)) and kind in self.histories
+
+    @property
+    def fused(self) -> bool:
+        """Whether the method maps fused histories (a mapping sensor -> matrix)."""
+        return self.sensors is not None and any(not isinstance(s, str) for s in self.sensors)
+
+
+def _maps(spec: MethodSpec, key: str | frozenset[str]) -> bool:
+    """Whether ``spec`` takes histories of ``key`` (a sensor or a frozenset of them); a spec
+    without ``sensors`` takes any single sensor."""
+    if spec.sensors is None:
+        return isinstance(key, str)
+    return key in spec.sensors
 
 
 _METHODS: dict[str, MethodSpec] = {}
@@ -142,10 +162,21 @@ def _load_builtins() -> None:
     if _BUILTINS_LOADED:
         return
     _BUILTINS_LOADED = True
-    from mappers import calibrated, covis_calibrated, ensemble, masked, methods, scalable, unfolding
+    from mappers import (
+        calibrated,
+        covis_calibrated,
+        ensemble,
+        masked,
+        methods,
+        range_bearing,
+        scalable,
+        unfolding,
+        visibility_bearing,
+    )
 
     for spec in (*methods.SPECS, calibrated.SPEC, unfolding.SPEC, scalable.SPEC, *masked.SPECS,
-                 ensemble.SPEC, *covis_calibrated.SPECS):
+                 ensemble.SPEC, *covis_calibrated.SPECS, range_bearing.SPEC,
+                 visibility_bearing.SPEC):
         _METHODS.setdefault(spec.label, spec)
 
 
@@ -171,16 +202,20 @@ class _Registry(Mapping[str, MethodSpec]):
 METHODS: Mapping[str, MethodSpec] = _Registry()
 """Label -> :class:`MethodSpec`, in registration order (read-only view; use register_method)."""
 
-DEFAULT_METHODS: dict[tuple[str, bool], str] = {
+DEFAULT_METHODS: dict[tuple[str | frozenset[str], bool], str] = {
     ("visibility", False): "CAL-SMA",
     ("bearing", False): "CAL-SMA",
     ("range", False): "UNFOLD",
     ("visibility", True): "covis-nonmetric",
     ("bearing", True): "covis-auto",
     ("range", True): "range-quantile",
+    (frozenset({"range", "bearing"}), False): "LOC-SMA",
+    (frozenset({"range", "bearing"}), True): "LOC-SMA",
+    (frozenset({"visibility", "bearing"}), False): "VB-SMA",
 }
-"""(sensor, masked) -> the label ``build_map`` uses when no method is given. The measured
-figures behind each choice are in the README and ``benchmarks/``."""
+"""(sensor, masked) -> the label ``build_map`` uses when no method is given; a fused set of
+sensors is keyed by its frozenset. The measured figures behind each choice are in the README
+and ``benchmarks/``."""
 
 SCALABLE_DEFAULTS: dict[tuple[str, bool], str] = {
     ("visibility", False): "CAL-SMA-SPARSE",
@@ -211,12 +246,10 @@ def register_method(spec: MethodSpec, *, replace: bool = False) -> MethodSpec:
         raise ValueError(f"spec.factory of {spec.label!r} is not callable")
     if spec.label in _METHODS and not replace:
         raise ValueError(f"method {spec.label!r} is already registered (pass replace=True)")
-    if spec.sensors is not None and (
-        isinstance(spec.sensors, str) or not spec.sensors or not set(spec.sensors) <= set(SENSORS)
-    ):
+    if spec.sensors is not None and not _valid_sensors(spec.sensors):
         raise ValueError(
-            f"{spec.label!r}: sensors must be None or a non-empty tuple of {SENSORS}, "
-            f"got {spec.sensors!r}"
+            f"{spec.label!r}: sensors must be None or a non-empty tuple of {SENSORS} and of "
+            f"frozensets of two or more of them (fused histories), got {spec.sensors!r}"
         )
     if (isinstance(spec.histories, str) or not spec.histories
             or not set(spec.histories) <= set(HISTORY_KINDS)):
@@ -232,29 +265,42 @@ def register_method(spec: MethodSpec, *, replace: bool = False) -> MethodSpec:
     return spec
 
 
-def methods_for(sensor: str | None = None, masked: bool | None = None) -> tuple[str, ...]:
-    """Labels of the registered methods that map ``sensor`` histories of that kind (None: any)."""
+def _valid_sensors(sensors: object) -> bool:
+    if isinstance(sensors, str) or not isinstance(sensors, tuple) or not sensors:
+        return False
+    return all(
+        (isinstance(s, str) and s in SENSORS)
+        or (isinstance(s, frozenset) and len(s) >= 2 and s <= set(SENSORS))
+        for s in sensors
+    )
+
+
+def methods_for(sensor=None, masked: bool | None = None) -> tuple[str, ...]:
+    """Labels of the registered methods that map ``sensor`` histories (a sensor, a fused set of
+    them, or None: any) of that kind (None: any)."""
     _load_builtins()
+    key = None if sensor is None else check_sensor_set(sensor)
     return tuple(
         label for label, spec in _METHODS.items()
-        if (sensor is None or spec.sensors is None or sensor in spec.sensors)
+        if (key is None or _maps(spec, key))
         and (masked is None or ("masked" if masked else "complete") in spec.histories)
     )
 
 
-def resolve_method(method: str | None, sensor: str, masked: bool = False,
+def resolve_method(method: str | None, sensor, masked: bool = False,
                    n_objects: int | None = None) -> MethodSpec:
     """The spec of ``method`` (a label, matched case-insensitively; None = the default for
-    ``sensor`` and the kind of history, the scalable one above :data:`SCALABLE_ABOVE_OBJECTS`
-    objects when ``n_objects`` is given) if it maps such histories, else a ValueError that lists
-    the labels which do."""
-    check_sensor(sensor)
+    ``sensor`` — a sensor, or a fused set of them — and the kind of history, the scalable one
+    above :data:`SCALABLE_ABOVE_OBJECTS` objects when ``n_objects`` is given) if it maps such
+    histories, else a ValueError that lists the labels which do."""
+    key = check_sensor_set(sensor)
+    sensor = sensor_name(key)
     kind = "masked" if masked else "complete"
-    fits = methods_for(sensor, masked)  # loads the built-ins
+    fits = methods_for(key, masked)  # loads the built-ins
     if method is None:
         large = n_objects is not None and n_objects > SCALABLE_ABOVE_OBJECTS
-        method = ((large and SCALABLE_DEFAULTS.get((sensor, bool(masked))))
-                  or DEFAULT_METHODS.get((sensor, bool(masked))))
+        method = ((large and SCALABLE_DEFAULTS.get((key, bool(masked))))
+                  or DEFAULT_METHODS.get((key, bool(masked))))
         if method is None or method not in _METHODS:
             raise ValueError(f"no default method for {kind} {sensor} histories; choose from {list(fits)}")
     if not isinstance(method, str):
@@ -263,9 +309,11 @@ def resolve_method(method: str | None, sensor: str, masked: bool = False,
     if label is None:
         raise ValueError(f"unknown method {method!r}; methods for {kind} {sensor} histories: {list(fits)}")
     spec = _METHODS[label]
-    if spec.sensors is not None and sensor not in spec.sensors:
+    if not _maps(spec, key):
+        takes = "single-sensor" if spec.sensors is None else " and ".join(
+            sensor_name(s) for s in spec.sensors)
         raise ValueError(
-            f"method {label!r} maps {' and '.join(spec.sensors)} histories only: it does not map "
+            f"method {label!r} maps {takes} histories only: it does not map "
             f"{sensor} histories; methods for {kind} {sensor} histories: {list(fits)}"
         )
     if kind not in spec.histories:

@@ -20,8 +20,11 @@ import numpy as np
 
 __all__ = [
     "COLUMNS_PER_STEP",
+    "FUSED_SENSORS",
     "SENSORS",
     "check_sensor",
+    "check_sensor_set",
+    "sensor_name",
     "check_timeline",
     "infer_sensor",
     "step_observations",
@@ -33,6 +36,16 @@ SENSORS: tuple[str, ...] = ("visibility", "bearing", "range")
 COLUMNS_PER_STEP = MappingProxyType({"visibility": 1, "bearing": 2, "range": 1})
 """Matrix columns one step contributes, per sensor."""
 
+FUSED_SENSORS = MappingProxyType({
+    "range-bearing": frozenset({"range", "bearing"}),
+    "visibility-bearing": frozenset({"visibility", "bearing"}),
+})
+"""Names of the sensor sets fused histories come in (a mapping sensor -> matrix of the same
+objects and steps): range and bearing together, as a camera that also measures distance gives
+them; visibility and bearing from one walk (the paper's open question, §6). Any set of two or
+more sensors of :data:`SENSORS` can be fused; these are the ones with names and defaults."""
+
+
 def check_sensor(sensor: object, *, allow_none: bool = False) -> str | None:
     """``sensor`` if it names a sensor of :data:`SENSORS` (or is None when allowed), else a
     ValueError listing the sensors."""
@@ -42,6 +55,38 @@ def check_sensor(sensor: object, *, allow_none: bool = False) -> str | None:
         extra = " or None" if allow_none else ""
         raise ValueError(f"sensor must be one of {list(SENSORS)}{extra}, got {sensor!r}")
     return sensor
+
+
+def check_sensor_set(sensors: object) -> str | frozenset[str]:
+    """The key a registry uses for one sensor or a fused set: a sensor name stays as it is; a
+    name of :data:`FUSED_SENSORS` or a collection of two or more distinct sensors becomes a
+    frozenset (a collection of one, its sensor); anything else is a ValueError naming the
+    sensors."""
+    if isinstance(sensors, str):
+        if sensors in FUSED_SENSORS:
+            return FUSED_SENSORS[sensors]
+        return check_sensor(sensors)
+    try:
+        names = list(sensors)  # type: ignore[call-overload]
+    except TypeError:
+        names = None
+    if not names or not all(isinstance(n, str) for n in names):
+        raise ValueError(f"sensor must be one of {list(SENSORS)}, a fused set of them or one of "
+                         f"{list(FUSED_SENSORS)}, got {sensors!r}")
+    unknown = [n for n in names if n not in SENSORS]
+    if unknown:
+        raise ValueError(f"unknown sensor name(s) {unknown}; sensors are {list(SENSORS)}")
+    if len(set(names)) != len(names):
+        raise ValueError(f"sensors of a fused set must be distinct, got {names}")
+    return names[0] if len(names) == 1 else frozenset(names)
+
+
+def sensor_name(key: str | frozenset[str]) -> str:
+    """How listings and messages name a sensor or a fused set (``"range-bearing"``)."""
+    if isinstance(key, str):
+        return key
+    named = {v: k for k, v in FUSED_SENSORS.items()}
+    return named.get(frozenset(key), "+".join(s for s in SENSORS if s in key))
 
 
 def check_timeline(timeline: Any, n_steps: int) -> np.ndarray | None:

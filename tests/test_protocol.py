@@ -58,10 +58,10 @@ def test_config_defaults_follow_the_paper():
     from mappers import METHODS as ALL
 
     # by default every method made for complete histories of the sensor, in table order (UNFOLD:
-    # range only; the masked-history methods and the sparse ones for large M are not in the
-    # paper's tables)
+    # range only; the masked-history methods, the sparse ones for large M and the fused ones are
+    # not in the paper's tables)
     complete = tuple(m for m in ALL if m != "UNFOLD" and not ALL[m].takes_masks
-                     and not ALL[m].sparse)
+                     and not ALL[m].sparse and not ALL[m].fused)
     assert "CAL-SMA-SPARSE" in ALL and "CAL-SMA-SPARSE" not in complete
     assert ProtocolConfig().methods == complete == ProtocolConfig(sensor="bearing").methods
     assert complete[-1] == "CAL-SMA" and len(complete) == 11

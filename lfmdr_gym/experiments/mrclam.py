@@ -28,18 +28,24 @@ from lfmdr_gym.datasets.mrclam import (
     load_mrclam,
 )
 from lfmdr_gym.history import History
-from mappers.sensors import check_sensor
+from mappers.sensors import check_sensor_set, sensor_name
 
-__all__ = ["DEFAULT_METHOD", "ENSEMBLE_BIN_WIDTHS", "METHOD_ALIASES", "MRCLAMMap", "map_mrclam_run"]
+__all__ = ["DEFAULT_METHOD", "ENSEMBLE_BIN_WIDTHS", "FUSED_BIN_WIDTH", "METHOD_ALIASES", "MRCLAMMap", "map_mrclam_run"]
 
 DEFAULT_METHOD: dict[str, str] = {
     "visibility": "covis-ensemble",
     "bearing": "covis-ensemble",
     "range": "range-quantile",
+    "range-bearing": "LOC-SMA",
 }
 """The method per sensor on real runs when none is given: the best measured leave-one-run-out
 (``benchmarks/bench_mrclam.py``). Bearing uses the pattern of what was seen: no bearing-only
 statistic measured better (``docs/bearing-on-real-data.md``)."""
+
+FUSED_BIN_WIDTH: dict[str, float] = {"range-bearing": 0.25}
+"""Bin width [s] of fused runs when none is given: the law of cosines needs both readings from
+one viewpoint, so bins stay near the camera period (chosen leave-one-run-out,
+``benchmarks/bench_mrclam.py``)."""
 
 ENSEMBLE_BIN_WIDTHS: tuple[float, ...] = (1.0, 1.5, 2.0, 3.0, 4.0, 5.0)
 """Bin widths [s] of the covis-ensemble's members on real runs (``bin_widths=`` overrides)."""
@@ -102,6 +108,8 @@ def _tick(widths: Sequence[float]) -> float:
 def _plan(sensor: str, method: str | None, bin_width: float | None, params: dict[str, Any]):
     """(method label, bin width of the history, the method's parameters, zero-fill or not)."""
     zero_fill = False
+    if bin_width is None and sensor in FUSED_BIN_WIDTH:
+        bin_width = FUSED_BIN_WIDTH[sensor]
     if method in METHOD_ALIASES:
         method, zero_fill = METHOD_ALIASES[method], True
     if method is None:
@@ -120,12 +128,21 @@ def _plan(sensor: str, method: str | None, bin_width: float | None, params: dict
     return method, tick, {"windows": tuple(round(w / tick) for w in widths), **params}, zero_fill
 
 
-def _load(run_dir, sensor, robots, bin_width, anchors, groundtruth_fixes) -> tuple[History, MRCLAMReport]:
+def _load(run_dir, key, robots, bin_width, anchors, groundtruth_fixes):
+    """The run's History (a fused set: a dict sensor -> History, binned alike) and report."""
+    sensors = [key] if isinstance(key, str) else [s for s in ("range", "bearing", "visibility")
+                                                  if s in key]
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", MRCLAMDataWarning)
-        history, report = load_mrclam(run_dir, sensor, robots=robots, bin_width=bin_width,
-                                      anchors=anchors, groundtruth_fixes=groundtruth_fixes)
-    for w in caught:  # re-issue what the loader said, so callers' filters still apply
+        loaded = {s: load_mrclam(run_dir, s, robots=robots, bin_width=bin_width, anchors=anchors,
+                                 groundtruth_fixes=groundtruth_fixes) for s in sensors}
+    report = loaded[sensors[0]][1]
+    history = loaded[key][0] if isinstance(key, str) else {s: h for s, (h, _) in loaded.items()}
+    seen: set[str] = set()
+    for w in caught:  # re-issue what the loader said (once), so callers' filters still apply
+        if str(w.message) in seen:
+            continue
+        seen.add(str(w.message))
         if issubclass(w.category, MRCLAMDataWarning):
             warnings.warn(str(w.message), MRCLAMDataWarning, stacklevel=3)
         else:
@@ -183,17 +200,19 @@ def map_mrclam_run(
 
     Args:
         run_dir: the run's directory.
-        sensor: ``"visibility"``, ``"bearing"`` or ``"range"`` (``mode=`` is the older name).
+        sensor: ``"visibility"``, ``"bearing"``, ``"range"`` or ``"range-bearing"`` (both
+            measurements of every sighting, fused; ``mode=`` is the older name).
         robots: robot subject numbers whose logs to use.
         method: any registered method that maps the run's (masked) histories, e.g.
             ``"covis-ensemble"`` (``bin_widths`` [s] and ``min_co`` sequences, ``member``,
             ``power``), ``"covis-power"``, ``"range-quantile"``; a method for complete histories
             with ``zero_fill``; ``"naive"`` = ``"SMA(UNWGT)"`` with ``zero_fill``; None =
-            :data:`DEFAULT_METHOD` of the sensor.
+            :data:`DEFAULT_METHOD` of the sensor (``"LOC-SMA"`` for range-bearing).
         anchors: anchor landmark subject numbers; None = the 4 nearest the bounding-box corners.
         out: directory for ``map.csv`` (subject, x, y of every landmark, anchors included, in
             the ground-truth frame; written atomically) and ``map.png``; None writes nothing.
-        bin_width: seconds per bin; None = the loader's default for the sensor; must be None for
+        bin_width: seconds per bin; None = the loader's default for the sensor (for fused
+            sensors :data:`FUSED_BIN_WIDTH`); must be None for
             ``covis-ensemble``; given with ``method=None`` for visibility or bearing, the
             ensemble's member method (``covis-power``) maps the run binned at that one width.
         groundtruth_fixes: ``"known"`` / ``"detect"`` / ``"none"`` (see ``read_run``).
@@ -204,13 +223,16 @@ def map_mrclam_run(
     """
     from mappers import build_map
 
-    sensor = check_sensor(mode if mode is not None else sensor)
+    key = check_sensor_set(mode if mode is not None else sensor)
+    sensor = sensor_name(key)
     method, bin_width, params, alias_fill = _plan(sensor, method, bin_width, dict(params))
-    history, report = _load(run_dir, sensor, robots, bin_width, anchors, groundtruth_fixes)
+    histories, report = _load(run_dir, key, robots, bin_width, anchors, groundtruth_fixes)
     if zero_fill or alias_fill:
-        history = dataclasses.replace(history, mask=None)
+        histories = (dataclasses.replace(histories, mask=None) if isinstance(key, str) else
+                     {s: dataclasses.replace(h, mask=None) for s, h in histories.items()})
+    history = histories if isinstance(key, str) else next(iter(histories.values()))
     msgs = list(report.warnings)
-    result = build_map(history, history.anchor_ids, history.anchor_positions, method, **params)
+    result = build_map(histories, history.anchor_ids, history.anchor_positions, method, **params)
     run = history.meta["run"]
     for w in result.warnings:
         msgs.append(f"{run} ({sensor}, {result.method}): {w}")
@@ -227,7 +249,8 @@ def map_mrclam_run(
         params={} if alias_fill else _reported_params(result.method, params, bin_width),
         subjects=subjects, positions=result.positions, truth=history.object_positions,
         anchor_subjects=tuple(int(s) for s in subjects[history.anchor_ids]), mpe=mpe, moe=moe,
-        centroid_mpe=centroid_mpe, warnings=tuple(msgs), report=report, history_meta=history.meta,
+        centroid_mpe=centroid_mpe, warnings=tuple(msgs), report=report,
+        history_meta={**history.meta, "sensor": sensor},
     )
     return outcome if out is None else _write(outcome, Path(out), plot)
 

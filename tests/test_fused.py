@@ -1,0 +1,150 @@
+"""Fused histories: the registry's sensor sets, build_map's checks, and range + bearing mapping
+by the law of cosines (LOC-SMA)."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from mappers import DEFAULT_METHODS, METHODS, MethodSpec, build_map, methods_for, register_method
+from mappers.law_of_cosines import frame_values, pooled_frame_distances
+from mappers.range_bearing import LawOfCosinesSMACOF, RigidityWarning
+from mappers.registry import _METHODS, resolve_method
+from mappers.sensors import check_sensor_set, sensor_name
+
+RB = frozenset({"range", "bearing"})
+
+
+def camera(P, n_steps=600, fov=np.pi / 3, max_range=1.0, seed=0, size=2.0):
+    """Noise-free fused range + bearing histories of a camera at random poses, and masks."""
+    rng = np.random.default_rng(seed)
+    poses = np.column_stack([rng.uniform(-size / 2, size / 2, (n_steps, 2)),
+                             rng.uniform(-np.pi, np.pi, n_steps)])
+    rel = P[:, None, :] - poses[None, :, :2]
+    r = np.hypot(rel[..., 0], rel[..., 1])
+    th = np.angle(np.exp(1j * (np.arctan2(rel[..., 1], rel[..., 0]) - poses[None, :, 2])))
+    seen = (np.abs(th) <= fov / 2) & (r <= (np.inf if max_range is None else max_range))
+    R = np.where(seen, r, 0.0)
+    B = np.zeros((len(P), 2 * n_steps))
+    B[:, 0::2], B[:, 1::2] = np.where(seen, np.cos(th), 0.0), np.where(seen, np.sin(th), 0.0)
+    return {"range": R, "bearing": B}, {"range": seen, "bearing": np.repeat(seen, 2, axis=1)}
+
+
+def grid_layout(n=6, spacing=0.35, seed=0):
+    rng = np.random.default_rng(seed)
+    g = (np.arange(n) - (n - 1) / 2) * spacing
+    P = np.array([(x, y) for x in g for y in g]) + rng.uniform(-0.05, 0.05, (n * n, 2))
+    anchors = np.array([0, n - 1, n * n - n, n * n - 1])  # the corners
+    return P, anchors
+
+
+# ---------------------------------------------------------------- vocabulary and registry
+def test_sensor_sets_are_canonical_and_named():
+    assert check_sensor_set(("bearing", "range")) == RB == check_sensor_set("range-bearing")
+    assert check_sensor_set(["range"]) == "range"
+    assert sensor_name(RB) == "range-bearing"
+    assert sensor_name(frozenset({"visibility", "bearing"})) == "visibility-bearing"
+    with pytest.raises(ValueError, match="unknown sensor name"):
+        check_sensor_set(("range", "sonar"))
+    with pytest.raises(ValueError, match="distinct"):
+        check_sensor_set(("range", "range"))
+
+
+def test_registry_lists_fused_methods_and_defaults():
+    assert DEFAULT_METHODS[(RB, False)] == "LOC-SMA" == DEFAULT_METHODS[(RB, True)]
+    assert "LOC-SMA" in methods_for(("range", "bearing"), masked=True)
+    assert "LOC-SMA" not in methods_for("range")
+    assert "SMA(WGT)" not in methods_for(RB)  # single-sensor methods do not take fused input
+    assert METHODS["LOC-SMA"].fused and not METHODS["SMA(WGT)"].fused
+    with pytest.raises(ValueError, match="maps range-bearing histories only"):
+        resolve_method("LOC-SMA", "range")
+    with pytest.raises(ValueError, match="single-sensor histories only"):
+        resolve_method("SMA(WGT)", ("range", "bearing"))
+
+
+def test_register_fused_spec_and_bad_sensor_sets():
+    spec = MethodSpec("test-fused", LawOfCosinesSMACOF, sensors=(RB,), uses_anchors=True,
+                      normalize=False, histories=("complete", "masked"))
+    try:
+        register_method(spec)
+        assert "test-fused" in methods_for(RB)
+    finally:
+        _METHODS.pop("test-fused", None)
+    for bad in ((frozenset({"range"}),), (frozenset({"range", "sonar"}),), ("range", 3)):
+        with pytest.raises(ValueError, match="sensors must be None or a non-empty tuple"):
+            register_method(MethodSpec("test-bad", LawOfCosinesSMACOF, sensors=bad))
+    assert "test-bad" not in METHODS
+
+
+# ---------------------------------------------------------------- bad fused input
+def test_bad_fused_inputs_are_refused_by_name():
+    P, anchors = grid_layout()
+    H, masks = camera(P)
+    pos = P[anchors]
+    with pytest.raises(ValueError, match="unknown sensor name.*sonar"):
+        build_map({"range": H["range"], "sonar": H["bearing"]}, anchors, pos)
+    with pytest.raises(ValueError, match="two or more sensors"):
+        build_map({"range": H["range"]}, anchors, pos)
+    with pytest.raises(ValueError, match="same objects and steps"):
+        build_map({"range": H["range"][:-1], "bearing": H["bearing"]}, anchors, pos)
+    with pytest.raises(ValueError, match="same objects and steps"):
+        build_map({"range": H["range"][:, :-1], "bearing": H["bearing"]}, anchors, pos)
+    with pytest.raises(ValueError, match=r"histories\['bearing'\] has 1199 columns"):
+        build_map({"range": H["range"], "bearing": H["bearing"][:, :-1]}, anchors, pos)
+    with pytest.raises(ValueError, match=r"mask must have one entry per sensor.*missing \['bearing'\]"):
+        build_map(H, anchors, pos, mask={"range": masks["range"]})
+    with pytest.raises(ValueError, match="must be a mapping sensor -> mask"):
+        build_map(H, anchors, pos, mask=masks["range"])
+    with pytest.raises(ValueError, match=r"mask\['range'\] must be a boolean array"):
+        build_map(H, anchors, pos, mask={**masks, "range": masks["range"].astype(int)})
+    with pytest.raises(ValueError, match="does not name the sensors"):
+        build_map(H, anchors, pos, sensor="visibility")
+    with pytest.raises(ValueError, match="does not map"):
+        build_map(H, anchors, pos, method="SMA(WGT)")
+
+
+# ---------------------------------------------------------------- the law of cosines
+def test_law_of_cosines_distances_exact_on_noise_free_frames():
+    P, _ = grid_layout()
+    H, masks = camera(P, fov=2 * np.pi, max_range=None, n_steps=50)
+    r, theta = frame_values(H, masks)
+    D, S, C = pooled_frame_distances(r, theta)
+    true = np.linalg.norm(P[:, None] - P[None], axis=2)
+    assert np.all(C[~np.eye(len(P), dtype=bool)] > 0)
+    np.testing.assert_allclose(D, true, atol=1e-9)
+    np.testing.assert_allclose(S, 0.0, atol=1e-9)
+
+
+def test_loc_sma_recovers_a_layout_from_a_narrow_camera():
+    P, anchors = grid_layout()
+    H, masks = camera(P, n_steps=1500)
+    m = build_map(H, anchors, P[anchors], mask=masks)
+    assert m.method == "LOC-SMA" and m.sensor == "range-bearing" and m.unmapped == ()
+    np.testing.assert_allclose(m.positions, P, atol=1e-4)
+
+
+def test_two_clusters_with_two_anchors_each_are_placed_by_handedness():
+    """No pair joins the clusters; each has two anchors, so distances leave a mirror image that
+    only the frames' handedness resolves."""
+    P1, _ = grid_layout(n=3, spacing=0.3, seed=1)
+    P = np.vstack([P1 - 1.5, P1 + 1.5])
+    anchors = np.array([0, 8, 9, 17])  # two corners of each cluster, diagonally opposite
+    H, masks = camera(P, n_steps=3000, max_range=0.9, size=4.0, seed=2)
+    r, theta = frame_values(H, masks)
+    _, _, C = pooled_frame_distances(r, theta)
+    assert C[:9, 9:].max() == 0  # the clusters are never seen together
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RigidityWarning)
+        m = build_map(H, anchors, P[anchors], mask=masks)
+    np.testing.assert_allclose(m.positions, P, atol=1e-4)
+
+
+def test_a_cluster_tied_to_one_anchor_is_not_placed_but_warned():
+    P1, _ = grid_layout(n=3, spacing=0.3, seed=1)
+    P = np.vstack([P1 - 1.5, P1 + 1.5])
+    anchors = np.array([0, 2, 8, 17])  # three in the first cluster, one in the second
+    H, masks = camera(P, n_steps=3000, max_range=0.9, size=4.0, seed=2)
+    m = build_map(H, anchors, P[anchors], mask=masks)
+    assert set(range(9, 17)) <= set(m.unmapped)
+    assert any("tied to 1 anchor" in w for w in m.warnings)
+    np.testing.assert_allclose(m.positions[:9], P[:9], atol=1e-4)
