@@ -202,22 +202,27 @@ def test_unknown_method_in_run_and_map(tmp_path, capsys):
     assert "unknown parameter(s) ['sigma2'] for method 'SDE'" in err
 
 
+def _table_with(fresh: Path, column: str, method: str, change) -> None:
+    """docs/results/visibility's table.csv written to ``fresh`` with one cell changed."""
+    lines = (ROOT / "docs" / "results" / "visibility" / "table.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    col, method_col = header.index(column), header.index("method")
+    rows = [lines[0]]
+    for line in lines[1:]:
+        cells = line.split(",")
+        if cells[method_col] == method:
+            cells[col] = repr(change(float(cells[col])))
+        rows.append(",".join(cells))
+    fresh.mkdir(exist_ok=True)
+    (fresh / "table.csv").write_text("\n".join(rows) + "\n")
+
+
 def test_compare_accepts_a_reproduction_and_names_what_moved(tmp_path, capsys):
     ref = ROOT / "docs" / "results" / "visibility"
     fresh = tmp_path / "fresh"
-    fresh.mkdir()
-    lines = (ref / "table.csv").read_text().splitlines()
-    header = lines[0].split(",")
-    col, method_col = header.index("mpe_mean"), header.index("method")
 
     def write(shift):
-        rows = [lines[0]]
-        for line in lines[1:]:
-            cells = line.split(",")
-            if cells[method_col] == "LLE":
-                cells[col] = repr(float(cells[col]) + shift)
-            rows.append(",".join(cells))
-        (fresh / "table.csv").write_text("\n".join(rows) + "\n")
+        _table_with(fresh, "mpe_mean", "LLE", lambda v: v + shift)
 
     write(0.001)  # within the stated tolerance (0.002 m)
     assert main(["compare", str(fresh), str(ref)]) == 0
@@ -232,17 +237,8 @@ def test_compare_accepts_a_reproduction_and_names_what_moved(tmp_path, capsys):
 def test_compare_moe_within_points_or_a_fraction(tmp_path, capsys):
     ref = ROOT / "docs" / "results" / "visibility"
     fresh = tmp_path / "fresh"
-    fresh.mkdir()
-    lines = (ref / "table.csv").read_text().splitlines()
-    header = lines[0].split(",")
-    col, method_col = header.index("moe_mean"), header.index("method")
-    rows = [lines[0]]
-    for line in lines[1:]:
-        cells = line.split(",")
-        if cells[method_col] == "KPCA(POLY)":  # MOE about 15 %: 1 % of it is 0.15 points
-            cells[col] = repr(float(cells[col]) * 1.01)
-        rows.append(",".join(cells))
-    (fresh / "table.csv").write_text("\n".join(rows) + "\n")
+    # KPCA(POLY)'s MOE is about 15 %: 1 % of it is 0.15 points
+    _table_with(fresh, "moe_mean", "KPCA(POLY)", lambda v: v * 1.01)
     assert main(["compare", str(fresh), str(ref)]) == 0  # within 2 % of the reference
     capsys.readouterr()
     assert main(["compare", str(fresh), str(ref), "--moe-rel", "0"]) == 1  # beyond 0.1 points

@@ -8,6 +8,8 @@ import inspect
 from collections.abc import Iterable, Mapping
 from typing import Any
 
+from lfmdr_gym.experiments.params import number_or_text
+
 __all__ = ["check_env_kwargs", "parse_env_kwargs"]
 
 # Keywords the experiments set themselves (the sensor comes from --sensor or the env id).
@@ -22,12 +24,7 @@ def _value(text: str) -> Any:
         return low == "true"
     if low == "none":
         return None
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text
+    return number_or_text(text)
 
 
 def parse_env_kwargs(items: Iterable[str] | None) -> dict[str, Any]:

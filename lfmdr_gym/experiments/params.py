@@ -63,7 +63,8 @@ def param_label(params: Mapping[str, Any]) -> str:
     return ",".join(f"{k}={params[k]}" for k in sorted(params))
 
 
-def _value(text: str) -> Any:
+def number_or_text(text: str) -> Any:
+    """``"5"`` -> 5, ``"0.5"`` -> 0.5, anything else stays text."""
     for kind in (int, float):
         try:
             return kind(text)
@@ -83,7 +84,7 @@ def parse_params(items: Iterable[str] | None) -> dict[str, Any]:
             name, sep, text = part.partition("=")
             if not sep or not name.strip() or not text.strip():
                 raise ValueError(f"parameters are given as NAME=VALUE, got {part!r}")
-            out[name.strip()] = _value(text.strip())
+            out[name.strip()] = number_or_text(text.strip())
     return out
 
 
