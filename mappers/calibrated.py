@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import warnings
 from numbers import Integral, Real
+from typing import NamedTuple
 
 import numpy as np
 from scipy.sparse.csgraph import shortest_path
@@ -68,6 +69,35 @@ __all__ = [
     "fold_score",
     "history_dissimilarity",
 ]
+
+
+class CalibrationFit(NamedTuple):
+    """CAL-SMA's calibration: ``coef`` of the least-squares fit, the design matrix ``F`` of the
+    fitted pairs, the map's ``centre`` and ``half`` extent the position features use, and the
+    ``target`` log map distances of the pairs."""
+
+    coef: np.ndarray
+    F: np.ndarray
+    centre: np.ndarray
+    half: float
+    target: np.ndarray
+
+
+def fit_calibration(ld: np.ndarray, X: np.ndarray, i: np.ndarray, j: np.ndarray,
+                    dissimilarity_degree: int, position_degree: int) -> CalibrationFit:
+    """Least-squares fit of the log map distance of pairs ``(i, j)`` of the map ``X`` on powers
+    of their log dissimilarity ``ld`` and polynomial features of their midpoint (CAL-SMA's
+    calibration; shared by the dense and the sparse estimator)."""
+    centre = 0.5 * (X.min(axis=0) + X.max(axis=0))
+    half = max(0.5 * float(np.max(X.max(axis=0) - X.min(axis=0))), 1e-12)
+    F = np.column_stack(
+        [ld**p for p in range(1, dissimilarity_degree + 1)]
+        + [np.ones_like(ld), _features(0.5 * (X[i] + X[j]), centre, half, position_degree)]
+    )
+    dx = np.hypot(*(X[i] - X[j]).T)
+    target = np.log(np.maximum(dx, 1e-6 * half))
+    coef, *_ = np.linalg.lstsq(F, target, rcond=None)
+    return CalibrationFit(coef, F, centre, half, target)
 
 
 class FoldWarning(UserWarning):
@@ -307,15 +337,8 @@ class CalibratedSMACOF(TransformerMixin, BaseEstimator):
         """Least-squares fit of log map distance on log delta and midpoint position."""
         i, j = np.nonzero(np.triu(pairs, 1))
         ld = np.log(np.maximum(D[i, j], lo_delta))
-        centre = 0.5 * (X.min(axis=0) + X.max(axis=0))
-        half = max(0.5 * float(np.max(X.max(axis=0) - X.min(axis=0))), 1e-12)
-        F = np.column_stack(
-            [ld**p for p in range(1, self.dissimilarity_degree + 1)]
-            + [np.ones_like(ld), _features(0.5 * (X[i] + X[j]), centre, half, self.position_degree)]
-        )
-        dx = np.hypot(*(X[i] - X[j]).T)
-        target = np.log(np.maximum(dx, 1e-6 * half))
-        coef, *_ = np.linalg.lstsq(F, target, rcond=None)
+        fit = fit_calibration(ld, X, i, j, self.dissimilarity_degree, self.position_degree)
+        coef, centre, half, target = fit.coef, fit.centre, fit.half, fit.target
         L = np.log(np.maximum(D, lo_delta))
         mid = 0.5 * (X[:, None, :] + X[None, :, :])
         G = np.concatenate(

@@ -28,7 +28,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from mappers.align import apply_affine, check_anchors, fit_affine
-from mappers.calibrated import _features
+from mappers.calibrated import fit_calibration
 from mappers.registry import MethodSpec
 from mappers.sparse_stress import candidate_pairs, knn_pairs, landmark_mds, sparse_smacof
 
@@ -96,15 +96,9 @@ class SparseCalibratedSMACOF(TransformerMixin, BaseEstimator):
 
     def _calibrate(self, ld, X, i, j):
         """Fit log map distance on log delta and midpoint (neighbour pairs); the targets."""
-        centre = 0.5 * (X.min(axis=0) + X.max(axis=0))
-        half = max(0.5 * float(np.max(X.max(axis=0) - X.min(axis=0))), 1e-12)
-        F = np.column_stack([ld**p for p in range(1, self.dissimilarity_degree + 1)]
-                            + [np.ones_like(ld),
-                               _features(0.5 * (X[i] + X[j]), centre, half, self.position_degree)])
-        dx = np.hypot(*(X[i] - X[j]).T)
-        target = np.log(np.maximum(dx, 1e-6 * half))
-        coef, *_ = np.linalg.lstsq(F, target, rcond=None)
-        return np.exp(np.clip(F @ coef, target.min() - 1.0, target.max() + 1.0)), coef
+        fit = fit_calibration(ld, X, i, j, self.dissimilarity_degree, self.position_degree)
+        expo = np.clip(fit.F @ fit.coef, fit.target.min() - 1.0, fit.target.max() + 1.0)
+        return np.exp(expo), fit.coef
 
     def _far_pairs(self, X, i, j, radius):
         """Pairs near in the map (``n_far`` nearest) that are not neighbour pairs, with bounds."""
