@@ -5,6 +5,12 @@ row per object and, per step, ``columns_per_step`` columns (:data:`mappers.senso
 1 for visibility (0/1) and range, 2 for bearing (cos, sin)). Columns are in step order, so the
 first ``n`` steps of a history are its first ``n * columns_per_step`` columns (:meth:`History.head`).
 
+A *fused* history holds several sensors' histories of the same objects over the same steps (a
+camera's range and bearing, or visibility and bearing of one walk): its ``sensor`` names the set
+(:data:`mappers.sensors.FUSED_SENSORS`, e.g. ``"range-bearing"``), its ``matrix`` is a mapping
+sensor -> matrix and its ``mask`` (if any) is keyed the same way; :attr:`History.parts` gives each
+sensor's history on its own. ``build_map`` maps it with the default of the set.
+
 Ground truth (object positions, robot poses) travels with the history for scoring only; a mapper
 is given the matrix and the anchors, nothing else.
 """
@@ -15,8 +21,10 @@ import json
 import os
 import zipfile
 import zlib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -24,11 +32,19 @@ import numpy as np
 from lfmdr_gym import compact
 from lfmdr_gym.atomic import atomic_write
 from mappers.align import check_anchor_ids
-from mappers.sensors import COLUMNS_PER_STEP, check_sensor, check_timeline
+from mappers.sensors import (
+    COLUMNS_PER_STEP,
+    FUSED_SENSORS,
+    SENSORS,
+    check_timeline,
+)
 
 FORMAT = "lfmdr-history"
-FORMAT_VERSION = 2
-READABLE_VERSIONS = (1, 2)  # 1: dense float64 matrix only; 2: also the compact (sparse) form
+FORMAT_VERSION = 3
+# 1: dense float64 matrix only; 2: also the compact (sparse) form; 3: also fused histories (one
+# matrix per sensor, its fields named "<sensor>.<field>"). A file is written with the lowest
+# version that holds it, so older lfmdr still reads what it can.
+READABLE_VERSIONS = (1, 2, 3)
 _ZIP_MAGIC = b"PK\x03\x04"  # an .npz is a zip archive
 
 
@@ -41,7 +57,11 @@ class History:
     """Per-object observation histories of one episode, with the ground truth to score a map.
 
     Attributes:
-        sensor: ``"visibility"``, ``"bearing"`` or ``"range"``.
+        sensor: ``"visibility"``, ``"bearing"`` or ``"range"``; or the name of a fused set of
+            them (``"range-bearing"``, ``"visibility-bearing"``: :data:`FUSED_SENSORS`), whose
+            ``matrix`` is then a mapping sensor -> matrix (one per sensor of the set, each as
+            below, the same objects and steps) and whose ``mask`` is None or a mapping with the
+            same keys (a value None: that sensor complete).
         matrix: (M, N * columns_per_step) float64, one row per object. May be given in a
             compact form (a ``scipy.sparse`` matrix, or float32), which is kept as given
             (:attr:`compact`); reading ``matrix`` then builds the float64 matrix if it fits in
@@ -71,7 +91,15 @@ class History:
     timeline: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        check_sensor(self.sensor)
+        if isinstance(self.sensor, str) and self.sensor in FUSED_SENSORS:
+            self._init_fused()
+            return
+        if not isinstance(self.sensor, str) or self.sensor not in SENSORS:
+            raise ValueError(f"sensor must be one of {list(SENSORS)} or a fused set of "
+                             f"{list(FUSED_SENSORS)}, got {self.sensor!r}")
+        if isinstance(self.__dict__["_data"], Mapping):
+            raise ValueError(f"a mapping sensor -> matrix is a fused history: its sensor must name "
+                             f"the set (one of {list(FUSED_SENSORS)}), got {self.sensor!r}")
         columns = COLUMNS_PER_STEP[self.sensor]
         matrix = compact.check_compact(self.__dict__["_data"])
         if matrix.ndim != 2:
@@ -113,9 +141,74 @@ class History:
         object.__setattr__(self, "meta", dict(self.meta))
         object.__setattr__(self, "timeline", check_timeline(self.timeline, d // columns))
 
+    def _init_fused(self) -> None:
+        """Validate a fused history: one single-sensor History per sensor of the set (:attr:`parts`)."""
+        names = tuple(s for s in SENSORS if s in FUSED_SENSORS[self.sensor])
+        matrices = self.__dict__["_data"]
+        if not isinstance(matrices, Mapping):
+            raise ValueError(f"a {self.sensor} history needs a mapping sensor -> matrix with the "
+                             f"keys {list(names)}, got {type(matrices).__name__}")
+        masks = self.mask
+        if masks is not None and not isinstance(masks, Mapping):
+            raise ValueError(f"the mask of a {self.sensor} history must be None or a mapping "
+                             f"sensor -> mask (None: complete) with the keys {list(names)}, got "
+                             f"{type(masks).__name__}")
+        for what, keys in (("matrix", set(matrices)), ("mask", None if masks is None else set(masks))):
+            if keys is None:
+                continue
+            missing, extra = sorted(set(names) - keys), sorted(keys - set(names))
+            if missing or extra:
+                raise ValueError(
+                    f"the {what} of a {self.sensor} history must have the keys {list(names)}: "
+                    + "; ".join(([f"missing {missing}"] if missing else [])
+                                + ([f"unknown {extra}"] if extra else [])))
+        parts = {}
+        for name in names:
+            try:
+                parts[name] = History(
+                    sensor=name, matrix=matrices[name], object_positions=self.object_positions,
+                    anchor_ids=self.anchor_ids, anchor_positions=self.anchor_positions,
+                    robot_poses=self.robot_poses, mask=None if masks is None else masks[name],
+                    meta=self.meta, timeline=self.timeline)
+            except ValueError as exc:
+                raise ValueError(f"{name} part of the {self.sensor} history: {exc}") from exc
+        steps = {name: (p.n_objects, p.n_steps) for name, p in parts.items()}
+        if len(set(steps.values())) > 1:
+            raise ValueError(f"the sensors of a {self.sensor} history must hold the same objects "
+                             f"and steps; (objects, steps) per sensor: {steps}")
+        first = parts[names[0]]
+        self.__dict__["_parts"] = MappingProxyType(parts)
+        self.__dict__["_data"] = MappingProxyType({n: p.__dict__["_data"] for n, p in parts.items()})
+        mask = {n: p.mask for n, p in parts.items()}
+        object.__setattr__(self, "mask", None if all(v is None for v in mask.values())
+                           else MappingProxyType(mask))
+        for name in ("object_positions", "anchor_ids", "anchor_positions", "robot_poses", "meta",
+                     "timeline"):
+            object.__setattr__(self, name, getattr(first, name))
+
     # ------------------------------------------------------------------ views
     @property
+    def fused(self) -> bool:
+        """Whether the history holds several sensors (:attr:`parts`)."""
+        return "_parts" in self.__dict__
+
+    @property
+    def sensors(self) -> tuple[str, ...]:
+        """The sensors whose histories this holds: ``(sensor,)``, or a fused set's, in
+        :data:`SENSORS` order."""
+        return tuple(self.__dict__["_parts"]) if self.fused else (self.sensor,)
+
+    @property
+    def parts(self) -> Mapping[str, History] | None:
+        """A fused history's single-sensor histories (sensor -> History, the same ground truth);
+        None for a single-sensor history."""
+        return self.__dict__.get("_parts")
+
+    @property
     def columns_per_step(self) -> int:
+        """Matrix columns per step (of a fused history: over all its sensors)."""
+        if self.fused:
+            return sum(p.columns_per_step for p in self.parts.values())
         return COLUMNS_PER_STEP[self.sensor]
 
     @property
@@ -128,28 +221,45 @@ class History:
 
     @property
     def shape(self) -> tuple[int, int]:
-        """(M, N * columns_per_step), without building the dense matrix."""
+        """(M, N * columns_per_step), without building the dense matrix (of a fused history: the
+        columns of all its sensors)."""
+        if self.fused:
+            parts = list(self.parts.values())
+            return (parts[0].shape[0], sum(p.shape[1] for p in parts))
         return tuple(self.__dict__["_data"].shape)
 
     @property
     def compact(self) -> bool:
-        """Whether the matrix is stored compactly (sparse, or float32) rather than as float64."""
+        """Whether the matrix is stored compactly (sparse, or float32) rather than as float64 (of
+        a fused history: any of its sensors')."""
+        if self.fused:
+            return any(p.compact for p in self.parts.values())
         data = self.__dict__["_data"]
         return compact.is_sparse(data) or data.dtype != np.float64
 
     @property
     def is_sparse(self) -> bool:
-        """Whether the matrix is stored as a scipy sparse matrix (visibility, limited range)."""
-        return compact.is_sparse(self.__dict__["_data"])
+        """Whether the matrix is stored as a scipy sparse matrix (visibility, limited range); a
+        fused history is not (see its :attr:`parts`)."""
+        return not self.fused and compact.is_sparse(self.__dict__["_data"])
 
     @property
     def sparse(self):
         """The matrix as a float64 ``scipy.sparse.csr_array`` (zeros not stored): works at any size."""
+        self._single("sparse")
         return compact.to_sparse(self.__dict__["_data"])
+
+    def _single(self, what: str) -> None:
+        if self.fused:
+            raise ValueError(f"History.{what} is one matrix; a {self.sensor} history holds one per "
+                             f"sensor: use History.parts[sensor].{what}")
 
     def dense(self, max_bytes: int | None = None) -> np.ndarray:
         """The (M, D) float64 matrix; for a compact history built once (cached) if it needs at most
-        ``max_bytes`` (default :data:`lfmdr_gym.compact.MAX_DENSE_BYTES`), else DenseTooLargeError."""
+        ``max_bytes`` (default :data:`lfmdr_gym.compact.MAX_DENSE_BYTES`), else DenseTooLargeError.
+        A fused history gives a read-only mapping sensor -> matrix."""
+        if self.fused:
+            return MappingProxyType({n: p.dense(max_bytes) for n, p in self.parts.items()})
         data = self.__dict__["_data"]
         if "_dense" not in self.__dict__:
             out = compact.to_dense(data, max_bytes)
@@ -162,6 +272,17 @@ class History:
         """The history of the first ``n_steps`` steps (a checkpoint of the same episode)."""
         if not 0 < n_steps <= self.n_steps:
             raise ValueError(f"n_steps must be in [1, {self.n_steps}], got {n_steps}")
+        if self.fused:
+            heads = {n: p.head(n_steps) for n, p in self.parts.items()}
+            return History(
+                sensor=self.sensor, matrix={n: h.__dict__["_data"] for n, h in heads.items()},
+                object_positions=self.object_positions, anchor_ids=self.anchor_ids,
+                anchor_positions=self.anchor_positions,
+                robot_poses=None if self.robot_poses is None else self.robot_poses[:n_steps],
+                mask=None if self.mask is None else {n: h.mask for n, h in heads.items()},
+                meta=self.meta,
+                timeline=None if self.timeline is None else self.timeline[:n_steps],
+            )
         cols = n_steps * self.columns_per_step
         return History(
             sensor=self.sensor,
@@ -187,12 +308,23 @@ class History:
         path = Path(path)
         if path.suffix != ".npz":
             raise ValueError(f"history files end in .npz, got {path.name!r}")
+        if self.fused:  # version 3: each sensor's matrix (and mask) under "<sensor>.<field>"
+            version, per_sensor = 3, {"sensors": np.array(self.sensors)}
+            for name, part in self.parts.items():
+                per_sensor.update({f"{name}.{k}": v for k, v in
+                                   compact.compact_fields(part.__dict__["_data"]).items()})
+                if part.mask is not None:
+                    per_sensor[f"{name}.mask"] = part.mask
+        else:  # version 1 where it suffices, so that older lfmdr still reads today's dense files
+            version = 2 if self.compact else 1
+            per_sensor = compact.compact_fields(self.__dict__["_data"])
+            if self.mask is not None:
+                per_sensor["mask"] = self.mask
         arrays: dict[str, np.ndarray] = {
             "format": np.array(FORMAT),
-            # version 1 where it suffices, so that older lfmdr still reads today's dense files
-            "format_version": np.array(FORMAT_VERSION if self.compact else 1),
+            "format_version": np.array(version),
             "sensor": np.array(self.sensor),
-            **compact.compact_fields(self.__dict__["_data"]),
+            **per_sensor,
             "object_positions": self.object_positions,
             "anchor_ids": self.anchor_ids,
             "anchor_positions": self.anchor_positions,
@@ -200,8 +332,6 @@ class History:
         }
         if self.robot_poses is not None:
             arrays["robot_poses"] = self.robot_poses
-        if self.mask is not None:
-            arrays["mask"] = self.mask
         if self.timeline is not None:
             arrays["timeline"] = self.timeline
         with atomic_write(path, "wb") as fh:
@@ -235,14 +365,26 @@ class History:
                 NotImplementedError) as exc:  # zlib.error / NotImplementedError: damaged members
             raise HistoryFileError(f"{path} is damaged or not an .npz history: {exc}") from exc
         try:
+            sensor = str(fields["sensor"])
+            if version >= 3 and sensor in FUSED_SENSORS:
+                names = [str(n) for n in fields["sensors"]]
+                parts = {n: {k[len(n) + 1:]: v for k, v in fields.items() if k.startswith(n + ".")}
+                         for n in names}
+                for n, part in parts.items():
+                    if "matrix" not in part and "matrix_shape" not in part:
+                        raise KeyError(f"{n}.matrix")
+                matrix = {n: compact.from_fields(part) for n, part in parts.items()}
+                mask = {n: part.get("mask") for n, part in parts.items()}
+            else:
+                matrix, mask = compact.from_fields(fields), fields.get("mask")
             return cls(
-                sensor=str(fields["sensor"]),
-                matrix=compact.from_fields(fields),
+                sensor=sensor,
+                matrix=matrix,
                 object_positions=fields["object_positions"],
                 anchor_ids=fields["anchor_ids"],
                 anchor_positions=fields["anchor_positions"],
                 robot_poses=fields.get("robot_poses"),
-                mask=fields.get("mask"),
+                mask=mask,
                 meta=json.loads(str(fields["meta"])),
                 timeline=fields.get("timeline"),
             )

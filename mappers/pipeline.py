@@ -272,7 +272,9 @@ def build_map(
             ``lfmdr_gym.History`` (its ``sensor``, ``mask`` and ``timeline`` are then used
             unless given); or fused histories, a mapping sensor -> matrix (or History) of the
             same objects and steps, e.g. ``{"range": R, "bearing": B}`` (:mod:`mappers.fused`),
-            mapped by a method that takes that set of sensors.
+            mapped by a method that takes that set of sensors; or an object whose ``parts`` is
+            such a mapping (a fused ``lfmdr_gym.History``, whose ``timeline`` is then used
+            unless given).
         anchor_ids: (A,) ids of the anchor objects, A >= 3, distinct, in [0, M).
         anchor_positions: (A, 2) their known positions [m]; not collinear.
         method: a label of :data:`mappers.METHODS` (case-insensitive) that maps this kind of
@@ -298,6 +300,11 @@ def build_map(
         ValueError: bad input, naming the problem. MappingError (a ValueError) when the method
         itself fails (e.g. Hessian LLE's eigenproblem), naming the method and the cause.
     """
+    parts = getattr(histories, "parts", None)
+    if isinstance(parts, Mapping) and not isinstance(histories, Mapping):
+        # a fused History (lfmdr_gym): its single-sensor parts, each with its own mask
+        timeline = timeline if timeline is not None else getattr(histories, "timeline", None)
+        histories = dict(parts)
     if isinstance(histories, Mapping):
         return _build_fused_map(histories, anchor_ids, anchor_positions, method, sensor, mask,
                                 timeline, normalize, random_state, params)

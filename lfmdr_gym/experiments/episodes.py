@@ -140,7 +140,11 @@ def describe_history(history: History) -> str:
             f"max {int(seen.max())}; never seen: {int((seen == 0).sum())} objects; "
             f"visible per step: {history.matrix.sum(axis=0).mean():.2f} objects on average"
         )
-    if history.mask is not None:
+    if history.fused and history.mask is not None:
+        lines.append("observed entries: " + ", ".join(
+            f"{name} {100 * (1.0 if m is None else m.mean()):.1f} %"
+            for name, m in history.mask.items()))
+    elif history.mask is not None:
         lines.append(f"observed entries: {100 * history.mask.mean():.1f} %")
     if history.robot_poses is not None and history.n_steps > 1:
         moves = np.linalg.norm(np.diff(history.robot_poses[:, :2], axis=0), axis=1)
