@@ -5,39 +5,58 @@
     import gymnasium as gym
     import lfmdr_gym  # noqa: F401
 
-    env = gym.make("LFMDR-Visibility-v0")   # or "LFMDR-Bearing-v0", "LFMDR-Range-v0"
+    env = gym.make("LFMDR-Visibility-v0")   # or "LFMDR-Bearing-v0", "LFMDR-Range-v0",
+    # "LFMDR-RangeBearing-v0", "LFMDR-VisibilityBearing-v0", "LFMDR-Camera-v0"
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 from gymnasium.envs.registration import register, registry
 
+from lfmdr_gym.camera import CAMERA_PRESET
 from lfmdr_gym.env import LFMDREnv
 from lfmdr_gym.history import History
 from lfmdr_gym.policies import POLICIES, RandomWalkPolicy, as_policy
 from lfmdr_gym.recording import collect, collect_vector
-from mappers.sensors import SENSORS, check_sensor
+from mappers.sensors import FUSED_SENSORS, SENSORS, check_sensor
 
-__all__ = ["ENV_IDS", "POLICIES", "History", "LFMDREnv", "RandomWalkPolicy", "as_policy", "collect",
+__all__ = ["ENV_IDS", "POLICIES", "PRESETS", "History", "LFMDREnv", "RandomWalkPolicy", "as_policy", "collect",
            "collect_vector", "env_id_for"]
 
 MAX_EPISODE_STEPS = 2000
 """The paper's episode length N (paper §4.1)."""
 
-ENV_IDS: dict[str, str] = {f"LFMDR-{sensor.capitalize()}-v0": sensor for sensor in SENSORS}
-"""Registered id -> sensor: LFMDR-Visibility-v0, LFMDR-Bearing-v0, LFMDR-Range-v0."""
+ENV_IDS: dict[str, str] = {
+    **{f"LFMDR-{sensor.capitalize()}-v0": sensor for sensor in SENSORS},
+    **{"LFMDR-" + "".join(w.capitalize() for w in name.split("-")) + "-v0": name
+       for name in FUSED_SENSORS},
+    "LFMDR-Camera-v0": "range-bearing",
+}
+"""Registered id -> sensor (or fused set): LFMDR-Visibility-v0, LFMDR-Bearing-v0,
+LFMDR-Range-v0; LFMDR-RangeBearing-v0 and LFMDR-VisibilityBearing-v0 (both observations every
+step); LFMDR-Camera-v0, the range-bearing env preset to the MRCLAM robots' camera
+(:data:`lfmdr_gym.camera.CAMERA_PRESET`)."""
+
+PRESETS: dict[str, Mapping[str, Any]] = {"LFMDR-Camera-v0": CAMERA_PRESET}
+"""Registered id -> the env keywords it sets beyond its sensor (overridable in ``gym.make``)."""
 
 
 def env_id_for(sensor: str) -> str:
-    """The registered env id whose observations are ``sensor``'s."""
-    check_sensor(sensor)
-    return next(env_id for env_id, s in ENV_IDS.items() if s == sensor)
+    """The registered env id whose observations are ``sensor``'s (a sensor or a fused set's
+    name), without a preset."""
+    if sensor not in FUSED_SENSORS:
+        check_sensor(sensor)
+    return next(env_id for env_id, s in ENV_IDS.items() if s == sensor and env_id not in PRESETS)
+
 
 for _env_id, _sensor in ENV_IDS.items():  # one loop, as panda-gym registers its variants
     if _env_id not in registry:  # a second import (or importlib.reload) must not re-register
         register(
             id=_env_id,
             entry_point="lfmdr_gym.env:LFMDREnv",
-            kwargs={"sensor": _sensor},
+            kwargs={"sensor": _sensor, **dict(PRESETS.get(_env_id, {}))},
             max_episode_steps=MAX_EPISODE_STEPS,
         )

@@ -14,7 +14,7 @@ from lfmdr_gym.grid import CellGrid
 from lfmdr_gym.imperfect import SensingLimits
 from lfmdr_gym.render import HumanViewer, available_render_modes, draw_frame, human_rendering_error
 from lfmdr_gym.world import World, check_int, check_real
-from mappers.sensors import SENSORS, check_sensor
+from mappers.sensors import FUSED_SENSORS, SENSORS, check_sensor
 
 __all__ = ["LFMDREnv", "OBSERVATION_TYPES", "observation_factory"]
 
@@ -128,6 +128,13 @@ class LFMDREnv(gym.Env):
     - ``"observed"`` (only with a sensing limit on, see *Imperfect sensing*): ``MultiBinary(M)``
       (int8), 1 for the objects the mapping sensor reported on this step.
 
+    Fused sensing (``sensor="range-bearing"`` or ``"visibility-bearing"``, the ids
+    ``LFMDR-RangeBearing-v0``, ``LFMDR-VisibilityBearing-v0`` and ``LFMDR-Camera-v0``): the
+    observation holds every sensor of the set, each as above, read from the same pose after the
+    same move; one ``"observed"`` serves them all (one camera: the field of view, range and line
+    of sight decide for every sensor of the set), while each sensor's noise or dropouts are its
+    own, drawn independently. ``collect`` records such an env into a fused History.
+
     ## Imperfect sensing
 
     All off by default (the paper's perfect sensors); see :class:`lfmdr_gym.imperfect.SensingLimits`.
@@ -169,7 +176,9 @@ class LFMDREnv(gym.Env):
     ## Arguments
 
     ```python
-    gymnasium.make("LFMDR-Visibility-v0")   # or LFMDR-Bearing-v0, LFMDR-Range-v0
+    gymnasium.make("LFMDR-Visibility-v0")   # or LFMDR-Bearing-v0, LFMDR-Range-v0,
+    # LFMDR-RangeBearing-v0, LFMDR-VisibilityBearing-v0, LFMDR-Camera-v0 (the range-bearing
+    # env with the MRCLAM camera's keywords, lfmdr_gym.camera.CAMERA_PRESET)
     LFMDREnv(sensor="visibility", n_objects=50, arena_size=2.5, object_diameter=0.048,
              robot_radius=0.05, step_length=0.2, max_turn=pi/4, visual_angle_deg=5.0,
              occlusion=True, anchors="corners", n_anchors=4, object_clearance=0.15,
@@ -178,6 +187,8 @@ class LFMDREnv(gym.Env):
              false_rate=0.0, line_of_sight=False, render_mode=None)
     ```
 
+    ``sensor``: ``"visibility"``, ``"bearing"``, ``"range"``, or a fused set: ``"range-bearing"``,
+    ``"visibility-bearing"`` (a sensing limit is accepted when it applies to a sensor of the set).
     Lengths in metres. ``object_clearance``/``wall_clearance``: least gap between two objects'
     surfaces / between an object and a wall in random layouts. ``anchors``: ``"corners"`` (the
     objects nearest ``n_anchors`` points spread along the walls from a corner; the four corners
@@ -192,7 +203,8 @@ class LFMDREnv(gym.Env):
     ## Version History
 
     - v0: initial version; the imperfect-sensing keywords came later, off by default (the
-      observations without them are unchanged).
+      observations without them are unchanged); the fused sensors (range-bearing,
+      visibility-bearing) and the camera preset later still, as new ids.
     """
 
     # "human" is offered only where it can work (pygame and a display), so that Gymnasium's
@@ -226,7 +238,13 @@ class LFMDREnv(gym.Env):
         line_of_sight: bool = False,
         render_mode: str | None = None,
     ) -> None:
-        check_sensor(sensor)
+        if sensor in FUSED_SENSORS:
+            sensors_of = tuple(s for s in SENSORS if s in FUSED_SENSORS[sensor])
+        elif isinstance(sensor, str) and sensor in SENSORS:
+            sensors_of = (sensor,)
+        else:
+            raise ValueError(f"sensor must be one of {list(SENSORS)} or a fused set of "
+                             f"{list(FUSED_SENSORS)}, got {sensor!r}")
         self.world = World(
             n_objects=n_objects,
             arena_size=arena_size,
@@ -263,22 +281,32 @@ class LFMDREnv(gym.Env):
             )
         self.render_mode = render_mode
 
-        self._obs_type = observation_factory(self, sensor)
-        self._key = self._obs_type.key
+        # One observation type per sensor (several for a fused set, read from the same pose).
+        self.sensors = sensors_of
+        self._obs_types = {s: observation_factory(self, s) for s in sensors_of}
+        self._fused = len(sensors_of) > 1
+        # The sensor drawn by render(): a fused set's other than bearing (whose rays go to every
+        # object), i.e. range or visibility.
+        self._key = (sensors_of[0] if not self._fused
+                     else next(s for s in sensors_of if s != "bearing"))
+        self._obs_type = self._obs_types[self._key]
+        range_type = self._obs_types.get("range")
         # Imperfect sensing (lfmdr_gym.imperfect): built only when a limit is on.
         self._limits = (SensingLimits(sensor, self.world.n_objects, self.world.object_radius,
-                                      range_high=getattr(self._obs_type, "high", 1.0), **limits)
+                                      range_high=getattr(range_type or self._obs_type, "high", 1.0),
+                                      **limits)
                         if SensingLimits.active(limits) else None)
         self._dirs = sensors.ray_directions(self.n_proximity_rays)
         # One candidate prefilter serves the proximity ring and a nearby-only sensor.
-        self._reach = max(self.proximity_range + self.world.object_radius, self._obs_type.reach)
+        self._reach = max(self.proximity_range + self.world.object_radius,
+                          *(t.reach for t in self._obs_types.values()))
         self._reach2 = self._reach * self._reach
         self._r2 = self.world.object_radius * self.world.object_radius
         self._xy = np.zeros(2)  # the robot's (x, y), reused every step
         self.action_space = spaces.Box(-self.max_turn, self.max_turn, (1,), np.float32)
         self.observation_space = spaces.Dict(
             {
-                self._key: self._obs_type.space,
+                **{key: t.space for key, t in self._obs_types.items()},
                 "proximity": spaces.Box(
                     0.0, self.proximity_range, (self.n_proximity_rays,), np.float32
                 ),
@@ -303,7 +331,8 @@ class LFMDREnv(gym.Env):
         # so a step costs the same at any M; readings are bit-identical to a scan of all objects.
         # (The sensing limits read every object's offset, so they keep the full scan.)
         self._grid = (CellGrid(layout.object_positions, self.world.arena_half, self._reach)
-                      if self._obs_type.local and self._limits is None else None)
+                      if all(t.local for t in self._obs_types.values()) and self._limits is None
+                      else None)
         self._anchor_positions = layout.object_positions[layout.anchor_ids]
         obs = self._observe()
         if self.render_mode == "human":
@@ -353,6 +382,14 @@ class LFMDREnv(gym.Env):
         prox = sensors.proximity_kernel(
             x, y, h, rc, q, w.arena_half, self._dirs, self.proximity_range, xy
         )
+        if self._fused:
+            readings = {k: t.observe(rel, d2, h, cand, rc, dc2, q) for k, t in self._obs_types.items()}
+            obs = {**readings, "proximity": prox.astype(np.float32)}
+            if self._limits is not None:
+                limited, obs["observed"] = self._limits.apply_all(readings, rel, d2, h)
+                obs.update(limited)
+            self._last_obs = obs
+            return obs
         obs = {
             self._key: self._obs_type.observe(rel, d2, h, cand, rc, dc2, q),
             "proximity": prox.astype(np.float32),

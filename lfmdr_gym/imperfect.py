@@ -22,6 +22,7 @@ import numpy as np
 
 from lfmdr_gym import sensors
 from lfmdr_gym.world import check_real
+from mappers.sensors import FUSED_SENSORS, SENSORS
 
 __all__ = ["LIMIT_DEFAULTS", "SensingLimits"]
 
@@ -54,7 +55,11 @@ class SensingLimits:
     """Turns one step's perfect reading into an imperfect sensor's (see the module docstring).
 
     Args:
-        sensor: ``"visibility"``, ``"bearing"`` or ``"range"``.
+        sensor: ``"visibility"``, ``"bearing"`` or ``"range"``, or a fused set of them
+            (``"range-bearing"``, ``"visibility-bearing"``): then one camera senses every sensor
+            of the set, so the field of view, range and line of sight give one ``observed`` for
+            all, and each sensor's own limits (noise, dropouts) apply to its reading only, drawn
+            independently (:meth:`apply_all`).
         n_objects: M.
         object_radius: r [m], for ``line_of_sight``.
         fov_deg: field of view in degrees, centred on the heading, in (0, 360]: object j is
@@ -83,6 +88,8 @@ class SensingLimits:
     def __init__(self, sensor: str, n_objects: int, object_radius: float, *,
                  range_high: float, **limits: Any) -> None:
         self.sensor = sensor
+        self.sensors = tuple(s for s in SENSORS if s in FUSED_SENSORS[sensor]) \
+            if sensor in FUSED_SENSORS else (sensor,)
         self.n_objects = n_objects
         self.r2 = object_radius * object_radius
         self.fov = check_real("fov_deg", limits["fov_deg"], low=0.0, low_open=True, high=360.0)
@@ -97,7 +104,7 @@ class SensingLimits:
             raise ValueError(f"line_of_sight must be True or False, got {los!r}")
         self.line_of_sight = bool(los)
         for name, for_sensors in _ONLY_FOR.items():
-            if limits[name] != LIMIT_DEFAULTS[name] and sensor not in for_sensors:
+            if limits[name] != LIMIT_DEFAULTS[name] and not set(self.sensors) & set(for_sensors):
                 raise ValueError(
                     f"{name} applies to the {' and '.join(for_sensors)} sensor(s), not to {sensor!r}"
                 )
@@ -146,18 +153,34 @@ class SensingLimits:
               heading: float) -> tuple[np.ndarray, np.ndarray]:
         """The imperfect reading (same shape and dtype as ``reading``) and ``observed`` (int8)."""
         seen = self.observed(rel, d2, heading)
+        out = self._perturb(self.sensor, reading)
+        out[~seen] = 0
+        return out, seen.astype(np.int8)
+
+    def apply_all(self, readings: dict[str, np.ndarray], rel: np.ndarray, d2: np.ndarray,
+                  heading: float) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        """:meth:`apply` for a fused set: every sensor's imperfect reading (its noise drawn after
+        the previous sensor's, in :data:`SENSORS` order) and the one ``observed`` they share."""
+        seen = self.observed(rel, d2, heading)
+        out = {}
+        for sensor in self.sensors:
+            out[sensor] = self._perturb(sensor, readings[sensor])
+            out[sensor][~seen] = 0
+        return out, seen.astype(np.int8)
+
+    def _perturb(self, sensor: str, reading: np.ndarray) -> np.ndarray:
+        """``sensor``'s reading with its noise or dropouts (a copy)."""
         out = reading.copy()
         m = self.n_objects
-        if self.sensor == "bearing" and self.bearing_noise > 0.0:
+        if sensor == "bearing" and self.bearing_noise > 0.0:
             theta = np.arctan2(out[:, 1], out[:, 0]) + self.rng.normal(0.0, self.bearing_noise, m)
             out = np.stack([np.cos(theta), np.sin(theta)], axis=1).astype(reading.dtype)
-        elif self.sensor == "range" and self.range_noise > 0.0:
+        elif sensor == "range" and self.range_noise > 0.0:
             noisy = out + self.rng.normal(0.0, self.range_noise, m)
             out = np.clip(noisy, 0.0, self.range_high).astype(reading.dtype)
-        elif self.sensor == "visibility" and (self.miss_rate > 0.0 or self.false_rate > 0.0):
+        elif sensor == "visibility" and (self.miss_rate > 0.0 or self.false_rate > 0.0):
             u = self.rng.random(m)
             visible = out == 1
             out[visible & (u < self.miss_rate)] = 0
             out[~visible & (u < self.false_rate)] = 1
-        out[~seen] = 0
-        return out, seen.astype(np.int8)
+        return out

@@ -19,25 +19,31 @@ import numpy as np
 
 from lfmdr_gym.compact import COMPACT_ABOVE_BYTES, CompactSteps
 from lfmdr_gym.history import History
-from mappers.sensors import COLUMNS_PER_STEP, SENSORS
+from mappers.sensors import COLUMNS_PER_STEP, FUSED_SENSORS, SENSORS
 
 __all__ = ["collect", "collect_vector"]
 
 
-def _sensor_key(observation: Any) -> str:
-    """The observation entry that holds the mapping sensor ("visibility", "bearing" or "range")."""
+def _sensor_keys(observation: Any) -> tuple[str, tuple[str, ...]]:
+    """The history's sensor name and the observation entries that hold it: one of
+    "visibility", "bearing" or "range", or a fused set of them (:data:`FUSED_SENSORS`) whose
+    entries are all recorded."""
     if not isinstance(observation, dict):
         raise ValueError(
             f"the env must return a dict observation holding one of {sorted(SENSORS)}, "
             f"got {type(observation).__name__} (a flattening wrapper cannot be recorded)"
         )
-    keys = [k for k in SENSORS if k in observation]
-    if len(keys) != 1:
+    keys = tuple(k for k in SENSORS if k in observation)
+    if len(keys) == 1:
+        return keys[0], keys
+    named = {v: k for k, v in FUSED_SENSORS.items()}
+    if frozenset(keys) not in named:
         raise ValueError(
-            f"the observation must hold exactly one sensor entry of {sorted(SENSORS)}, "
-            f"got keys {sorted(observation)}"
+            f"the observation must hold one sensor entry of {sorted(SENSORS)} or the entries of "
+            f"a fused set {dict((k, sorted(v)) for k, v in FUSED_SENSORS.items())}, got keys "
+            f"{sorted(observation)}"
         )
-    return keys[0]
+    return named[frozenset(keys)], keys
 
 
 def _json_safe(mapping: dict[str, Any] | None) -> dict[str, Any]:
@@ -141,14 +147,20 @@ def _check_episodes(n_episodes: int) -> int:
 
 
 class _Episode:
-    """What one episode's moves leave behind, move by move."""
+    """What one episode's moves leave behind, move by move: each sensor's reading (one for a
+    single sensor, several for a fused set: ``samples`` keyed by sensor), the env's "observed"
+    flags (shared by the sensors of a set), the poses and blocked moves."""
 
-    def __init__(self, n_steps: int, sample: np.ndarray, truth: dict[str, np.ndarray],
-                 masked: bool = False, values: Any = None) -> None:
-        self.values: Any = (np.empty((n_steps, *sample.shape), dtype=sample.dtype)
-                            if values is None else values)
+    def __init__(self, n_steps: int, samples: dict[str, np.ndarray], truth: dict[str, np.ndarray],
+                 masked: bool = False, compact: bool = False) -> None:
+        self.n_steps = n_steps
+        self.values: dict[str, Any] = {
+            key: (CompactSteps(n_steps, sample, key) if compact
+                  else np.empty((n_steps, *sample.shape), dtype=sample.dtype))
+            for key, sample in samples.items()}
+        m = next(iter(samples.values())).shape[0]
         # the env's "observed" flags (imperfect sensing), one row per move; None without them
-        self.observed = np.empty((n_steps, sample.shape[0]), dtype=bool) if masked else None
+        self.observed = np.empty((n_steps, m), dtype=bool) if masked else None
         self.poses = np.empty((n_steps, 3), dtype=np.float64)
         self.truth = truth
         self.count = 0
@@ -156,13 +168,14 @@ class _Episode:
 
     @property
     def full(self) -> bool:
-        return self.count >= len(self.values)
+        return self.count >= self.n_steps
 
-    def record(self, value: Any, pose: Any, blocked: Any, observed: Any = None) -> None:
+    def record(self, values: dict[str, Any], pose: Any, blocked: Any, observed: Any = None) -> None:
         """Store one move (moves past ``n_steps`` are not recorded)."""
         if self.full:
             return
-        self.values[self.count] = value
+        for key, buffer in self.values.items():
+            buffer[self.count] = values[key]
         if self.observed is not None:
             self.observed[self.count] = observed
         self.poses[self.count] = pose
@@ -170,10 +183,14 @@ class _Episode:
         self.count += 1
 
     def history(self, sensor: str, meta: dict[str, Any]) -> History:
-        matrix = (self.values.matrix(sensor) if isinstance(self.values, CompactSteps)
-                  else _steps_to_matrix(self.values, sensor))
-        mask = None if self.observed is None else _steps_to_mask(self.observed, sensor)
-        return History(sensor=sensor, matrix=matrix, mask=mask,
+        matrices, masks = {}, {}
+        for key, values in self.values.items():
+            matrices[key] = (values.matrix(key) if isinstance(values, CompactSteps)
+                             else _steps_to_matrix(values, key))
+            masks[key] = None if self.observed is None else _steps_to_mask(self.observed, key)
+        single = len(matrices) == 1
+        return History(sensor=sensor, matrix=matrices[sensor] if single else matrices,
+                       mask=(masks[sensor] if single else None if self.observed is None else masks),
                        robot_poses=self.poses, meta={**meta, "blocked_moves": int(self.blocked)},
                        **self.truth)
 
@@ -220,7 +237,8 @@ def collect(
 ) -> History:
     """Run one episode of ``n_steps`` moves and return what the robot sensed as a :class:`History`.
 
-    ``env`` is a Gymnasium env with a dict observation (one sensor entry plus, for
+    ``env`` is a Gymnasium env with a dict observation (one sensor entry, or the entries of a
+    fused set such as ``"range"`` and ``"bearing"``, which give a fused History, plus, for
     :class:`~lfmdr_gym.policies.RandomWalkPolicy`, ``"proximity"``) and the ground truth in
     ``info``, or an env id (made with ``make_kwargs`` and closed afterwards). ``policy`` is anything
     :func:`~lfmdr_gym.policies.as_policy` accepts; its ``reset(seed=...)`` is called with a seed
@@ -241,19 +259,18 @@ def collect(
         spec = getattr(env, "spec", None)
         _check_limit(n_steps, getattr(spec, "max_episode_steps", None), "the env's")
         obs, info = env.reset(seed=seed)
-        sensor = _sensor_key(obs)
+        sensor, keys = _sensor_keys(obs)
         _reset_policy(pol, seed)
-        sample = np.asarray(obs[sensor])
+        samples = {k: np.asarray(obs[k]) for k in keys}
         if compact is None:
-            compact = 8 * n_steps * sample.size > COMPACT_ABOVE_BYTES
+            compact = 8 * n_steps * sum(v.size for v in samples.values()) > COMPACT_ABOVE_BYTES
         elif not isinstance(compact, bool | np.bool_):
             raise ValueError(f"compact must be True, False or None, got {compact!r}")
-        episode = _Episode(n_steps, sample, _truth(info), "observed" in obs,
-                           CompactSteps(n_steps, sample, sensor) if compact else None)
+        episode = _Episode(n_steps, samples, _truth(info), "observed" in obs, bool(compact))
         for t in range(n_steps):
             action = _shaped_actions(pol(obs), env.action_space, None)
             obs, _, terminated, truncated, info = env.step(action)
-            episode.record(obs[sensor], info["robot_pose"], info.get("blocked", False),
+            episode.record(obs, info["robot_pose"], info.get("blocked", False),
                            obs.get("observed"))
             if (terminated or truncated) and t < n_steps - 1:
                 raise ValueError(
@@ -275,22 +292,25 @@ def _check_limit(n_steps: int, limit: int | None, whose: str) -> None:
 class _VectorRecorder:
     """Episodes of every sub-env of a vector env, filled as the sub-envs step and reset."""
 
-    def __init__(self, n_steps: int, n_episodes: int, sample: np.ndarray, info: dict,
+    def __init__(self, n_steps: int, n_episodes: int, samples: dict[str, np.ndarray], info: dict,
                  masked: bool) -> None:
         self.n_steps, self.n_episodes = n_steps, n_episodes
-        self.batch = len(sample)
+        self.batch = len(next(iter(samples.values())))
         self.masked = masked  # the sub-envs report "observed" (imperfect sensing)
-        self.sample = np.empty_like(sample[0])  # the shape and dtype of one sub-env's reading
-        self.episodes = [[_Episode(n_steps, sample[i], _truth(info, i), masked)]
+        # the shape and dtype of one sub-env's readings
+        self.sample = {k: np.empty_like(v[0]) for k, v in samples.items()}
+        self.episodes = [[_Episode(n_steps, {k: v[i] for k, v in samples.items()}, _truth(info, i),
+                                   masked)]
                          for i in range(self.batch)]
         self.starts = np.ones(self.batch, dtype=bool)  # episode_start flags for SB3-style policies
 
-    def record(self, rows: Any, values: np.ndarray, step_info: dict[str, Any],
+    def record(self, rows: Any, values: dict[str, np.ndarray], step_info: dict[str, Any],
                observed: np.ndarray | None = None) -> None:
         blocked = step_info.get("blocked")
         for i in rows:
             if len(self.episodes[i]) <= self.n_episodes:
-                self.episodes[i][-1].record(values[i], step_info["robot_pose"][i],
+                self.episodes[i][-1].record({k: v[i] for k, v in values.items()},
+                                            step_info["robot_pose"][i],
                                             False if blocked is None else blocked[i],
                                             None if observed is None else observed[i])
 
@@ -313,8 +333,8 @@ class _VectorRecorder:
                    or (len(eps) == self.n_episodes and eps[-1].full) for eps in self.episodes)
 
 
-def _vector_step(envs: Any, mode: Any, action: np.ndarray, sensor: str, rec: _VectorRecorder,
-                 pending: np.ndarray) -> tuple[Any, np.ndarray]:
+def _vector_step(envs: Any, mode: Any, action: np.ndarray, keys: tuple[str, ...],
+                 rec: _VectorRecorder, pending: np.ndarray) -> tuple[Any, np.ndarray]:
     """One step of every sub-env, recorded as the autoreset mode requires; returns the new
     observation and the NEXT_STEP rows whose next step is a reset."""
     from gymnasium.vector import AutoresetMode
@@ -323,17 +343,18 @@ def _vector_step(envs: Any, mode: Any, action: np.ndarray, sensor: str, rec: _Ve
     done = np.asarray(terminated) | np.asarray(truncated)
     seen = np.asarray(obs["observed"]) if rec.masked else None
     if mode == AutoresetMode.NEXT_STEP:  # the step after an end only resets: not a move
-        rec.record(np.flatnonzero(~pending), np.asarray(obs[sensor]), info, seen)
+        rec.record(np.flatnonzero(~pending), {k: np.asarray(obs[k]) for k in keys}, info, seen)
         rec.new_episode(np.flatnonzero(pending), info)
         return obs, done & ~pending
     if mode == AutoresetMode.SAME_STEP:  # the move's own observation is in final_obs
-        values = np.asarray(obs[sensor]).copy()
+        values = {k: np.asarray(obs[k]).copy() for k in keys}
         seen = None if seen is None else seen.copy()
         step_info = {k: np.array(v, copy=True) for k, v in info.items()
                      if k in ("robot_pose", "blocked")}
         ended = np.flatnonzero(done)
         for i in ended:
-            values[i] = info["final_obs"][i][sensor]
+            for k in keys:
+                values[k][i] = info["final_obs"][i][k]
             if seen is not None:
                 seen[i] = info["final_obs"][i]["observed"]
             for key in step_info:
@@ -341,7 +362,8 @@ def _vector_step(envs: Any, mode: Any, action: np.ndarray, sensor: str, rec: _Ve
         rec.record(range(rec.batch), values, step_info, seen)
         rec.new_episode(ended, info)
         return obs, pending
-    rec.record(range(rec.batch), np.asarray(obs[sensor]), info, seen)  # DISABLED: we reset ourselves
+    # DISABLED: we reset ourselves
+    rec.record(range(rec.batch), {k: np.asarray(obs[k]) for k in keys}, info, seen)
     if done.any():
         obs, reset_info = envs.reset(options={"reset_mask": done})
         rec.new_episode(np.flatnonzero(done), reset_info)
@@ -387,15 +409,16 @@ def collect_vector(
     _check_limit(n_steps, (getattr(spec, "kwargs", None) or {}).get(
         "max_episode_steps", getattr(spec, "max_episode_steps", None)), "the sub-envs'")
     obs, info = envs.reset(seed=seed)
-    sensor = _sensor_key(obs)
+    sensor, keys = _sensor_keys(obs)
     _reset_policy(pol, seed)
-    rec = _VectorRecorder(n_steps, n_episodes, np.asarray(obs[sensor]), info, "observed" in obs)
+    rec = _VectorRecorder(n_steps, n_episodes, {k: np.asarray(obs[k]) for k in keys}, info,
+                          "observed" in obs)
     pending = np.zeros(rec.batch, dtype=bool)  # NEXT_STEP: this sub-env's next step is a reset
     while not rec.finished():
         starts, rec.starts = rec.starts, np.zeros(rec.batch, dtype=bool)
         action = pol(obs, episode_start=starts) if isinstance(pol, PredictPolicy) else pol(obs)
         obs, pending = _vector_step(envs, mode, _shaped_actions(action, envs.single_action_space,
-                                                                rec.batch), sensor, rec, pending)
+                                                                rec.batch), keys, rec, pending)
     meta = {**_meta(spec, pol, seed, n_steps, sensor), "num_envs": rec.batch,
             "autoreset_mode": mode.value}
     histories = []

@@ -17,7 +17,11 @@ from lfmdr_gym import sensors
 from lfmdr_gym.env import LFMDREnv
 
 ENV_IDS = sorted(i for i in gym.registry if i.startswith("LFMDR-"))
-SENSOR_OF = {"LFMDR-Visibility-v0": "visibility", "LFMDR-Bearing-v0": "bearing", "LFMDR-Range-v0": "range"}
+SENSOR_OF = {"LFMDR-Visibility-v0": "visibility", "LFMDR-Bearing-v0": "bearing", "LFMDR-Range-v0": "range",
+             "LFMDR-RangeBearing-v0": "range-bearing", "LFMDR-VisibilityBearing-v0": "visibility-bearing",
+             "LFMDR-Camera-v0": "range-bearing"}
+KEYS_OF = {"visibility": {"visibility"}, "bearing": {"bearing"}, "range": {"range"},
+           "range-bearing": {"range", "bearing"}, "visibility-bearing": {"visibility", "bearing"}}
 
 
 def test_ids_registered_once():
@@ -60,8 +64,8 @@ def test_check_env_with_default_arguments(env_id):
 def test_spaces_dtypes_and_info(env_id):
     env = gym.make(env_id)
     obs, info = env.reset(seed=3)
-    key = SENSOR_OF[env_id]
-    assert set(obs) == {key, "proximity"}
+    observed = {"observed"} if env_id == "LFMDR-Camera-v0" else set()  # a preset with limits
+    assert set(obs) == KEYS_OF[SENSOR_OF[env_id]] | {"proximity"} | observed
     for _ in range(50):
         assert obs in env.observation_space
         for k, v in obs.items():

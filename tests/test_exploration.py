@@ -62,7 +62,7 @@ def test_every_policy_sees_observations_only(name, env_id):
     assert not _holds(policy, (gym.Env, GeometryOnly, lfmdr_gym.env.World))
     check_policy(policy, env, n_steps=30, seed=2)
     history = collect(env, policy, 40, seed=3)
-    assert history.matrix.shape[0] == env.unwrapped.world.n_objects
+    assert history.n_objects == env.unwrapped.world.n_objects
     env.close()
 
 
