@@ -141,6 +141,7 @@ class CameraModel:
     range_bias: float
     near: float
     range_noise_by_bin: tuple[tuple[float, float, int, float], ...]
+    per_run: tuple[tuple[str, float, float], ...] = ()
 
     def preset(self) -> dict[str, float]:
         """The env keywords of ``LFMDR-Camera-v0`` these figures give (rounded as printed)."""
@@ -162,6 +163,8 @@ class CameraModel:
             "modelled)",
             "range noise by range: " + "; ".join(
                 f"{lo:g}-{hi:g} m: {sd:.3f} m (n={n})" for lo, hi, n, sd in self.range_noise_by_bin),
+            "per run (bearing noise, range noise up to near): " + "; ".join(
+                f"{name}: {b:.2f} deg, {r:.3f} m" for name, b, r in self.per_run),
             "LFMDR-Camera-v0 keywords: " + ", ".join(f"{k}={v}" for k, v in self.preset().items()),
         ]
         return "\n".join(lines)
@@ -180,8 +183,12 @@ def measure_camera(run_dirs: Sequence[str | os.PathLike], *, near: float = NEAR)
         ranges.append(run.obs[:, 3])
         bearings.append(run.obs[:, 4])
     ranges, bearings = np.concatenate(ranges), np.concatenate(bearings)
-    res = image_residuals(run_dirs)
-    r, rr, rb = res["range"], res["range_residual"], res["bearing_residual"]
+    each = [image_residuals([d]) for d in run_dirs]  # each run's own weights, then pooled
+    r, rr, rb = (np.concatenate([e[k] for e in each])
+                 for k in ("range", "range_residual", "bearing_residual"))
+    per_run = tuple((d.name, float(np.degrees(_robust_sd(e["bearing_residual"]))),
+                     _robust_sd(e["range_residual"][e["range"] <= near]))
+                    for d, e in zip(run_dirs, each, strict=True))
     bins = []
     for lo, hi in zip(RANGE_BINS[:-1], RANGE_BINS[1:], strict=True):
         sel = (r > lo) & (r <= hi)
@@ -189,13 +196,14 @@ def measure_camera(run_dirs: Sequence[str | os.PathLike], *, near: float = NEAR)
             bins.append((lo, hi, int(sel.sum()), _robust_sd(rr[sel])))
     return CameraModel(
         runs=tuple(d.name for d in run_dirs), readings=int(ranges.size),
-        images_fitted=int(res["images"]), readings_fitted=int(r.size),
+        images_fitted=sum(int(e["images"]) for e in each), readings_fitted=int(r.size),
         fov_deg=float(2.0 * np.degrees(np.abs(bearings).max())),
         max_range=float(np.quantile(ranges, 0.99)), min_range=float(np.quantile(ranges, 0.01)),
         bearing_noise_deg=float(np.degrees(_robust_sd(rb))),
         bearing_bias_deg=float(np.degrees(np.median(rb))),
         range_noise=_robust_sd(rr[r <= near]), range_noise_all=_robust_sd(rr),
         range_bias=float(np.median(rr)), near=float(near), range_noise_by_bin=tuple(bins),
+        per_run=per_run,
     )
 
 
