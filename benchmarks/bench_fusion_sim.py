@@ -1,7 +1,7 @@
 """Fused sensing in simulation: each sensor alone and fused, non-anchor MPE and time per map.
 
     python benchmarks/bench_fusion_sim.py [--runs 25] [--steps 2000] [--seed0 9000]
-        [--sections camera60,camera360,vis-bearing]
+        [--sections camera60,camera360,camera-env,vis-bearing]
 
 Every run is one random walk in ``LFMDR-Bearing-v0`` (50 objects, 2.5 m arena, 4 corner
 anchors), seeds ``seed0, seed0 + 1, ...`` (fresh: never used to choose a setting). From that
@@ -12,6 +12,10 @@ walk's true poses and layout:
   (``range-quantile``, masked) — the conditions of a real robot's camera;
 * ``camera360``: a 360-degree view without range limit, 5 deg / 5 cm noise, fused vs range
   alone (``UNFOLD``) and bearing alone (``CAL-SMA``);
+* ``camera-env``: a walk of ``LFMDR-Camera-v0`` itself (the MRCLAM camera's field of view,
+  range limit and noise, line of sight on; :data:`lfmdr_gym.camera.CAMERA_PRESET`), its fused
+  history mapped as collected (``LOC-SMA``) and each of its parts alone (masked defaults:
+  ``range-quantile`` for range, ``covis-auto`` for bearing);
 * ``vis-bearing``: the walk's own bearing history and the visibility bits of the same poses
   (:func:`lfmdr_gym.sensors.visibility`, the env's defaults), each alone (``CAL-SMA``) and fused
   (``VB-SMA``); the ratio fused / better-alone per run.
@@ -97,6 +101,13 @@ def run_one(seed: int, steps: int, sections: list[str]) -> dict[str, tuple[float
         out["cam360 range-bearing"] = _score(history, fused)
         out["cam360 range"] = _score(history, fused["range"], sensor="range")
         out["cam360 bearing"] = _score(history, fused["bearing"], sensor="bearing")
+    if "camera-env" in sections:
+        env = gym.make("LFMDR-Camera-v0", max_episode_steps=steps)
+        cam = collect(env, RandomWalkPolicy.for_env(env, seed=seed), steps, seed=seed)
+        env.close()
+        out["camera-env range-bearing"] = _score(cam, cam)
+        out["camera-env range"] = _score(cam, cam.parts["range"])
+        out["camera-env bearing"] = _score(cam, cam.parts["bearing"])
     if "vis-bearing" in sections:
         vis = visibility_history(history, radius, visual_angle)
         out["visibility"] = _score(history, vis, sensor="visibility")
@@ -110,7 +121,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--runs", type=int, default=25)
     ap.add_argument("--steps", type=int, default=2000)
     ap.add_argument("--seed0", type=int, default=9000)
-    ap.add_argument("--sections", default="camera60,camera360,vis-bearing")
+    ap.add_argument("--sections", default="camera60,camera360,camera-env,vis-bearing")
     args = ap.parse_args(argv)
     sections = args.sections.split(",")
     rows = [run_one(args.seed0 + k, args.steps, sections) for k in range(args.runs)]
