@@ -156,3 +156,21 @@ def test_collect_vector_records_fused_envs():
     one = collect("LFMDR-Camera-v0", lambda obs: np.zeros(1, np.float32), 30, seed=4)
     np.testing.assert_array_equal(hs[0].matrix["range"], one.matrix["range"])
     np.testing.assert_array_equal(hs[0].mask["bearing"], one.mask["bearing"])
+
+
+def test_lfmdr_collect_and_map_a_fused_env(tmp_path, capsys):
+    from lfmdr_gym.cli import main
+
+    path = tmp_path / "rb.npz"
+    assert main(["collect", "--env", "LFMDR-RangeBearing-v0", "--steps", "200", "--env-kw",
+                 "fov_deg=90", "--env-kw", "range_noise=0.01", "--out", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "sensor='range-bearing'" in out and "observed entries: bearing" in out
+    assert main(["map", str(path), "--out", str(tmp_path / "map")]) == 0
+    out = capsys.readouterr().out
+    assert "LOC-SMA" in out and "MPE" in out
+    mpe = float(out.split("MPE ")[1].split()[0])
+    assert mpe < 0.1
+    assert main(["run", "--online", "--env", "LFMDR-Camera-v0", "--steps", "20",
+                 "--out", str(tmp_path / "live")]) == 2
+    assert "takes one sensor's histories" in capsys.readouterr().err

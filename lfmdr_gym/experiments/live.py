@@ -33,9 +33,16 @@ def online_episode(env_id: str, steps: int, *, seed: int | None = 0, policy: str
     ``mapped``) and the last :class:`mappers.Map`.
     """
     import mappers
+    from lfmdr_gym import ENV_IDS
     from lfmdr_gym.experiments.episodes import make_env
     from lfmdr_gym.policies import POLICIES, as_policy
     from lfmdr_gym.render import draw_map
+    from mappers.sensors import FUSED_SENSORS
+
+    if ENV_IDS.get(env_id) in FUSED_SENSORS:
+        raise ValueError(f"online mapping (mappers.OnlineMapper) takes one sensor's histories; "
+                         f"{env_id} observes {ENV_IDS[env_id]} (fused sensors): map its episode "
+                         "offline (lfmdr run without --online)")
 
     for name, value in (("steps", steps), ("every", every), ("frame_every", frame_every)):
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
