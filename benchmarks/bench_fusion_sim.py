@@ -18,7 +18,8 @@ walk's true poses and layout:
   ``range-quantile`` for range, ``covis-auto`` for bearing);
 * ``vis-bearing``: the walk's own bearing history and the visibility bits of the same poses
   (:func:`lfmdr_gym.sensors.visibility`, the env's defaults), each alone (``CAL-SMA``) and fused
-  (``VB-SMA``); the ratio fused / better-alone per run.
+  (``VB-SMA``, and VB-SMA without its blend with the bearing-only map, ``bearing_share=0``);
+  the ratio fused / better-alone per run, for both.
 
 Prints mean / median / max MPE [m] per column and the median wall-clock and CPU time per map
 [s] (on a busy machine the CPU time is the fairer figure: the mappers run on one thread).
@@ -73,12 +74,13 @@ def visibility_history(history, radius: float, visual_angle: float) -> np.ndarra
                      for pose in history.robot_poses], axis=1).astype(float)
 
 
-def _score(history, histories, method=None, mask=None, sensor=None) -> tuple[float, float, float]:
+def _score(history, histories, method=None, mask=None, sensor=None,
+           **params) -> tuple[float, float, float]:
     t, cpu = time.perf_counter(), time.process_time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         m = build_map(histories, history.anchor_ids, history.anchor_positions, method,
-                      mask=mask, sensor=sensor)
+                      mask=mask, sensor=sensor, **params)
     dt, dcpu = time.perf_counter() - t, time.process_time() - cpu
     exclude = sorted({*history.anchor_ids.tolist(), *m.unmapped})
     return mean_position_error(m.positions, history.object_positions, exclude=exclude), dt, dcpu
@@ -112,7 +114,9 @@ def run_one(seed: int, steps: int, sections: list[str]) -> dict[str, tuple[float
         vis = visibility_history(history, radius, visual_angle)
         out["visibility"] = _score(history, vis, sensor="visibility")
         out["bearing"] = _score(history, history.matrix, sensor="bearing")
-        out["visibility-bearing"] = _score(history, {"visibility": vis, "bearing": history.matrix})
+        both = {"visibility": vis, "bearing": history.matrix}
+        out["visibility-bearing"] = _score(history, both)
+        out["vis-bearing unblended"] = _score(history, both, bearing_share=0.0)
     return out
 
 
@@ -138,6 +142,9 @@ def main(argv: list[str] | None = None) -> None:
         fused = np.array([r["visibility-bearing"][0] for r in rows])
         print(f"visibility-bearing / better alone: mean of MPEs {fused.mean() / better.mean():.3f}, "
               f"per run median {np.median(ratio):.3f}, max {ratio.max():.3f}")
+        plain = np.array([r["vis-bearing unblended"][0] for r in rows])
+        print(f"unblended / better alone: mean of MPEs {plain.mean() / better.mean():.3f}, "
+              f"per run median {np.median(plain / better):.3f}, max {(plain / better).max():.3f}")
 
 
 if __name__ == "__main__":

@@ -148,3 +148,35 @@ def test_a_cluster_tied_to_one_anchor_is_not_placed_but_warned():
     assert set(range(9, 17)) <= set(m.unmapped)
     assert any("tied to 1 anchor" in w for w in m.warnings)
     np.testing.assert_allclose(m.positions[:9], P[:9], atol=1e-4)
+
+
+def test_vb_sma_blends_the_fused_map_with_the_bearing_only_map():
+    from mappers.calibrated import CalibratedSMACOF
+    from mappers.visibility_bearing import VisibilityBearingSMACOF
+
+    rng = np.random.default_rng(4)
+    P, anchors = grid_layout(5, 0.4, seed=4)
+    poses = np.column_stack([rng.uniform(-1, 1, (800, 2)), rng.uniform(-np.pi, np.pi, 800)])
+    rel = P[:, None] - poses[None, :, :2]
+    V = (np.hypot(rel[..., 0], rel[..., 1]) < 0.55).astype(float)
+    th = np.arctan2(rel[..., 1], rel[..., 0]) - poses[None, :, 2]
+    B = np.stack([np.cos(th), np.sin(th)], -1).reshape(len(P), -1)
+    X, fix = {"visibility": V, "bearing": B}, dict(anchor_ids=anchors, anchor_positions=P[anchors])
+    est = VisibilityBearingSMACOF(bearing_share=0.3, random_state=0).fit(X, **fix)
+    alone = CalibratedSMACOF(random_state=0).fit_transform(
+        B / np.linalg.norm(B, axis=1, keepdims=True), **fix)
+    np.testing.assert_allclose(est.bearing_embedding_, alone)
+    np.testing.assert_allclose(est.embedding_, 0.7 * est.fused_embedding_ + 0.3 * alone)
+    plain = VisibilityBearingSMACOF(bearing_share=0.0, random_state=0).fit(X, **fix)
+    assert plain.bearing_embedding_ is None
+    np.testing.assert_array_equal(plain.embedding_, est.fused_embedding_)
+    np.testing.assert_allclose(est.embedding_[anchors], P[anchors], atol=1e-9)  # both held fixed
+    m = build_map(X, anchors, P[anchors])
+    assert m.params["bearing_share"] == 0.3
+    np.testing.assert_allclose(m.positions, est.embedding_, atol=1e-9)
+    for bad in (1.0, -0.1):
+        with pytest.raises(ValueError, match="bearing_share"):
+            build_map(X, anchors, P[anchors], bearing_share=bad)
+    empty = {"visibility": V, "bearing": np.where(np.arange(len(P))[:, None] == 7, 0.0, B)}
+    with pytest.raises(ValueError, match="bearing-only map, which needs every object's bearing"):
+        build_map(empty, anchors, P[anchors])
