@@ -158,7 +158,8 @@ def _add_run(sub: Any) -> None:
         ),
     )
     p.add_argument("--env", default="LFMDR-Visibility-v0", metavar="ID",
-                   help="environment id (LFMDR-Visibility-v0, LFMDR-Bearing-v0, LFMDR-Range-v0)")
+                   help="environment id (LFMDR-Visibility-v0, LFMDR-Bearing-v0, LFMDR-Range-v0, "
+                        "LFMDR-RangeBearing-v0, LFMDR-VisibilityBearing-v0, LFMDR-Camera-v0)")
     p.add_argument("--steps", type=_positive_int, default=2000, help="episode length N")
     _add_method_options(p, "the default for the env's histories, as build_map chooses")
     p.add_argument("--seed", type=int, default=0, help="seed of layout, start pose and walk")
@@ -204,7 +205,9 @@ def _add_collect(sub: Any) -> None:
             "print a summary."
         ),
     )
-    p.add_argument("--env", default="LFMDR-Visibility-v0", metavar="ID", help="environment id")
+    p.add_argument("--env", default="LFMDR-Visibility-v0", metavar="ID",
+                   help="environment id (a fused one, e.g. LFMDR-RangeBearing-v0 or "
+                        "LFMDR-Camera-v0, records a fused history)")
     p.add_argument("--steps", type=_positive_int, default=2000, help="episode length N")
     p.add_argument("--seed", type=int, default=0, help="seed of layout, start pose and walk")
     _add_env_keywords(p, "--env-kw")

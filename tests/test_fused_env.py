@@ -174,3 +174,17 @@ def test_lfmdr_collect_and_map_a_fused_env(tmp_path, capsys):
     assert main(["run", "--online", "--env", "LFMDR-Camera-v0", "--steps", "20",
                  "--out", str(tmp_path / "live")]) == 2
     assert "takes one sensor's histories" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("env_id", ["LFMDR-Camera-v0", "LFMDR-VisibilityBearing-v0"])
+def test_compact_fused_histories_round_trip(tmp_path, env_id):
+    small = collect(env_id, RandomWalkPolicy(), 150, seed=2, compact=True)
+    dense = collect(env_id, RandomWalkPolicy(), 150, seed=2)
+    assert small.compact and not dense.compact
+    sparse_part = "range" if env_id == "LFMDR-Camera-v0" else "visibility"
+    assert small.parts[sparse_part].is_sparse  # each part stored in its own compact form
+    back = History.load(small.save(tmp_path / "c.npz"))
+    for s in small.sensors:
+        np.testing.assert_allclose(small.matrix[s], dense.matrix[s], atol=1e-6)  # float32
+        np.testing.assert_array_equal(back.matrix[s], small.matrix[s])
+    assert back.parts[sparse_part].is_sparse
