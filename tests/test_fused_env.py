@@ -188,3 +188,18 @@ def test_compact_fused_histories_round_trip(tmp_path, env_id):
         np.testing.assert_allclose(small.matrix[s], dense.matrix[s], atol=1e-6)  # float32
         np.testing.assert_array_equal(back.matrix[s], small.matrix[s])
     assert back.parts[sparse_part].is_sparse
+
+
+def test_mrclam_camera_example(tmp_path, capsys):
+    import runpy
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "examples" / "mrclam_camera.py"
+    out_file = tmp_path / "cam.npz"
+    history = runpy.run_path(str(script))["main"](["--steps", "600", "--out", str(out_file)])
+    out = capsys.readouterr().out
+    assert history.sensor == "range-bearing" and History.load(out_file).fused
+    mpe = {line.split(":")[0].strip(): float(line.split("MPE ")[1].split(" m")[0])
+           for line in out.splitlines() if "MPE" in line}
+    assert set(mpe) == {"range + bearing", "bearing", "range"}
+    assert mpe["range + bearing"] < min(mpe["range"], mpe["bearing"])  # fusing pays
