@@ -1,7 +1,7 @@
 """The MRCLAM robots' camera, measured from their logs: field of view, range limit and noise.
 
-    python -m lfmdr_gym.datasets.camera_model [RUN_DIR ...]   (default: the runs in
-        ../shared/data/mrclam, i.e. /work/shared/data/mrclam/MRCLAM_Dataset*)
+    python -m lfmdr_gym.datasets.camera_model [RUN_DIR ...]   (default: the runs
+        ../shared/data/mrclam/MRCLAM_Dataset* beside the project)
 
 The figures behind :data:`lfmdr_gym.camera.CAMERA_PRESET` (``LFMDR-Camera-v0``). The runs hold the
 landmarks' motion-capture ground truth but not the robots' poses, so the geometry a measurement is
@@ -208,7 +208,10 @@ def measure_camera(run_dirs: Sequence[str | os.PathLike], *, near: float = NEAR)
 
 
 def _default_runs() -> list[Path]:
-    for root in (Path.cwd() / "../shared/data/mrclam", Path("/work/shared/data/mrclam")):
+    """The runs in ``../shared/data/mrclam`` beside the project (or the working directory)."""
+    project = Path(__file__).resolve().parents[2]
+    for root in (project / ".." / "shared" / "data" / "mrclam",
+                 Path.cwd() / ".." / "shared" / "data" / "mrclam"):
         runs = sorted(root.glob("MRCLAM_Dataset*"))
         if runs:
             return runs
@@ -223,6 +226,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                     help="largest range [m] of the range-noise figure the preset takes")
     args = ap.parse_args(argv)
     runs = [Path(r) for r in args.runs] or _default_runs()
+    if not runs:
+        ap.error("no MRCLAM run directories given and none found in ../shared/data/mrclam")
     print(measure_camera(runs, near=args.near).report())
     return 0
 
