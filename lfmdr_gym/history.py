@@ -177,11 +177,11 @@ class History:
             raise ValueError(f"the sensors of a {self.sensor} history must hold the same objects "
                              f"and steps; (objects, steps) per sensor: {steps}")
         first = parts[names[0]]
-        self.__dict__["_parts"] = MappingProxyType(parts)
-        self.__dict__["_data"] = MappingProxyType({n: p.__dict__["_data"] for n, p in parts.items()})
+        # plain dicts inside (a History pickles: joblib, multiprocessing); read-only views outside
+        self.__dict__["_parts"] = parts
+        self.__dict__["_data"] = {n: p.__dict__["_data"] for n, p in parts.items()}
         mask = {n: p.mask for n, p in parts.items()}
-        object.__setattr__(self, "mask", None if all(v is None for v in mask.values())
-                           else MappingProxyType(mask))
+        object.__setattr__(self, "mask", None if all(v is None for v in mask.values()) else mask)
         for name in ("object_positions", "anchor_ids", "anchor_positions", "robot_poses", "meta",
                      "timeline"):
             object.__setattr__(self, name, getattr(first, name))
@@ -202,7 +202,8 @@ class History:
     def parts(self) -> Mapping[str, History] | None:
         """A fused history's single-sensor histories (sensor -> History, the same ground truth);
         None for a single-sensor history."""
-        return self.__dict__.get("_parts")
+        parts = self.__dict__.get("_parts")
+        return None if parts is None else MappingProxyType(parts)
 
     @property
     def columns_per_step(self) -> int:

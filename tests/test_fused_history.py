@@ -135,3 +135,14 @@ def test_lfmdr_map_on_a_fused_file(tmp_path, capsys):
     assert (tmp_path / "out" / "map.png").stat().st_size > 0
     assert main(["map", str(path), "--method", "VB-SMA", "--out", str(tmp_path / "o2")]) == 2
     assert "does not map" in capsys.readouterr().err
+
+
+def test_a_fused_history_pickles():
+    import pickle
+
+    h = _camera()
+    back = pickle.loads(pickle.dumps(h))
+    assert back.sensor == h.sensor and back.sensors == h.sensors
+    for s in h.sensors:
+        np.testing.assert_array_equal(back.matrix[s], h.matrix[s])
+        np.testing.assert_array_equal(back.mask[s], h.mask[s])
