@@ -110,7 +110,7 @@ def _sparse_inputs(X: Any, sensor: str | None, mask: Any) -> tuple[Any, str]:
     if not np.all(np.isfinite(X.data)):
         raise ValueError("histories contain NaN or inf (in observed entries)")
     if sensor is None:
-        sensor = "visibility" if np.all(X.data == 1.0) else infer_sensor(X.toarray())
+        sensor = infer_sensor(X)  # from the stored values: never densified
     return X, check_sensor(sensor)
 
 
