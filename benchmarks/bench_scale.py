@@ -64,15 +64,16 @@ def run_method(path: str, method: str) -> dict:
     )
 
     h = History.load(path)
-    _ = mappers.METHODS[method]  # load the registry (scikit-learn, cvxpy) before timing
+    label = None if method == "default" else method  # "default": build_map's own choice
+    _ = mappers.METHODS["CAL-SMA" if label is None else label]  # load the registry before timing
     base = _rss_mb()
     t0 = time.perf_counter()
     cpu0 = time.process_time()
     try:
-        m = mappers.build_map(h, h.anchor_ids, h.anchor_positions, method=method)
+        m = mappers.build_map(h, h.anchor_ids, h.anchor_positions, method=label)
     except ValueError as exc:
         return {"refused": str(exc)}
-    out = {"seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - cpu0,
+    out = {"method": m.method, "seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - cpu0,
            "peak_mb": _rss_mb(), "base_mb": base}
     ex = sorted({*h.anchor_ids.tolist(), *m.unmapped})
     out["mpe"] = mean_position_error(m.positions, h.object_positions, exclude=ex)
@@ -102,7 +103,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--full", action="store_true", help="also M = 10,000 (N = 400,000)")
     parser.add_argument("--sizes", type=int, nargs="*", default=None, help="values of M")
-    parser.add_argument("--methods", nargs="*", default=list(METHODS))
+    parser.add_argument("--methods", nargs="*", default=list(METHODS),
+                        help="method labels; 'default' = build_map's choice (method=None)")
     parser.add_argument("--sensor", choices=sorted(ENV_IDS), default="visibility")
     parser.add_argument("--max-range", type=float, default=None)
     parser.add_argument("--seed", type=int, default=101, help="episode seed (not tuned on)")
@@ -136,7 +138,8 @@ def main() -> None:
                 if "refused" in r:
                     print(f"         {method:<15} cannot run: {r['refused'][:150]}")
                     continue
-                print(f"         {method:<15} {r['seconds']:8.1f} s ({r['cpu_seconds']:.1f}) peak "
+                name = method if method != "default" else f"default ({r['method']})"
+                print(f"         {name:<15} {r['seconds']:8.1f} s ({r['cpu_seconds']:.1f}) peak "
                       f"{r['peak_mb']:7.0f} MB ({r['base_mb']:.0f})  MPE {r['mpe']:.4f} m  "
                       f"MOE {r['moe']:.3f} % ({r['moe_how']}, {r['moe_seconds']:.1f} s)")
             sys.stdout.flush()

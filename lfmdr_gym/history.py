@@ -28,7 +28,9 @@ from mappers.sensors import COLUMNS_PER_STEP, check_sensor, check_timeline
 
 FORMAT = "lfmdr-history"
 FORMAT_VERSION = 2
-READABLE_VERSIONS = (1, 2)  # 1: dense float64 matrix only; 2: also the compact (sparse) form
+SPARSE_MASK_VERSION = 3
+READABLE_VERSIONS = (1, 2, 3)  # 1: dense float64 matrix only; 2: also the compact (sparse) form;
+# 3: also a sparse mask (mask_indices, mask_indptr, mask_shape)
 _ZIP_MAGIC = b"PK\x03\x04"  # an .npz is a zip archive
 
 
@@ -54,7 +56,10 @@ class History:
             logged data without it. Never given to a mapper.
         mask: None when every entry was observed, else a (M, N * columns_per_step) bool array,
             True where the entry was observed (an env with imperfect sensing always gives one:
-            its ``"observed"`` flags, repeated over a step's columns).
+            its ``"observed"`` flags, repeated over a step's columns). May be given as a scipy
+            sparse bool matrix (a compact masked history), which is kept as given; reading
+            ``mask`` then builds the dense array within the memory budget
+            (:attr:`sparse_mask` always works).
         meta: JSON-serialisable facts about where the history came from (env id, seed, ...).
         timeline: None (one robot, one step per tick) or (N, 2) int64: the robot that took each
             step and the tick of its clock (logged data binned in time, several robots).
@@ -96,13 +101,9 @@ class History:
                 raise ValueError(f"robot_poses must have shape (N, 3), got {poses.shape}")
             if poses.shape[0] != d // columns:
                 raise ValueError(f"robot_poses has {poses.shape[0]} rows for {d // columns} steps")
-        mask = None
-        if self.mask is not None:
-            mask = np.asarray(self.mask)
-            if mask.dtype != np.bool_ or mask.shape != matrix.shape:
-                raise ValueError(
-                    f"mask must be a bool array of shape {matrix.shape}, got {mask.dtype} {mask.shape}"
-                )
+        mask = self.__dict__["_mask"]
+        if mask is not None:
+            mask = compact.check_mask(mask, matrix.shape)
         object.__setattr__(self, "matrix", matrix)
         self.__dict__.pop("_dense", None)
         object.__setattr__(self, "object_positions", obj)
@@ -110,6 +111,7 @@ class History:
         object.__setattr__(self, "anchor_positions", apos)
         object.__setattr__(self, "robot_poses", poses)
         object.__setattr__(self, "mask", mask)
+        self.__dict__.pop("_dense_mask", None)
         object.__setattr__(self, "meta", dict(self.meta))
         object.__setattr__(self, "timeline", check_timeline(self.timeline, d // columns))
 
@@ -147,6 +149,17 @@ class History:
         """The matrix as a float64 ``scipy.sparse.csr_array`` (zeros not stored): works at any size."""
         return compact.to_sparse(self.__dict__["_data"])
 
+    @property
+    def masked(self) -> bool:
+        """Whether the history has a mask (without building a dense one)."""
+        return self.__dict__["_mask"] is not None
+
+    @property
+    def sparse_mask(self):
+        """The mask as a bool ``scipy.sparse.csr_array`` (None without one): works at any size."""
+        mask = self.__dict__["_mask"]
+        return None if mask is None else compact.to_sparse_mask(mask)
+
     def dense(self, max_bytes: int | None = None) -> np.ndarray:
         """The (M, D) float64 matrix; for a compact history built once (cached) if it needs at most
         ``max_bytes`` (default :data:`lfmdr_gym.compact.MAX_DENSE_BYTES`), else DenseTooLargeError."""
@@ -170,7 +183,7 @@ class History:
             anchor_ids=self.anchor_ids,
             anchor_positions=self.anchor_positions,
             robot_poses=None if self.robot_poses is None else self.robot_poses[:n_steps],
-            mask=None if self.mask is None else self.mask[:, :cols],
+            mask=None if not self.masked else self.__dict__["_mask"][:, :cols],
             meta=self.meta,
             timeline=None if self.timeline is None else self.timeline[:n_steps],
         )
@@ -178,7 +191,7 @@ class History:
     def __repr__(self) -> str:
         return (
             f"History(sensor={self.sensor!r}, objects={self.n_objects}, steps={self.n_steps}, "
-            f"anchors={self.anchor_ids.tolist()}, masked={self.mask is not None})"
+            f"anchors={self.anchor_ids.tolist()}, masked={self.masked})"
         )
 
     # ------------------------------------------------------------------ files
@@ -190,7 +203,8 @@ class History:
         arrays: dict[str, np.ndarray] = {
             "format": np.array(FORMAT),
             # version 1 where it suffices, so that older lfmdr still reads today's dense files
-            "format_version": np.array(FORMAT_VERSION if self.compact else 1),
+            "format_version": np.array(SPARSE_MASK_VERSION if compact.is_sparse(
+                self.__dict__["_mask"]) else FORMAT_VERSION if self.compact else 1),
             "sensor": np.array(self.sensor),
             **compact.compact_fields(self.__dict__["_data"]),
             "object_positions": self.object_positions,
@@ -200,8 +214,8 @@ class History:
         }
         if self.robot_poses is not None:
             arrays["robot_poses"] = self.robot_poses
-        if self.mask is not None:
-            arrays["mask"] = self.mask
+        if self.masked:
+            arrays.update(compact.mask_fields(self.__dict__["_mask"]))
         if self.timeline is not None:
             arrays["timeline"] = self.timeline
         with atomic_write(path, "wb") as fh:
@@ -242,7 +256,7 @@ class History:
                 anchor_ids=fields["anchor_ids"],
                 anchor_positions=fields["anchor_positions"],
                 robot_poses=fields.get("robot_poses"),
-                mask=fields.get("mask"),
+                mask=compact.mask_from_fields(fields),
                 meta=json.loads(str(fields["meta"])),
                 timeline=fields.get("timeline"),
             )
@@ -250,6 +264,19 @@ class History:
             raise HistoryFileError(f"{path} lacks the field {exc.args[0]!r}") from exc
         except ValueError as exc:
             raise HistoryFileError(f"{path} holds an inconsistent history: {exc}") from exc
+
+
+def _mask_get(self: History) -> np.ndarray | None:
+    mask = self.__dict__["_mask"]
+    if mask is None or isinstance(mask, np.ndarray):
+        return mask
+    if "_dense_mask" not in self.__dict__:
+        self.__dict__["_dense_mask"] = compact.to_dense_mask(mask)
+    return self.__dict__["_dense_mask"]
+
+
+def _mask_set(self: History, value: Any) -> None:
+    self.__dict__["_mask"] = value
 
 
 def _matrix_get(self: History) -> np.ndarray:
@@ -264,6 +291,8 @@ def _matrix_set(self: History, value: Any) -> None:
 # is kept as stored; reading it goes through History.dense, so a compact history densifies only
 # on demand and refuses a matrix beyond the memory budget.
 History.matrix = property(_matrix_get, _matrix_set, doc="The (M, D) float64 matrix (History.dense).")
+# ``mask`` likewise: kept as stored (dense or sparse); reading it gives the dense bool array.
+History.mask = property(_mask_get, _mask_set, doc="The (M, D) bool mask or None (History.sparse_mask).")
 
 
 def __getattr__(name: str):

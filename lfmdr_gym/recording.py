@@ -148,7 +148,10 @@ class _Episode:
         self.values: Any = (np.empty((n_steps, *sample.shape), dtype=sample.dtype)
                             if values is None else values)
         # the env's "observed" flags (imperfect sensing), one row per move; None without them
-        self.observed = np.empty((n_steps, sample.shape[0]), dtype=bool) if masked else None
+        # (a masked CompactSteps keeps them itself, sparsely)
+        self.compact = isinstance(self.values, CompactSteps)
+        self.observed = (np.empty((n_steps, sample.shape[0]), dtype=bool)
+                         if masked and not self.compact else None)
         self.poses = np.empty((n_steps, 3), dtype=np.float64)
         self.truth = truth
         self.count = 0
@@ -162,7 +165,10 @@ class _Episode:
         """Store one move (moves past ``n_steps`` are not recorded)."""
         if self.full:
             return
-        self.values[self.count] = value
+        if self.compact and self.values.masked:
+            self.values.record(value, observed)
+        else:
+            self.values[self.count] = value
         if self.observed is not None:
             self.observed[self.count] = observed
         self.poses[self.count] = pose
@@ -170,9 +176,11 @@ class _Episode:
         self.count += 1
 
     def history(self, sensor: str, meta: dict[str, Any]) -> History:
-        matrix = (self.values.matrix(sensor) if isinstance(self.values, CompactSteps)
+        matrix = (self.values.matrix(sensor) if self.compact
                   else _steps_to_matrix(self.values, sensor))
         mask = None if self.observed is None else _steps_to_mask(self.observed, sensor)
+        if self.compact and self.values.masked:
+            mask = self.values.mask()
         return History(sensor=sensor, matrix=matrix, mask=mask,
                        robot_poses=self.poses, meta={**meta, "blocked_moves": int(self.blocked)},
                        **self.truth)
@@ -229,8 +237,9 @@ def collect(
     is not recorded. Raises ValueError if the episode ends before ``n_steps`` moves.
 
     ``compact``: record the history in compact form (visibility and range sparse, bearing
-    float32; see :mod:`lfmdr_gym.compact`); None (default) does so only when the float64 matrix
-    would exceed :data:`~lfmdr_gym.compact.COMPACT_ABOVE_BYTES`, so small histories are as before.
+    float32, a masked history's matrix and mask both sparse; see :mod:`lfmdr_gym.compact`);
+    None (default) does so only when the float64 matrix would exceed
+    :data:`~lfmdr_gym.compact.COMPACT_ABOVE_BYTES`, so small histories are as before.
     """
     from lfmdr_gym.policies import as_policy
 
@@ -248,8 +257,9 @@ def collect(
             compact = 8 * n_steps * sample.size > COMPACT_ABOVE_BYTES
         elif not isinstance(compact, bool | np.bool_):
             raise ValueError(f"compact must be True, False or None, got {compact!r}")
-        episode = _Episode(n_steps, sample, _truth(info), "observed" in obs,
-                           CompactSteps(n_steps, sample, sensor) if compact else None)
+        masked = "observed" in obs
+        episode = _Episode(n_steps, sample, _truth(info), masked,
+                           CompactSteps(n_steps, sample, sensor, masked) if compact else None)
         for t in range(n_steps):
             action = _shaped_actions(pol(obs), env.action_space, None)
             obs, _, terminated, truncated, info = env.step(action)
