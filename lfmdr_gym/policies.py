@@ -451,7 +451,9 @@ class RandomWalkPolicy:
             )
         prox = np.asarray(observation["proximity"], dtype=np.float64)
         if prox.ndim == 1:
-            return self._act_one(prox)
+            if type(self)._act is RandomWalkPolicy._act:  # (a subclass's own _act is kept)
+                return self._act_one(prox)
+            return self._act(prox[None, :])[0]
         if prox.ndim == 2:
             return self._act(prox)
         raise ValueError(f"observation['proximity'] must be 1-D or 2-D (batched), got {prox.shape}")
