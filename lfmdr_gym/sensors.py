@@ -252,7 +252,8 @@ def proximity_kernel(
     Speed notes (the env runs this every step on a few objects and 32 rays, where numpy's
     per-call overhead dominates): the min over the two wall axes is one binary ``minimum`` rather
     than an axis-1 reduction (3x dearer on an (n, 2) array), and rays that meet an object
-    behind the robot are set to inf by ``copyto(..., where=)`` rather than ``np.where``.
+    behind the robot are left out of the min by the reduction's ``where=`` rather than masked
+    with ``np.where`` first.
     """
     c, s = math.cos(heading), math.sin(heading)
     u = dirs @ np.array(((c, s), (-s, c)))  # rays rotated into the world frame, (n, 2)
@@ -272,15 +273,17 @@ def proximity_kernel(
             hit = np.full(dirs.shape[0], max_range)
         if rc.shape[0]:
             # Ray k meets circle j at t - sqrt(r^2 - (d^2 - t^2)), t = u_k . rc_j: NaN when the
-            # ray misses (negative root argument); behind the robot when t <= 0 (the robot's
-            # centre is outside every object, so both roots then lie behind it).
-            t = u @ rc.T
+            # ray misses (negative root argument, dropped by fmin); behind the robot when t <= 0
+            # (the robot's centre is outside every object, so both roots then lie behind it:
+            # left out of the min). Laid out (objects, rays), so that the min over objects runs
+            # along the outer axis (twice as fast as along the inner one); rc @ u.T holds the
+            # same dot products as u @ rc.T.
+            t = rc @ u.T
             entry = t * t
-            entry -= q  # == t^2 + (r^2 - d^2), bit for bit (IEEE a - b is a + (-b))
+            entry -= q[:, None]  # == t^2 + (r^2 - d^2), bit for bit (IEEE a - b is a + (-b))
             np.sqrt(entry, out=entry)
             np.subtract(t, entry, out=entry)
-            np.copyto(entry, np.inf, where=t <= 0.0)
-            np.fmin(hit, np.fmin.reduce(entry, axis=1), out=hit)
+            np.fmin(hit, np.fmin.reduce(entry, axis=0, where=t > 0.0, initial=np.inf), out=hit)
     return hit
 
 
