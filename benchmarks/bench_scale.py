@@ -10,7 +10,11 @@ prints its reason; one that runs past ``--timeout`` is reported as such.
 
     PYTHONPATH=. python benchmarks/bench_scale.py                  # M = 50, 200, 1000
     PYTHONPATH=. python benchmarks/bench_scale.py --full           # and M = 10,000 (~5 CPU-min)
-    PYTHONPATH=. python benchmarks/bench_scale.py --sensor bearing --max-range 1.5
+    PYTHONPATH=. python benchmarks/bench_scale.py --sensor bearing --max-range 1.5  # masked
+
+With ``--max-range`` (a sensing limit of issue #11) the histories are masked and recorded
+sparse at M = 1,000 (the observed entries and the mask), and the methods are those of
+:data:`MASKED_METHODS`.
 """
 
 from __future__ import annotations
@@ -27,6 +31,9 @@ from pathlib import Path
 
 STEPS = {50: 2000, 200: 8000, 1000: 20000, 10000: 400000}
 METHODS = ("CAL-SMA-SPARSE", "CAL-SMA", "SMA(WGT)", "ISOMAP", "LEM")
+MASKED_METHODS = ("default", "covis-sparse", "covis-auto")
+"""With ``--max-range`` the histories are masked: build_map's default (covis-auto up to 500
+objects, covis-sparse above), the sparse path and the dense masked default."""
 ENV_IDS = {"visibility": "LFMDR-Visibility-v0", "bearing": "LFMDR-Bearing-v0"}
 
 
@@ -103,7 +110,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--full", action="store_true", help="also M = 10,000 (N = 400,000)")
     parser.add_argument("--sizes", type=int, nargs="*", default=None, help="values of M")
-    parser.add_argument("--methods", nargs="*", default=list(METHODS),
+    parser.add_argument("--methods", nargs="*", default=None,
                         help="method labels; 'default' = build_map's choice (method=None)")
     parser.add_argument("--sensor", choices=sorted(ENV_IDS), default="visibility")
     parser.add_argument("--max-range", type=float, default=None)
@@ -121,6 +128,8 @@ def main() -> None:
         print(json.dumps(out))
         return
     sizes = args.sizes or ([50, 200, 1000, 10000] if args.full else [50, 200, 1000])
+    if args.methods is None:
+        args.methods = list(MASKED_METHODS if args.max_range is not None else METHODS)
     print(f"{args.sensor} histories, 8 % random anchors, seed {args.seed}; wall s (CPU s), peak RSS MB "
           f"(import baseline)")
     with tempfile.TemporaryDirectory() as tmp:

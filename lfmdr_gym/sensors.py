@@ -119,8 +119,12 @@ def visibility_kernel(
     if tk.size == 0:
         return out
     if occlusion and rc.shape[0] > 1:
-        rt = rc.take(tk, axis=0)  # take: the same rows as rc[tk], at a fraction of the overhead
-        dt2 = dc2.take(tk)
+        # Usually every candidate is a target (the candidates' reach exceeds d_vis by a sliver):
+        # then tk is arange(K) and dc2 serves as it is. (rt must not be rc itself: numpy computes
+        # rc @ rc.T with BLAS syrk, whose rounding differs from gemm's in the last bit.)
+        every = tk.size == rc.shape[0]
+        rt = rc.copy() if every else rc.take(tk, axis=0)  # take: as rc[tk], cheaper
+        dt2 = dc2 if every else dc2.take(tk)
         # For target j (line of sight rt_j, length d_j) and object k, p = rc_k . rt_j = t d_j
         # where t is the position of k's foot along the line of sight, and the perpendicular h
         # from k's centre obeys h^2 d_j^2 = d_k^2 d_j^2 - p^2. So k blocks j (0 <= t <= d_j and
@@ -129,7 +133,11 @@ def visibility_kernel(
         blk = p * p > q[:, None] * dt2
         blk &= p >= 0.0
         blk &= p <= dt2
-        blk[tk, _arange(tk.size)] = False  # a target does not hide itself
+        # a target does not hide itself (row tk[j], column j; the diagonal when every)
+        if every:
+            blk.reshape(-1)[::tk.size + 1] = False
+        else:
+            blk[tk, _arange(tk.size)] = False
         tk = tk[~np.logical_or.reduce(blk, axis=0)]  # == ~blk.any(axis=0), minus its wrapper
     out[cand.take(tk)] = 1
     return out
