@@ -260,8 +260,9 @@ def collect(
         masked = "observed" in obs
         episode = _Episode(n_steps, sample, _truth(info), masked,
                            CompactSteps(n_steps, sample, sensor, masked) if compact else None)
+        space = env.action_space  # (read once: through each wrapper, it is a chain of lookups)
         for t in range(n_steps):
-            action = _shaped_actions(pol(obs), env.action_space, None)
+            action = _shaped_actions(pol(obs), space, None)
             obs, _, terminated, truncated, info = env.step(action)
             episode.record(obs[sensor], info["robot_pose"], info.get("blocked", False),
                            obs.get("observed"))
