@@ -4,9 +4,9 @@ The world at the paper's density (arena side 2.5 sqrt(M / 50) m), 8 % of the obj
 anchors (at least 4), the random-walk agent, the visibility sensor (or ``--sensor bearing``).
 Steps N per M follow the issue's figures: 2,000 at M = 50 (the paper), then 8,000, 20,000
 and, with ``--full``, 400,000 at M = 10,000 (the paper's path length per square metre). Each
-case runs in its own subprocess, so its peak resident memory (``resource.getrusage``, ru_maxrss) is its own; the
-import baseline (the RSS before the work) is printed beside it. A method that refuses a size
-prints its reason; one that runs past ``--timeout`` is reported as such.
+case runs in its own subprocess, so its peak resident memory (``resource.getrusage``,
+ru_maxrss) is its own; the import baseline (the RSS before the work) is printed beside it. A
+method that refuses a size prints its reason; one that runs past ``--timeout`` is reported as such.
 
     PYTHONPATH=. python benchmarks/bench_scale.py                  # M = 50, 200, 1000
     PYTHONPATH=. python benchmarks/bench_scale.py --full           # and M = 10,000 (~5 CPU-min)
