@@ -23,10 +23,6 @@ def limited():
     return dense, small
 
 
-def _pairs_of(full: np.ndarray, i, j):
-    return full[i, j]
-
-
 @pytest.mark.parametrize("sensor", ["bearing", "visibility"])
 def test_sparse_coefficient_equals_the_dense_one(limited, sensor):
     dense, small = limited
