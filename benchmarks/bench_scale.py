@@ -1,16 +1,20 @@
 """Time and peak memory of collecting and of mapping against the number of objects M.
 
 The world at the paper's density (arena side 2.5 sqrt(M / 50) m), 8 % of the objects as random
-anchors (at least 4), the random-walk agent, the visibility sensor. Steps N per M follow the
-issue's figures: 2,000 at M = 50 (the paper), then 8,000, 20,000 and, with ``--full``, 400,000
-at M = 10,000 (the paper's path length per square metre). Each case runs in its own
-subprocess, so its peak resident memory (``resource.getrusage``, ru_maxrss) is its own; the
-import baseline (the RSS before the work) is printed beside it. A method that refuses a size
-prints its reason; one that runs past ``--timeout`` is reported as such.
+anchors (at least 4), the random-walk agent, the visibility sensor (or ``--sensor bearing``).
+Steps N per M follow the issue's figures: 2,000 at M = 50 (the paper), then 8,000, 20,000
+and, with ``--full``, 400,000 at M = 10,000 (the paper's path length per square metre). Each
+case runs in its own subprocess, so its peak resident memory (``resource.getrusage``,
+ru_maxrss) is its own; the import baseline (the RSS before the work) is printed beside it. A
+method that refuses a size prints its reason; one that runs past ``--timeout`` is reported as such.
 
     PYTHONPATH=. python benchmarks/bench_scale.py                  # M = 50, 200, 1000
     PYTHONPATH=. python benchmarks/bench_scale.py --full           # and M = 10,000 (~5 CPU-min)
-    PYTHONPATH=. python benchmarks/bench_scale.py --sensor bearing --max-range 1.5
+    PYTHONPATH=. python benchmarks/bench_scale.py --sensor bearing --max-range 1.5  # masked
+
+With ``--max-range`` (a sensing limit of issue #11) the histories are masked and recorded
+sparse at M = 1,000 (the observed entries and the mask), and the methods are those of
+:data:`MASKED_METHODS`.
 """
 
 from __future__ import annotations
@@ -27,6 +31,9 @@ from pathlib import Path
 
 STEPS = {50: 2000, 200: 8000, 1000: 20000, 10000: 400000}
 METHODS = ("CAL-SMA-SPARSE", "CAL-SMA", "SMA(WGT)", "ISOMAP", "LEM")
+MASKED_METHODS = ("default", "covis-sparse", "covis-auto")
+"""With ``--max-range`` the histories are masked: build_map's default (covis-auto up to 500
+objects, covis-sparse above), the sparse path and the dense masked default."""
 ENV_IDS = {"visibility": "LFMDR-Visibility-v0", "bearing": "LFMDR-Bearing-v0"}
 
 
@@ -64,15 +71,16 @@ def run_method(path: str, method: str) -> dict:
     )
 
     h = History.load(path)
-    _ = mappers.METHODS[method]  # load the registry (scikit-learn, cvxpy) before timing
+    label = None if method == "default" else method  # "default": build_map's own choice
+    _ = mappers.METHODS["CAL-SMA" if label is None else label]  # load the registry before timing
     base = _rss_mb()
     t0 = time.perf_counter()
     cpu0 = time.process_time()
     try:
-        m = mappers.build_map(h, h.anchor_ids, h.anchor_positions, method=method)
+        m = mappers.build_map(h, h.anchor_ids, h.anchor_positions, method=label)
     except ValueError as exc:
         return {"refused": str(exc)}
-    out = {"seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - cpu0,
+    out = {"method": m.method, "seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - cpu0,
            "peak_mb": _rss_mb(), "base_mb": base}
     ex = sorted({*h.anchor_ids.tolist(), *m.unmapped})
     out["mpe"] = mean_position_error(m.positions, h.object_positions, exclude=ex)
@@ -102,7 +110,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--full", action="store_true", help="also M = 10,000 (N = 400,000)")
     parser.add_argument("--sizes", type=int, nargs="*", default=None, help="values of M")
-    parser.add_argument("--methods", nargs="*", default=list(METHODS))
+    parser.add_argument("--methods", nargs="*", default=None,
+                        help="method labels; 'default' = build_map's choice (method=None)")
     parser.add_argument("--sensor", choices=sorted(ENV_IDS), default="visibility")
     parser.add_argument("--max-range", type=float, default=None)
     parser.add_argument("--seed", type=int, default=101, help="episode seed (not tuned on)")
@@ -119,6 +128,8 @@ def main() -> None:
         print(json.dumps(out))
         return
     sizes = args.sizes or ([50, 200, 1000, 10000] if args.full else [50, 200, 1000])
+    if args.methods is None:
+        args.methods = list(MASKED_METHODS if args.max_range is not None else METHODS)
     print(f"{args.sensor} histories, 8 % random anchors, seed {args.seed}; wall s (CPU s), peak RSS MB "
           f"(import baseline)")
     with tempfile.TemporaryDirectory() as tmp:
@@ -136,7 +147,8 @@ def main() -> None:
                 if "refused" in r:
                     print(f"         {method:<15} cannot run: {r['refused'][:150]}")
                     continue
-                print(f"         {method:<15} {r['seconds']:8.1f} s ({r['cpu_seconds']:.1f}) peak "
+                name = method if method != "default" else f"default ({r['method']})"
+                print(f"         {name:<15} {r['seconds']:8.1f} s ({r['cpu_seconds']:.1f}) peak "
                       f"{r['peak_mb']:7.0f} MB ({r['base_mb']:.0f})  MPE {r['mpe']:.4f} m  "
                       f"MOE {r['moe']:.3f} % ({r['moe_how']}, {r['moe_seconds']:.1f} s)")
             sys.stdout.flush()

@@ -86,6 +86,62 @@ def to_sparse(data: Any) -> sp.csr_array:
     return sp.csr_array(np.asarray(data, dtype=np.float64))
 
 
+def check_mask(mask: Any, shape: tuple[int, ...]) -> Any:
+    """A history's mask as stored: a bool ndarray, or a bool csr_array with sorted indices."""
+    if sp.issparse(mask):
+        out = sp.csr_array(mask)
+        if out.dtype != np.bool_ or out.shape != tuple(shape):
+            raise ValueError(f"mask must be a bool matrix of shape {tuple(shape)}, got sparse "
+                             f"{out.dtype} {out.shape}")
+        out.sum_duplicates()
+        out.sort_indices()
+        return out
+    arr = np.asarray(mask)
+    if arr.dtype != np.bool_ or arr.shape != tuple(shape):
+        raise ValueError(f"mask must be a bool array of shape {tuple(shape)}, got {arr.dtype} {arr.shape}")
+    return arr
+
+
+def to_dense_mask(mask: Any, max_bytes: int | None = None) -> np.ndarray:
+    """The (M, D) bool array of a (sparse) mask; DenseTooLargeError beyond ``max_bytes``."""
+    if isinstance(mask, np.ndarray):
+        return mask
+    budget = MAX_DENSE_BYTES if max_bytes is None else int(max_bytes)
+    need = int(np.prod(mask.shape, dtype=np.int64))
+    if need > budget:
+        raise DenseTooLargeError(
+            f"a dense bool mask of shape {mask.shape} needs {need / 2**30:.1f} GiB, above the "
+            f"budget of {budget / 2**30:.1f} GiB; use History.sparse_mask"
+        )
+    return mask.toarray()
+
+
+def to_sparse_mask(mask: Any) -> sp.csr_array:
+    """A mask as a bool ``csr_array`` (False not stored)."""
+    out = sp.csr_array(mask if sp.issparse(mask) else np.asarray(mask, dtype=bool), dtype=bool)
+    out.eliminate_zeros()
+    return out
+
+
+def mask_fields(mask: Any) -> dict[str, np.ndarray]:
+    """The arrays a history file stores for a mask (``mask`` for a dense one; a sparse one as
+    its structure, every stored value being True)."""
+    if not sp.issparse(mask):
+        return {"mask": np.asarray(mask)}
+    mask = to_sparse_mask(mask)
+    return {"mask_indices": mask.indices, "mask_indptr": mask.indptr,
+            "mask_shape": np.array(mask.shape, dtype=np.int64)}
+
+
+def mask_from_fields(fields: dict[str, np.ndarray]) -> Any:
+    """The stored mask from a file's arrays (either form), or None."""
+    if "mask_shape" in fields:
+        indices = fields["mask_indices"]
+        return sp.csr_array((np.ones(indices.size, bool), indices, fields["mask_indptr"]),
+                            shape=tuple(int(v) for v in fields["mask_shape"]))
+    return fields.get("mask")
+
+
 def compact_fields(data: Any) -> dict[str, np.ndarray]:
     """The arrays a history file stores for ``data`` (``matrix`` for a dense one)."""
     if not sp.issparse(data):
@@ -114,23 +170,67 @@ class CompactSteps:
     Visibility keeps, per step, the ids of the objects seen and their readings; bearing and range
     keep a float32 buffer (range becomes sparse at the end when most readings are 0). Assigned
     step by step (``steps[t] = reading``) like the (N, M, ...) buffer it replaces.
+
+    ``masked=True`` (an env with imperfect sensing): each step is recorded with its ``observed``
+    flags (:meth:`record`), and every sensor keeps only the observed objects' ids and readings, so
+    :meth:`matrix` and :meth:`mask` are both sparse (a limited range observes a few objects a step).
     """
 
-    def __init__(self, n_steps: int, sample: np.ndarray, sensor: str) -> None:
-        self.n_steps, self.sensor = n_steps, sensor
+    def __init__(self, n_steps: int, sample: np.ndarray, sensor: str, masked: bool = False) -> None:
+        self.n_steps, self.sensor, self.masked = n_steps, sensor, bool(masked)
         self.shape = sample.shape
         self.dtype = sample.dtype if sample.dtype in (np.int8, np.bool_, np.float32) else np.float64
-        if sensor == "visibility":
+        if sensor == "visibility" or self.masked:
             self._ids: list[np.ndarray] = []
             self._vals: list[np.ndarray] = []
         else:
             self._buf = np.empty((n_steps, *sample.shape), dtype=np.float32)
+        if sensor != "visibility":
+            self.dtype = np.float32
         self._count = 0
+
+    def record(self, value: Any, observed: Any) -> None:
+        """Store the next step of a masked episode: the reading and its ``observed`` flags (M,)."""
+        if not self.masked:
+            raise ValueError("record() is for masked episodes; assign steps[t] = reading instead")
+        v = np.asarray(value)
+        seen = np.asarray(observed)
+        if v.shape != self.shape or seen.shape != self.shape[:1]:
+            raise ValueError(f"a reading must have shape {self.shape} and its observed flags "
+                             f"{self.shape[:1]}, got {v.shape} and {seen.shape}")
+        ids = seen.nonzero()[0]
+        self._ids.append(ids)
+        self._vals.append(v.take(ids, axis=0).astype(self.dtype, copy=False))
+        self._count += 1
+
+    def _by_step(self, values: list[np.ndarray]) -> sp.csr_array:
+        """The (M, N * columns) csr matrix of per-step (ids, values) lists, columns interleaved."""
+        n, m = self._count, self.shape[0]
+        c = int(np.prod(self.shape[1:], dtype=int))
+        counts = np.fromiter((ids.size for ids in self._ids), dtype=np.int64, count=n)
+        ids = np.concatenate(self._ids) if n else np.zeros(0, np.int64)
+        data = (np.concatenate([v.reshape(-1, c) for v in values]) if n
+                else np.zeros((0, c), self.dtype))
+        steps = np.repeat(np.arange(n, dtype=np.int64), counts)
+        rows = np.repeat(ids, c)
+        cols = (steps[:, None] * c + np.arange(c)).ravel()
+        out = sp.coo_array((data.ravel(), (rows, cols)), shape=(m, n * c)).tocsr()
+        out.sort_indices()
+        return out
+
+    def mask(self) -> sp.csr_array:
+        """The (M, N * columns) bool mask of a masked episode: True on each observed object's
+        columns of its steps (a sparse form of ``collect``'s dense mask)."""
+        if not self.masked:
+            raise ValueError("only a masked episode has a mask")
+        return self._by_step([np.ones((ids.size, *self.shape[1:]), bool) for ids in self._ids])
 
     def __len__(self) -> int:
         return self.n_steps
 
     def __setitem__(self, t: int, value: Any) -> None:
+        if self.masked:
+            raise ValueError("a masked episode is recorded with record(value, observed)")
         if t != self._count:
             raise IndexError(f"steps are recorded in order: expected step {self._count}, got {t}")
         v = np.asarray(value)
@@ -148,6 +248,10 @@ class CompactSteps:
         """The recorded steps as the compact (M, N * columns) matrix a History stores."""
         n, m = self._count, self.shape[0]
         per_step = int(np.prod(self.shape[1:], dtype=int))
+        if self.masked:  # the observed readings; unobserved entries are 0, as collect zeroes them
+            out = self._by_step(self._vals)
+            out.eliminate_zeros()
+            return out
         if sensor == "visibility":
             if per_step != 1:
                 raise ValueError(f"a visibility observation must give 1 value per object, "

@@ -372,8 +372,8 @@ class LFMDREnv(gym.Env):
             cand = (d2 < self._reach2).nonzero()[0]
             rc, dc2 = rel.take(cand, axis=0), d2.take(cand)  # take: as rel[cand], cheaper
         else:  # the same rows, in the same (ascending) order, from the nearby block alone
-            near = self._grid.near(x, y)
-            rel = w.object_positions.take(near, axis=0) - xy
+            near, points = self._grid.near_points(x, y)
+            rel = points - xy
             sq = rel * rel
             d2 = sq[:, 0] + sq[:, 1]
             sel = (d2 < self._reach2).nonzero()[0]

@@ -50,6 +50,9 @@ class CellGrid:
                          for jx in range(max(ix - 1, 0), min(ix + 2, n))]
                 block = np.sort(np.concatenate(parts)) if parts else empty
                 self._blocks.append(block.astype(np.int64, copy=False))
+        # each block's points too (points[block]), so a query needs no gather
+        self._block_points = [np.ascontiguousarray(points[b], dtype=np.float64)
+                              for b in self._blocks]
 
     def _cells(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         last = self.n_cells - 1
@@ -57,12 +60,20 @@ class CellGrid:
         cy = np.clip(((y + self.half) * self.inv_cell).astype(np.int64), 0, last)
         return cx, cy
 
-    def near(self, x: float, y: float) -> np.ndarray:
-        """Ascending ids of the points in the 3 x 3 block of cells around ``(x, y)`` (read-only)."""
+    def _block(self, x: float, y: float) -> int:
         last = self.n_cells - 1
         ix = min(max(int((x + self.half) * self.inv_cell), 0), last)
         iy = min(max(int((y + self.half) * self.inv_cell), 0), last)
-        return self._blocks[iy * self.n_cells + ix]
+        return iy * self.n_cells + ix
+
+    def near(self, x: float, y: float) -> np.ndarray:
+        """Ascending ids of the points in the 3 x 3 block of cells around ``(x, y)`` (read-only)."""
+        return self._blocks[self._block(x, y)]
+
+    def near_points(self, x: float, y: float) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`near` and those points' coordinates (K, 2), both kept by the grid: read-only."""
+        b = self._block(x, y)
+        return self._blocks[b], self._block_points[b]
 
 
 def sample_separated(

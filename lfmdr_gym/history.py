@@ -42,8 +42,9 @@ from mappers.sensors import (
 FORMAT = "lfmdr-history"
 FORMAT_VERSION = 3
 # 1: dense float64 matrix only; 2: also the compact (sparse) form; 3: also fused histories (one
-# matrix per sensor, its fields named "<sensor>.<field>"). A file is written with the lowest
-# version that holds it, so older lfmdr still reads what it can.
+# matrix per sensor, its fields named "<sensor>.<field>") and sparse masks (mask_indices,
+# mask_indptr, mask_shape). A file is written with the lowest version that holds it, so older
+# lfmdr still reads what it can.
 READABLE_VERSIONS = (1, 2, 3)
 _ZIP_MAGIC = b"PK\x03\x04"  # an .npz is a zip archive
 
@@ -74,7 +75,10 @@ class History:
             logged data without it. Never given to a mapper.
         mask: None when every entry was observed, else a (M, N * columns_per_step) bool array,
             True where the entry was observed (an env with imperfect sensing always gives one:
-            its ``"observed"`` flags, repeated over a step's columns).
+            its ``"observed"`` flags, repeated over a step's columns). May be given as a scipy
+            sparse bool matrix (a compact masked history), which is kept as given; reading
+            ``mask`` then builds the dense array within the memory budget
+            (:attr:`sparse_mask` always works).
         meta: JSON-serialisable facts about where the history came from (env id, seed, ...).
         timeline: None (one robot, one step per tick) or (N, 2) int64: the robot that took each
             step and the tick of its clock (logged data binned in time, several robots).
@@ -124,13 +128,12 @@ class History:
                 raise ValueError(f"robot_poses must have shape (N, 3), got {poses.shape}")
             if poses.shape[0] != d // columns:
                 raise ValueError(f"robot_poses has {poses.shape[0]} rows for {d // columns} steps")
-        mask = None
-        if self.mask is not None:
-            mask = np.asarray(self.mask)
-            if mask.dtype != np.bool_ or mask.shape != matrix.shape:
-                raise ValueError(
-                    f"mask must be a bool array of shape {matrix.shape}, got {mask.dtype} {mask.shape}"
-                )
+        mask = self.__dict__["_mask"]
+        if isinstance(mask, Mapping):
+            raise ValueError(f"a mapping sensor -> mask belongs to a fused history; a "
+                             f"{self.sensor} history takes one mask or None")
+        if mask is not None:
+            mask = compact.check_mask(mask, matrix.shape)
         object.__setattr__(self, "matrix", matrix)
         self.__dict__.pop("_dense", None)
         object.__setattr__(self, "object_positions", obj)
@@ -138,6 +141,7 @@ class History:
         object.__setattr__(self, "anchor_positions", apos)
         object.__setattr__(self, "robot_poses", poses)
         object.__setattr__(self, "mask", mask)
+        self.__dict__.pop("_dense_mask", None)
         object.__setattr__(self, "meta", dict(self.meta))
         object.__setattr__(self, "timeline", check_timeline(self.timeline, d // columns))
 
@@ -148,7 +152,7 @@ class History:
         if not isinstance(matrices, Mapping):
             raise ValueError(f"a {self.sensor} history needs a mapping sensor -> matrix with the "
                              f"keys {list(names)}, got {type(matrices).__name__}")
-        masks = self.mask
+        masks = self.__dict__["_mask"]
         if masks is not None and not isinstance(masks, Mapping):
             raise ValueError(f"the mask of a {self.sensor} history must be None or a mapping "
                              f"sensor -> mask (None: complete) with the keys {list(names)}, got "
@@ -180,7 +184,7 @@ class History:
         # plain dicts inside (a History pickles: joblib, multiprocessing); read-only views outside
         self.__dict__["_parts"] = parts
         self.__dict__["_data"] = {n: p.__dict__["_data"] for n, p in parts.items()}
-        mask = {n: p.mask for n, p in parts.items()}
+        mask = {n: p.__dict__["_mask"] for n, p in parts.items()}  # as stored (dense or sparse)
         object.__setattr__(self, "mask", None if all(v is None for v in mask.values()) else mask)
         for name in ("object_positions", "anchor_ids", "anchor_positions", "robot_poses", "meta",
                      "timeline"):
@@ -250,6 +254,18 @@ class History:
         self._single("sparse")
         return compact.to_sparse(self.__dict__["_data"])
 
+    @property
+    def masked(self) -> bool:
+        """Whether the history has a mask (without building a dense one)."""
+        return self.__dict__["_mask"] is not None
+
+    @property
+    def sparse_mask(self):
+        """The mask as a bool ``scipy.sparse.csr_array`` (None without one): works at any size."""
+        self._single("sparse_mask")
+        mask = self.__dict__["_mask"]
+        return None if mask is None else compact.to_sparse_mask(mask)
+
     def _single(self, what: str) -> None:
         if self.fused:
             raise ValueError(f"History.{what} is one matrix; a {self.sensor} history holds one per "
@@ -280,7 +296,7 @@ class History:
                 object_positions=self.object_positions, anchor_ids=self.anchor_ids,
                 anchor_positions=self.anchor_positions,
                 robot_poses=None if self.robot_poses is None else self.robot_poses[:n_steps],
-                mask=None if self.mask is None else {n: h.mask for n, h in heads.items()},
+                mask=None if not self.masked else {n: h.__dict__["_mask"] for n, h in heads.items()},
                 meta=self.meta,
                 timeline=None if self.timeline is None else self.timeline[:n_steps],
             )
@@ -292,7 +308,7 @@ class History:
             anchor_ids=self.anchor_ids,
             anchor_positions=self.anchor_positions,
             robot_poses=None if self.robot_poses is None else self.robot_poses[:n_steps],
-            mask=None if self.mask is None else self.mask[:, :cols],
+            mask=None if not self.masked else self.__dict__["_mask"][:, :cols],
             meta=self.meta,
             timeline=None if self.timeline is None else self.timeline[:n_steps],
         )
@@ -300,7 +316,7 @@ class History:
     def __repr__(self) -> str:
         return (
             f"History(sensor={self.sensor!r}, objects={self.n_objects}, steps={self.n_steps}, "
-            f"anchors={self.anchor_ids.tolist()}, masked={self.mask is not None})"
+            f"anchors={self.anchor_ids.tolist()}, masked={self.masked})"
         )
 
     # ------------------------------------------------------------------ files
@@ -314,13 +330,15 @@ class History:
             for name, part in self.parts.items():
                 per_sensor.update({f"{name}.{k}": v for k, v in
                                    compact.compact_fields(part.__dict__["_data"]).items()})
-                if part.mask is not None:
-                    per_sensor[f"{name}.mask"] = part.mask
+                if part.masked:
+                    per_sensor.update({f"{name}.{k}": v for k, v in
+                                       compact.mask_fields(part.__dict__["_mask"]).items()})
         else:  # version 1 where it suffices, so that older lfmdr still reads today's dense files
-            version = 2 if self.compact else 1
+            mask = self.__dict__["_mask"]
+            version = 3 if compact.is_sparse(mask) else 2 if self.compact else 1
             per_sensor = compact.compact_fields(self.__dict__["_data"])
-            if self.mask is not None:
-                per_sensor["mask"] = self.mask
+            if mask is not None:
+                per_sensor.update(compact.mask_fields(mask))
         arrays: dict[str, np.ndarray] = {
             "format": np.array(FORMAT),
             "format_version": np.array(version),
@@ -375,9 +393,9 @@ class History:
                     if "matrix" not in part and "matrix_shape" not in part:
                         raise KeyError(f"{n}.matrix")
                 matrix = {n: compact.from_fields(part) for n, part in parts.items()}
-                mask = {n: part.get("mask") for n, part in parts.items()}
+                mask = {n: compact.mask_from_fields(part) for n, part in parts.items()}
             else:
-                matrix, mask = compact.from_fields(fields), fields.get("mask")
+                matrix, mask = compact.from_fields(fields), compact.mask_from_fields(fields)
             return cls(
                 sensor=sensor,
                 matrix=matrix,
@@ -395,6 +413,21 @@ class History:
             raise HistoryFileError(f"{path} holds an inconsistent history: {exc}") from exc
 
 
+def _mask_get(self: History) -> Any:
+    mask = self.__dict__["_mask"]
+    if mask is None or isinstance(mask, np.ndarray):
+        return mask
+    if isinstance(mask, Mapping):  # fused: each sensor's mask as its part gives it, read-only
+        return MappingProxyType({n: p.mask for n, p in self.parts.items()})
+    if "_dense_mask" not in self.__dict__:
+        self.__dict__["_dense_mask"] = compact.to_dense_mask(mask)
+    return self.__dict__["_dense_mask"]
+
+
+def _mask_set(self: History, value: Any) -> None:
+    self.__dict__["_mask"] = value
+
+
 def _matrix_get(self: History) -> np.ndarray:
     return self.dense()
 
@@ -407,6 +440,9 @@ def _matrix_set(self: History, value: Any) -> None:
 # is kept as stored; reading it goes through History.dense, so a compact history densifies only
 # on demand and refuses a matrix beyond the memory budget.
 History.matrix = property(_matrix_get, _matrix_set, doc="The (M, D) float64 matrix (History.dense).")
+# ``mask`` likewise: kept as stored (dense or sparse); reading it gives the dense bool array (of a
+# fused history: a read-only mapping sensor -> its part's mask).
+History.mask = property(_mask_get, _mask_set, doc="The (M, D) bool mask or None (History.sparse_mask).")
 
 
 def __getattr__(name: str):

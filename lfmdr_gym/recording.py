@@ -155,12 +155,14 @@ class _Episode:
                  masked: bool = False, compact: bool = False) -> None:
         self.n_steps = n_steps
         self.values: dict[str, Any] = {
-            key: (CompactSteps(n_steps, sample, key) if compact
+            key: (CompactSteps(n_steps, sample, key, masked) if compact
                   else np.empty((n_steps, *sample.shape), dtype=sample.dtype))
             for key, sample in samples.items()}
         m = next(iter(samples.values())).shape[0]
         # the env's "observed" flags (imperfect sensing), one row per move; None without them
-        self.observed = np.empty((n_steps, m), dtype=bool) if masked else None
+        # (a masked compact recording keeps them in each sensor's CompactSteps, sparsely)
+        self.compact = bool(compact)
+        self.observed = np.empty((n_steps, m), dtype=bool) if masked and not compact else None
         self.poses = np.empty((n_steps, 3), dtype=np.float64)
         self.truth = truth
         self.count = 0
@@ -175,7 +177,10 @@ class _Episode:
         if self.full:
             return
         for key, buffer in self.values.items():
-            buffer[self.count] = values[key]
+            if self.compact and buffer.masked:
+                buffer.record(values[key], observed)
+            else:
+                buffer[self.count] = values[key]
         if self.observed is not None:
             self.observed[self.count] = observed
         self.poses[self.count] = pose
@@ -185,12 +190,16 @@ class _Episode:
     def history(self, sensor: str, meta: dict[str, Any]) -> History:
         matrices, masks = {}, {}
         for key, values in self.values.items():
-            matrices[key] = (values.matrix(key) if isinstance(values, CompactSteps)
-                             else _steps_to_matrix(values, key))
-            masks[key] = None if self.observed is None else _steps_to_mask(self.observed, key)
+            if self.compact:
+                matrices[key] = values.matrix(key)
+                masks[key] = values.mask() if values.masked else None
+            else:
+                matrices[key] = _steps_to_matrix(values, key)
+                masks[key] = None if self.observed is None else _steps_to_mask(self.observed, key)
         single = len(matrices) == 1
+        masked = any(m is not None for m in masks.values())
         return History(sensor=sensor, matrix=matrices[sensor] if single else matrices,
-                       mask=(masks[sensor] if single else None if self.observed is None else masks),
+                       mask=(masks[sensor] if single else masks if masked else None),
                        robot_poses=self.poses, meta={**meta, "blocked_moves": int(self.blocked)},
                        **self.truth)
 
@@ -247,8 +256,9 @@ def collect(
     is not recorded. Raises ValueError if the episode ends before ``n_steps`` moves.
 
     ``compact``: record the history in compact form (visibility and range sparse, bearing
-    float32; see :mod:`lfmdr_gym.compact`); None (default) does so only when the float64 matrix
-    would exceed :data:`~lfmdr_gym.compact.COMPACT_ABOVE_BYTES`, so small histories are as before.
+    float32, a masked history's matrix and mask both sparse; see :mod:`lfmdr_gym.compact`);
+    None (default) does so only when the float64 matrix would exceed
+    :data:`~lfmdr_gym.compact.COMPACT_ABOVE_BYTES`, so small histories are as before.
     """
     from lfmdr_gym.policies import as_policy
 
@@ -267,8 +277,9 @@ def collect(
         elif not isinstance(compact, bool | np.bool_):
             raise ValueError(f"compact must be True, False or None, got {compact!r}")
         episode = _Episode(n_steps, samples, _truth(info), "observed" in obs, bool(compact))
+        space = env.action_space  # (read once: through each wrapper, it is a chain of lookups)
         for t in range(n_steps):
-            action = _shaped_actions(pol(obs), env.action_space, None)
+            action = _shaped_actions(pol(obs), space, None)
             obs, _, terminated, truncated, info = env.step(action)
             episode.record(obs, info["robot_pose"], info.get("blocked", False),
                            obs.get("observed"))

@@ -119,8 +119,12 @@ def visibility_kernel(
     if tk.size == 0:
         return out
     if occlusion and rc.shape[0] > 1:
-        rt = rc.take(tk, axis=0)  # take: the same rows as rc[tk], at a fraction of the overhead
-        dt2 = dc2.take(tk)
+        # Usually every candidate is a target (the candidates' reach exceeds d_vis by a sliver):
+        # then tk is arange(K) and dc2 serves as it is. (rt must not be rc itself: numpy computes
+        # rc @ rc.T with BLAS syrk, whose rounding differs from gemm's in the last bit.)
+        every = tk.size == rc.shape[0]
+        rt = rc.copy() if every else rc.take(tk, axis=0)  # take: as rc[tk], cheaper
+        dt2 = dc2 if every else dc2.take(tk)
         # For target j (line of sight rt_j, length d_j) and object k, p = rc_k . rt_j = t d_j
         # where t is the position of k's foot along the line of sight, and the perpendicular h
         # from k's centre obeys h^2 d_j^2 = d_k^2 d_j^2 - p^2. So k blocks j (0 <= t <= d_j and
@@ -129,7 +133,11 @@ def visibility_kernel(
         blk = p * p > q[:, None] * dt2
         blk &= p >= 0.0
         blk &= p <= dt2
-        blk[tk, _arange(tk.size)] = False  # a target does not hide itself
+        # a target does not hide itself (row tk[j], column j; the diagonal when every)
+        if every:
+            blk.reshape(-1)[::tk.size + 1] = False
+        else:
+            blk[tk, _arange(tk.size)] = False
         tk = tk[~np.logical_or.reduce(blk, axis=0)]  # == ~blk.any(axis=0), minus its wrapper
     out[cand.take(tk)] = 1
     return out
@@ -252,7 +260,8 @@ def proximity_kernel(
     Speed notes (the env runs this every step on a few objects and 32 rays, where numpy's
     per-call overhead dominates): the min over the two wall axes is one binary ``minimum`` rather
     than an axis-1 reduction (3x dearer on an (n, 2) array), and rays that meet an object
-    behind the robot are set to inf by ``copyto(..., where=)`` rather than ``np.where``.
+    behind the robot are left out of the min by the reduction's ``where=`` rather than masked
+    with ``np.where`` first.
     """
     c, s = math.cos(heading), math.sin(heading)
     u = dirs @ np.array(((c, s), (-s, c)))  # rays rotated into the world frame, (n, 2)
@@ -272,15 +281,17 @@ def proximity_kernel(
             hit = np.full(dirs.shape[0], max_range)
         if rc.shape[0]:
             # Ray k meets circle j at t - sqrt(r^2 - (d^2 - t^2)), t = u_k . rc_j: NaN when the
-            # ray misses (negative root argument); behind the robot when t <= 0 (the robot's
-            # centre is outside every object, so both roots then lie behind it).
-            t = u @ rc.T
+            # ray misses (negative root argument, dropped by fmin); behind the robot when t <= 0
+            # (the robot's centre is outside every object, so both roots then lie behind it:
+            # left out of the min). Laid out (objects, rays), so that the min over objects runs
+            # along the outer axis (twice as fast as along the inner one); rc @ u.T holds the
+            # same dot products as u @ rc.T.
+            t = rc @ u.T
             entry = t * t
-            entry -= q  # == t^2 + (r^2 - d^2), bit for bit (IEEE a - b is a + (-b))
+            entry -= q[:, None]  # == t^2 + (r^2 - d^2), bit for bit (IEEE a - b is a + (-b))
             np.sqrt(entry, out=entry)
             np.subtract(t, entry, out=entry)
-            np.copyto(entry, np.inf, where=t <= 0.0)
-            np.fmin(hit, np.fmin.reduce(entry, axis=1), out=hit)
+            np.fmin(hit, np.fmin.reduce(entry, axis=0, where=t > 0.0, initial=np.inf), out=hit)
     return hit
 
 

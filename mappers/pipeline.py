@@ -99,19 +99,30 @@ def _check_mask(mask: Any, shape: tuple[int, int]) -> np.ndarray | None:
     return None if mask.all() else mask
 
 
-def _sparse_inputs(X: Any, sensor: str | None, mask: Any) -> tuple[Any, str]:
-    """A scipy sparse history as a float64 csr_array (checked as :func:`_check_histories`)."""
-    if mask is not None:
-        raise ValueError("a mask cannot be given with sparse histories: pass dense arrays")
+def _sparse_inputs(X: Any, sensor: str | None, mask: Any) -> tuple[Any, Any, str]:
+    """A scipy sparse history as a float64 csr_array (checked as :func:`_check_histories`), its
+    mask as a bool csr_array (None when absent or all True), unobserved entries dropped."""
     X = sp.csr_array(X, dtype=np.float64)
-    X.eliminate_zeros()
     if X.ndim != 2 or X.shape[0] < 3 or X.shape[1] < 1:
         raise ValueError(f"histories need at least 3 objects and 1 column, got shape {X.shape}")
+    if mask is not None:
+        if not sp.issparse(mask) and np.asarray(mask).dtype != bool:
+            raise ValueError(f"mask must be a boolean array (True = observed), got dtype "
+                             f"{np.asarray(mask).dtype}")
+        mask = sp.csr_array(mask, dtype=bool)
+        if mask.shape != X.shape:
+            raise ValueError(f"mask must have the shape of histories {X.shape}, got {mask.shape}")
+        mask.eliminate_zeros()
+        if mask.nnz == X.shape[0] * X.shape[1]:
+            mask = None
+        else:
+            X = sp.csr_array(X.multiply(mask))
+    X.eliminate_zeros()
     if not np.all(np.isfinite(X.data)):
         raise ValueError("histories contain NaN or inf (in observed entries)")
     if sensor is None:
-        sensor = "visibility" if np.all(X.data == 1.0) else infer_sensor(X.toarray())
-    return X, check_sensor(sensor)
+        sensor = infer_sensor(X)  # from the stored values: never densified
+    return X, mask, check_sensor(sensor)
 
 
 def _inputs(histories, sensor, mask, timeline):
@@ -122,13 +133,16 @@ def _inputs(histories, sensor, mask, timeline):
     if getattr(histories, "is_sparse", False) or (
             hasattr(histories, "matrix") and not isinstance(histories, np.ndarray)):
         sensor = sensor if sensor is not None else getattr(histories, "sensor", None)
-        mask = mask if mask is not None else getattr(histories, "mask", None)
         timeline = timeline if timeline is not None else getattr(histories, "timeline", None)
-        sparse_rows = mask is None and getattr(histories, "is_sparse", False)
+        stored_sparse = getattr(histories, "is_sparse", False)
+        if mask is None:  # a compact History's own mask stays sparse (History.sparse_mask)
+            mask = (histories.sparse_mask if stored_sparse and getattr(histories, "masked", False)
+                    else getattr(histories, "mask", None))
+        sparse_rows = stored_sparse and (mask is None or sp.issparse(mask))
         histories = histories.sparse if sparse_rows else histories.matrix
     if sp.issparse(histories):
-        X, sensor = _sparse_inputs(histories, sensor, mask)
-        return X, None, sensor, timeline
+        X, mask, sensor = _sparse_inputs(histories, sensor, mask)
+        return X, mask, sensor, timeline
     X = _check_histories(histories)
     mask = _check_mask(mask, X.shape)
     observed = X if mask is None else X[mask]
@@ -149,18 +163,19 @@ DENSE_BUDGET_BYTES = 2 * 2**30
 """Largest dense float64 matrix ``build_map`` builds from sparse histories for a dense method."""
 
 
-def _for_method(spec: MethodSpec, X: Any) -> Any:
-    """Sparse histories densified for a method that needs a dense matrix (within the budget)."""
+def _for_method(spec: MethodSpec, X: Any, mask: Any) -> tuple[Any, Any]:
+    """Sparse histories (and mask) densified for a method that needs a dense matrix (within the
+    budget)."""
     if not sp.issparse(X) or spec.sparse:
-        return X
+        return X, mask
     need = 8 * X.shape[0] * X.shape[1]
     if need > DENSE_BUDGET_BYTES:
         raise ValueError(
             f"method {spec.label!r} needs the dense history matrix, {need / 2**30:.1f} GiB for "
             f"shape {X.shape} (budget {DENSE_BUDGET_BYTES / 2**30:.0f} GiB); use a method that "
-            "maps sparse histories, e.g. 'CAL-SMA-SPARSE'"
+            "maps sparse histories, e.g. 'CAL-SMA-SPARSE' (or 'covis-sparse' when masked)"
         )
-    return X.toarray()
+    return X.toarray(), (mask.toarray() if sp.issparse(mask) else mask)
 
 
 def _method_params(spec: MethodSpec, params: dict[str, Any], normalize, random_state):
@@ -313,7 +328,7 @@ def build_map(
     spec = resolve_method(method, sensor, masked=mask is not None, n_objects=m)
     merged = _method_params(spec, params, normalize, random_state)
     ids, pos = check_anchors(anchor_ids, anchor_positions, m)
-    X = _for_method(spec, X)
+    X, mask = _for_method(spec, X, mask)
     if sp.issparse(X):
         has_data = np.diff(X.indptr) > 0
     else:

@@ -165,6 +165,7 @@ def _load_builtins() -> None:
     from mappers import (
         calibrated,
         covis_calibrated,
+        covis_sparse,
         ensemble,
         masked,
         methods,
@@ -175,7 +176,7 @@ def _load_builtins() -> None:
     )
 
     for spec in (*methods.SPECS, calibrated.SPEC, unfolding.SPEC, scalable.SPEC, *masked.SPECS,
-                 ensemble.SPEC, *covis_calibrated.SPECS, range_bearing.SPEC,
+                 ensemble.SPEC, *covis_calibrated.SPECS, covis_sparse.SPEC, range_bearing.SPEC,
                  visibility_bearing.SPEC):
         _METHODS.setdefault(spec.label, spec)
 
@@ -220,6 +221,7 @@ and ``benchmarks/``."""
 SCALABLE_DEFAULTS: dict[tuple[str, bool], str] = {
     ("visibility", False): "CAL-SMA-SPARSE",
     ("bearing", False): "CAL-SMA-SPARSE",
+    ("bearing", True): "covis-sparse",
 }
 """(sensor, masked) -> the default above :data:`SCALABLE_ABOVE_OBJECTS` objects."""
 

@@ -144,7 +144,30 @@ class SparseCalibratedSMACOF(TransformerMixin, BaseEstimator):
         k = min(k, m - 1)
         i, j, delta = candidate_pairs(X, kind, 3 * k)
         informative = delta < 1.0 - 1e-9 if kind == "cosine" else np.ones(delta.size, bool)
-        i, j, delta = i[informative], j[informative], delta[informative]
+        self.dissimilarity_kind_ = kind
+        return self._fit_pairs(i[informative], j[informative], delta[informative], m, k, ids, pos)
+
+    def fit_pairs(self, i, j, delta, n_objects, *, anchor_ids=None, anchor_positions=None):
+        """Map ``n_objects`` objects from dissimilarities ``delta`` of the pairs ``(i, j)``
+        (i < j, each pair once; the other pairs are unknown): the same calibration and sparse
+        stress as :meth:`fit`, for a dissimilarity computed elsewhere (``mappers.covis_sparse``)."""
+        self._validate_params()
+        i, j = np.asarray(i, dtype=np.int64), np.asarray(j, dtype=np.int64)
+        delta = np.asarray(delta, dtype=np.float64)
+        if not (i.shape == j.shape == delta.shape) or i.ndim != 1:
+            raise ValueError("i, j and delta must be 1-D arrays of one length")
+        if i.size and (np.any(i >= j) or i.min() < 0 or j.max() >= n_objects):
+            raise ValueError(f"pairs must have 0 <= i < j < n_objects={n_objects}")
+        if np.any(~np.isfinite(delta)) or np.any(delta < 0):
+            raise ValueError("delta must be finite and non-negative")
+        ids = pos = None
+        if anchor_ids is not None or anchor_positions is not None:
+            ids, pos = check_anchors(anchor_ids, anchor_positions, n_objects)
+        k = min(self.n_neighbors if self.n_neighbors is not None else 12, n_objects - 1)
+        self.dissimilarity_kind_ = "precomputed"
+        return self._fit_pairs(i, j, delta, n_objects, k, ids, pos)
+
+    def _fit_pairs(self, i, j, delta, m, k, ids, pos):
         if i.size == 0:
             raise ValueError("no two objects have informative histories (never sensed together)")
         loc = knn_pairs(i, j, delta, m, k)
@@ -168,7 +191,6 @@ class SparseCalibratedSMACOF(TransformerMixin, BaseEstimator):
         self.embedding_ = Y
         self.pairs_ = np.column_stack([i, j])
         self.dissimilarity_ = delta
-        self.dissimilarity_kind_ = kind
         self.neighbors_ = loc
         self.calibration_ = coef
         self.stress_ = float(np.sum((dx - Dh) ** 2) / max(np.sum(Dh**2), 1e-300))

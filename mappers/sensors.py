@@ -17,6 +17,7 @@ from types import MappingProxyType
 from typing import Any
 
 import numpy as np
+import scipy.sparse as sp
 
 __all__ = [
     "COLUMNS_PER_STEP",
@@ -106,8 +107,13 @@ def infer_sensor(X: np.ndarray, mask: np.ndarray | None = None) -> str:
     """Guess the sensor of a history matrix from its observed entries.
 
     All entries 0/1 -> "visibility"; an even number of columns whose (cos, sin) pairs are unit
-    vectors (all-zero pairs ignored) -> "bearing"; anything else -> "range".
+    vectors (all-zero pairs ignored) -> "bearing"; anything else -> "range". A scipy sparse
+    ``X`` (no mask) is judged from its stored values alone, never densified.
     """
+    if sp.issparse(X):
+        if mask is not None:
+            raise ValueError("a mask cannot be given with a sparse history matrix")
+        return _infer_sparse_sensor(sp.csr_array(X, dtype=np.float64))
     X = np.asarray(X, dtype=float)
     observed = X if mask is None else X[mask]
     if np.all((observed == 0) | (observed == 1)):
@@ -120,6 +126,22 @@ def infer_sensor(X: np.ndarray, mask: np.ndarray | None = None) -> str:
         r2 = c**2 + s**2
         nonzero = pair_seen & (r2 > 0)
         if nonzero.any() and np.allclose(r2[nonzero], 1.0, atol=1e-4):
+            return "bearing"
+    return "range"
+
+
+def _infer_sparse_sensor(X: sp.csr_array) -> str:
+    """:func:`infer_sensor` of a sparse matrix from its stored values (the unstored are 0)."""
+    data = X.data
+    if np.all((data == 0) | (data == 1)):
+        return "visibility"
+    if X.shape[1] % 2 == 0:
+        # Each step's cos^2 + sin^2: the squares summed over the column pair (col // 2).
+        coo = X.tocoo()
+        r2 = sp.coo_array((coo.data * coo.data, (coo.row, coo.col // 2)),
+                          shape=(X.shape[0], X.shape[1] // 2)).tocsr()  # sums duplicates
+        r2.eliminate_zeros()
+        if r2.nnz and np.allclose(r2.data, 1.0, atol=1e-4):
             return "bearing"
     return "range"
 

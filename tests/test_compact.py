@@ -99,3 +99,23 @@ def test_build_map_maps_a_history_beyond_the_budget_without_the_dense_matrix(mon
     assert built.method == "CAL-SMA-SPARSE" and np.isfinite(built.positions).all()
     with pytest.raises(ValueError, match="CAL-SMA-SPARSE"):
         mappers.build_map(h, h.anchor_ids, h.anchor_positions, method="CAL-SMA")
+
+
+@pytest.mark.parametrize(("env_id", "kwargs"), [
+    ("LFMDR-Bearing-v0", {"max_range": 1.5}),
+    ("LFMDR-Visibility-v0", {"fov_deg": 120.0, "miss_rate": 0.1}),
+])
+def test_masked_compact_histories_keep_a_sparse_mask(tmp_path, env_id, kwargs):
+    dense = collect(env_id, RandomWalkPolicy(seed=0), 300, seed=4, make_kwargs=kwargs)
+    small = collect(env_id, RandomWalkPolicy(seed=0), 300, seed=4, make_kwargs=kwargs,
+                    compact=True)
+    assert small.is_sparse and small.masked and sp.issparse(small.__dict__["_mask"])
+    assert small.sparse_mask.nnz == dense.mask.sum()
+    np.testing.assert_array_equal(small.mask, dense.mask)  # dense on demand
+    np.testing.assert_array_equal(small.matrix, dense.matrix)
+    np.testing.assert_array_equal(small.head(120).mask, dense.head(120).mask)
+    loaded = History.load(small.save(tmp_path / "h.npz"))  # format version 3: the mask's structure
+    assert sp.issparse(loaded.__dict__["_mask"])
+    np.testing.assert_array_equal(loaded.mask, dense.mask)
+    np.testing.assert_array_equal(loaded.matrix, dense.matrix)
+    assert "masked=True" in repr(loaded)

@@ -146,3 +146,29 @@ def test_a_fused_history_pickles():
     for s in h.sensors:
         np.testing.assert_array_equal(back.matrix[s], h.matrix[s])
         np.testing.assert_array_equal(back.mask[s], h.mask[s])
+
+
+def test_a_compact_masked_fused_recording_keeps_sparse_masks_through_a_file(tmp_path):
+    # #12's fused histories meet #13's sparse masks: each sensor's mask stays sparse in the
+    # recording and in the file (version 3), and equals the dense recording's
+    import gymnasium as gym
+
+    import lfmdr_gym  # noqa: F401
+    from lfmdr_gym.policies import RandomWalkPolicy
+    from lfmdr_gym.recording import collect
+
+    env = gym.make("LFMDR-RangeBearing-v0", fov_deg=90, max_range=1.5)
+    small = collect(env, RandomWalkPolicy.for_env(env), 300, seed=3, compact=True)
+    dense = collect(env, RandomWalkPolicy.for_env(env), 300, seed=3, compact=False)
+    small.save(tmp_path / "h.npz")
+    back = History.load(tmp_path / "h.npz")
+    for name in ("range", "bearing"):
+        assert back.parts[name].sparse_mask is not None
+        assert not isinstance(back.parts[name].__dict__["_mask"], np.ndarray)
+        np.testing.assert_array_equal(back.parts[name].mask, dense.parts[name].mask)
+        np.testing.assert_allclose(back.parts[name].matrix, dense.parts[name].matrix, atol=1e-6)
+    assert back.head(100).masked
+    with pytest.raises(ValueError, match="parts"):
+        back.sparse_mask
+    result = build_map(back, back.anchor_ids, back.anchor_positions)
+    assert result.method == "LOC-SMA"

@@ -107,6 +107,35 @@ def test_infer_sensor():
     assert infer_sensor(np.array([[0.3, 1.2, 0.5], [2.0, 0.0, 1.0]])) == "range"
 
 
+def test_infer_sensor_of_a_sparse_history_reads_the_stored_values_only(monkeypatch):
+    """The sparse inference agrees with the dense one and never builds the dense matrix."""
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(0)
+    th = rng.uniform(-np.pi, np.pi, (6, 5))
+    bearing = np.stack([np.cos(th), np.sin(th)], -1).reshape(6, 10)
+    bearing[:, 4:6] = 0.0  # a step with nothing sensed
+    bearing[0, 0:2] = (0.0, 1.0)  # cos exactly 0: one stored value in the pair
+    ranges = np.where(rng.random((6, 5)) < 0.5, rng.uniform(0.1, 2.0, (6, 5)), 0.0)
+    vis = (rng.random((6, 4)) < 0.4).astype(float)
+    cases = [(vis, "visibility"), (bearing, "bearing"), (ranges, "range"),
+             (ranges[:, :4], "range")]  # an even number of range columns is still range
+    for dense, _ in cases:
+        assert infer_sensor(sp.csr_array(dense)) == infer_sensor(dense)
+
+    def refuse(self, *args, **kwargs):
+        raise AssertionError("the sparse history was densified")
+
+    monkeypatch.setattr(sp.csr_array, "toarray", refuse)
+    monkeypatch.setattr(sp.csr_array, "todense", refuse)
+    for dense, expected in cases:
+        assert infer_sensor(sp.csr_array(dense)) == expected
+    B, _, _ = world(sensor="bearing", n_steps=300)
+    from mappers.pipeline import _inputs  # build_map's input check, where the sensor is inferred
+
+    assert _inputs(sp.csr_array(B), None, None, None)[2] == "bearing"
+
+
 def test_mask_all_true_is_no_mask():
     H, P, a = world()
     m1 = build_map(H, a, P[a], "LEM")

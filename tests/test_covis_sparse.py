@@ -1,0 +1,79 @@
+"""covis-sparse: the masked co-observation map from sparse products, against the dense path."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import mappers
+from lfmdr_gym.policies import RandomWalkPolicy
+from lfmdr_gym.recording import collect
+from mappers.coobservation import angle_covisibility_dissimilarity, covisibility_dissimilarity
+from mappers.covis_sparse import sparse_co_observation
+from mappers.scores import mean_position_error
+from mappers.sensors import step_observations
+
+
+@pytest.fixture(scope="module")
+def limited():
+    """A bearing history with a 1.5 m range (masked), dense and compact (sparse) forms."""
+    kw = {"max_range": 1.5, "anchors": "random", "n_anchors": 8}
+    dense = collect("LFMDR-Bearing-v0", RandomWalkPolicy(seed=0), 2000, seed=5, make_kwargs=kw)
+    small = collect("LFMDR-Bearing-v0", RandomWalkPolicy(seed=0), 2000, seed=5, make_kwargs=kw,
+                    compact=True)
+    return dense, small
+
+
+@pytest.mark.parametrize("sensor", ["bearing", "visibility"])
+def test_sparse_coefficient_equals_the_dense_one(limited, sensor):
+    dense, small = limited
+    if sensor == "bearing":
+        X, mask, S, M = dense.matrix, dense.mask, small.sparse, small.sparse_mask
+        seen, values = step_observations(X, mask, sensor)
+        delta, C = angle_covisibility_dissimilarity(seen, values)
+    else:  # a masked visibility history: what was looked at (mask) and seen (1)
+        rng = np.random.default_rng(0)
+        X = (rng.random((30, 400)) < 0.2).astype(float)
+        mask = rng.random(X.shape) < 0.6
+        S, M = sp.csr_array(X), sp.csr_array(mask)
+        seen, _ = step_observations(X, mask, sensor)
+        delta, C = covisibility_dissimilarity(seen)
+    i, j, och, count, n = sparse_co_observation(S, M, sensor=sensor)
+    together = np.argwhere(np.triu(C, 1) > 0)
+    np.testing.assert_array_equal(np.column_stack([i, j]), together)  # the same pairs, in order
+    np.testing.assert_array_equal(count, C[i, j])
+    np.testing.assert_array_equal(n, np.diag(C))
+    dense_och = np.exp(-delta[i, j])
+    big = och > 1e-6
+    np.testing.assert_allclose(och[big], dense_och[big], rtol=1e-9, atol=1e-12)
+
+
+def test_covis_sparse_maps_as_well_as_the_dense_default(limited):
+    dense, small = limited
+    ids, pos, truth = dense.anchor_ids, dense.anchor_positions, dense.object_positions
+    ref = mappers.build_map(dense, ids, pos)  # the masked bearing default (covis-auto)
+    assert ref.method == "covis-auto"
+    got = mappers.build_map(small, ids, pos, method="covis-sparse")  # sparse in, sparse path
+    again = mappers.build_map(dense, ids, pos, method="covis-sparse")  # dense in: the same map
+    np.testing.assert_allclose(again.positions, got.positions, atol=1e-9)
+    ex = sorted({*ids.tolist(), *ref.unmapped, *got.unmapped})
+    err = {name: mean_position_error(m.positions, truth, exclude=ex)
+           for name, m in (("dense", ref), ("sparse", got))}
+    assert err["sparse"] < 1.5 * err["dense"] and err["sparse"] < 0.15, err
+    np.testing.assert_allclose(got.positions[ids], pos, atol=1e-9)  # anchors held
+    # the two maps are close object by object, not merely equally good
+    both = np.setdiff1d(np.arange(len(truth)), ex)
+    gap = np.hypot(*(got.positions[both] - ref.positions[both]).T)
+    assert np.median(gap) < 0.1, np.median(gap)
+
+
+def test_large_masked_bearing_default_is_covis_sparse():
+    spec = mappers.registry.resolve_method(None, "bearing", masked=True, n_objects=1000)
+    assert spec.label == "covis-sparse" and spec.sparse
+    assert mappers.registry.resolve_method(None, "bearing", masked=True, n_objects=50).label == "covis-auto"
+
+
+def test_a_dense_masked_method_gets_the_sparse_history_densified(limited):
+    dense, small = limited
+    a = mappers.build_map(small, dense.anchor_ids, dense.anchor_positions, method="covis-auto")
+    b = mappers.build_map(dense, dense.anchor_ids, dense.anchor_positions, method="covis-auto")
+    np.testing.assert_array_equal(a.positions, b.positions)
