@@ -9,6 +9,8 @@ figure (matplotlib, the ``plots`` extra).
 
     PYTHONPATH=. python benchmarks/bench_exploration.py --plot docs/exploration.png  # 25 layouts
     PYTHONPATH=. python benchmarks/bench_exploration.py --runs 5 --sensors visibility
+    PYTHONPATH=. python benchmarks/bench_exploration.py --runs 6 --seed 5000 --policies rl \
+        --rl-model /tmp/m.npz   # a model of one's own, on layouts for tuning
 """
 
 from __future__ import annotations
@@ -35,14 +37,22 @@ def _mpe(hist, n: int) -> float:
     return mappers.mean_position_error(m.positions[keep], truth[keep])
 
 
-def run(sensor: str, runs: int, seed: int) -> dict[str, np.ndarray]:
-    out: dict[str, list] = {name: [] for name in POLICIES}
+def run(sensor: str, runs: int, seed: int, policies: list[str] | None = None,
+        kwargs: dict[str, dict] | None = None) -> dict[str, np.ndarray]:
+    """Per policy, an array (runs, len(STEPS)) of MPEs. ``kwargs``: per policy, factory keywords
+    (e.g. ``{"rl": {"model": "m.npz"}}`` to score a model of one's own)."""
+    names = list(POLICIES) if policies is None else policies
+    unknown = [n for n in names if n not in POLICIES]
+    if unknown:
+        raise ValueError(f"unknown policies {unknown}; registered: {list(POLICIES)}")
+    out: dict[str, list] = {name: [] for name in names}
     for r in range(runs):
         s = derived_seed(seed, r)
-        for name, factory in POLICIES.items():
+        for name in names:
             env = make_env(env_id_for(sensor), max(STEPS))
             try:
-                hist = collect(env, factory(env, seed=s), max(STEPS), seed=s)
+                policy = POLICIES[name](env, seed=s, **(kwargs or {}).get(name, {}))
+                hist = collect(env, policy, max(STEPS), seed=s)
             finally:
                 env.close()
             with threadpool_limits(limits=1):
@@ -79,15 +89,21 @@ def main() -> None:
     ap.add_argument("--sensors", nargs="+", default=["visibility", "bearing"])
     ap.add_argument("--runs", type=int, default=25, help="fresh layouts (one start pose each)")
     ap.add_argument("--seed", type=int, default=4711, help="never used for tuning")
+    ap.add_argument("--policies", nargs="+", default=None, help="default: every registered one")
+    ap.add_argument("--rl-model", default=None, metavar="FILE.npz",
+                    help="score this model as the 'rl' policy (default: the shipped one)")
     ap.add_argument("--plot", default=None, metavar="FILE.png")
     args = ap.parse_args()
+    kwargs = {"rl": {"model": args.rl_model}} if args.rl_model else None
     results = {}
     for sensor in args.sensors:
-        res = results[sensor] = run(sensor, args.runs, args.seed)
+        res = results[sensor] = run(sensor, args.runs, args.seed, args.policies, kwargs)
         print(f"\n{sensor}: mean MPE [m] over {args.runs} fresh layouts (seed {args.seed})")
         print(f"  {'policy':12s}" + "".join(f"{n:>9d}" for n in STEPS))
         for name, rows in res.items():
             print(f"  {name:12s}" + "".join(f"{v:9.4f}" for v in rows.mean(axis=0)))
+        if "random-walk" not in res:
+            continue
         target = res["random-walk"][:, STEPS.index(2000)].mean()
         best, value = min(((n, r[:, STEPS.index(500)].mean()) for n, r in res.items()),
                           key=lambda t: t[1])

@@ -50,8 +50,13 @@ class CoveragePolicy(RandomWalkPolicy):
 
     def __init__(self, max_turn: float = math.pi / 4, step_length: float = 0.2,
                  robot_radius: float = 0.05, *, cell: float = 0.25, extent: float = 3.0,
+                 correct_drift: bool = False, proximity_range: float = 0.5,
                  **kwargs: Any) -> None:
         super().__init__(max_turn, step_length, robot_radius, **kwargs)
+        if not isinstance(correct_drift, bool | np.bool_):
+            raise ValueError(f"correct_drift must be True or False, got {correct_drift!r}")
+        self.correct_drift = bool(correct_drift)
+        self.proximity_range = float(proximity_range)
         for name, value in (("cell", cell), ("extent", extent)):
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive finite number, got {value!r}")
@@ -62,10 +67,35 @@ class CoveragePolicy(RandomWalkPolicy):
         self._n = 2 * int(math.ceil(extent / cell))
         self._forget()
 
+    @classmethod
+    def for_env(cls, env: Any, **kwargs: Any) -> CoveragePolicy:
+        """As :meth:`RandomWalkPolicy.for_env`, plus the proximity ring's range from the env's
+        observation space (the scan match of ``correct_drift`` needs it)."""
+        space = getattr(env, "observation_space", None)
+        try:
+            kwargs.setdefault("proximity_range", float(np.max(space["proximity"].high)))
+        except (TypeError, KeyError):
+            pass
+        return super().for_env(env, **kwargs)
+
     def _forget(self) -> None:
         self.visits = np.zeros((self._n, self._n))
         self.odometry = np.zeros(3)
         self._moved = False
+        self._last: tuple | None = None  # (x, y, heading, turn, ring) of the last move's start
+
+    def _correct(self, prox: np.ndarray) -> None:
+        """Redo the last move's dead reckoning now that the ring after it is known: a move ends
+        free after the full step, or in contact after the advance a scan match gives."""
+        from lfmdr_gym.scan_match import contact, matched_advance
+
+        x, y, heading, turn, before = self._last
+        advance = self.step_length
+        if contact(prox, self.robot_radius):
+            matched = matched_advance(before, prox, turn, self.step_length, self.proximity_range)
+            advance = self._last_advance if matched is None else matched
+        self.odometry = np.array([x + advance * math.cos(heading), y + advance * math.sin(heading),
+                                  self.odometry[2]])
 
     def reset(self, seed: int | None = None) -> None:
         """Start an episode: forget the visits and the odometry; reseed as the random walk does."""
@@ -101,6 +131,8 @@ class CoveragePolicy(RandomWalkPolicy):
                              f"per-episode memory), got proximity of shape {prox.shape}")
         if self._stuck_sign is None or self._stuck_sign.shape != (1,):
             self._stuck_sign = np.zeros(1)
+        if self.correct_drift and self._last is not None:
+            self._correct(prox)
         self.visits[self._cells(self.odometry[None, :2])] += 1
         mt = self.max_turn
         turns = self.rng.uniform(-mt, mt, self.n_tries)
@@ -115,6 +147,9 @@ class CoveragePolicy(RandomWalkPolicy):
         room = float(self.clearance(prox[None, :], np.array([[turn]]))[0, 0])
         heading = self.odometry[2] + turn
         advance = min(self.step_length, max(room, 0.0))
+        if self.correct_drift:
+            self._last = (self.odometry[0], self.odometry[1], heading, turn, prox)
+            self._last_advance = advance
         self.odometry = np.array([self.odometry[0] + advance * math.cos(heading),
                                   self.odometry[1] + advance * math.sin(heading),
                                   math.remainder(heading, 2.0 * math.pi)])
