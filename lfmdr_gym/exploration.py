@@ -16,8 +16,11 @@ It knows only what it senses and what it did, never the pose or the layout in ``
   best-scored candidate that passes :class:`~lfmdr_gym.policies.RandomWalkPolicy`'s collision
   check is taken.
 
-Dead reckoning drifts a little on moves the physics cuts short (an object hidden between two
-rays); the visit memory only needs to be right over a few cells, so this does not matter much.
+Dead reckoning drifts on moves the physics cuts short (an object hidden between two rays).
+With ``correct_drift=True`` (registered as ``"coverage-scan"``) each move is re-reckoned once the
+ring after it is known: made in full unless it ended in contact, else the advance a scan match
+of the two rings gives (:mod:`lfmdr_gym.scan_match`). It maps visibility better and bearing no
+better (``docs/online-and-exploration.md``), so the default stays off.
 """
 
 from __future__ import annotations
@@ -40,6 +43,8 @@ class CoveragePolicy(RandomWalkPolicy):
         cell: side of a grid cell [m].
         extent: half-width of the grid around the start [m]; must exceed the arena's width so
             that any start keeps the arena inside (the default fits the paper's 2.5 m arena).
+        correct_drift: re-reckon each move from the ring after it (module docstring).
+        proximity_range: the ring's range [m] (``for_env`` reads it from the env's space).
         max_turn, step_length, robot_radius, margin, obstacle_radius, plan_ahead, n_tries, seed:
             as for :class:`~lfmdr_gym.policies.RandomWalkPolicy`.
 

@@ -447,6 +447,12 @@ def _coverage(env: Any, **kwargs: Any) -> Any:
     return CoveragePolicy.for_env(env, **kwargs)
 
 
+def _coverage_scan(env: Any, **kwargs: Any) -> Any:
+    from lfmdr_gym.exploration import CoveragePolicy
+
+    return CoveragePolicy.for_env(env, **{"correct_drift": True, **kwargs})
+
+
 def _rl(env: Any, **kwargs: Any) -> Any:
     from lfmdr_gym.rl_policy import MLPExplorationPolicy
 
@@ -456,6 +462,7 @@ def _rl(env: Any, **kwargs: Any) -> Any:
 POLICIES: Mapping[str, Callable[..., Any]] = MappingProxyType({
     "random-walk": RandomWalkPolicy.for_env,
     "coverage": _coverage,
+    "coverage-scan": _coverage_scan,
     "rl": _rl,
 })
 """Name -> factory ``factory(env, **kwargs) -> policy``: the exploration policies ``lfmdr collect
@@ -465,6 +472,8 @@ and object radii) and spaces; the policy then sees observations only (:func:`che
 - ``"random-walk"``: the paper's agent (:class:`RandomWalkPolicy`).
 - ``"coverage"``: even coverage from a dead-reckoned visit memory
   (:class:`lfmdr_gym.exploration.CoveragePolicy`).
+- ``"coverage-scan"``: the same with its dead reckoning corrected from the proximity rings
+  (``correct_drift=True``, :mod:`lfmdr_gym.scan_match`).
 - ``"rl"``: a PPO agent trained on the coverage reward, run in numpy from the shipped weights
   (:class:`lfmdr_gym.rl_policy.MLPExplorationPolicy`; ``examples/train_rl_policy.py``).
 """

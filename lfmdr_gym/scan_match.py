@@ -39,6 +39,21 @@ def contact(proximity: np.ndarray, robot_radius: float, tolerance: float = 0.003
     return bool(np.min(proximity) < robot_radius + tolerance)
 
 
+def match_costs(before: np.ndarray, after: np.ndarray, turn: float, max_advance: float,
+                proximity_range: float, *, resolution: float = 0.005,
+                clip: float = 0.03) -> tuple[np.ndarray, np.ndarray] | None:
+    """(candidate advances, their mismatch costs) for :func:`matched_advance`; None when either
+    ring has fewer than 3 hits."""
+    p = hit_points(before, proximity_range, rotate=turn)  # in the frame of the move
+    q = hit_points(after, proximity_range)
+    if len(p) < 3 or len(q) < 3:
+        return None
+    cands = np.linspace(0.0, max_advance, max(int(round(max_advance / resolution)), 1) + 1)
+    shifted = q[None, :, :] + np.stack([cands, np.zeros_like(cands)], axis=1)[:, None, :]
+    d2 = ((shifted[:, :, None, :] - p[None, None, :, :]) ** 2).sum(-1)  # (A, |q|, |p|)
+    return cands, np.minimum(np.sqrt(d2.min(axis=2)), clip).sum(axis=1)
+
+
 def matched_advance(before: np.ndarray, after: np.ndarray, turn: float, max_advance: float,
                     proximity_range: float, *, resolution: float = 0.005,
                     clip: float = 0.03) -> float | None:
@@ -48,12 +63,9 @@ def matched_advance(before: np.ndarray, after: np.ndarray, turn: float, max_adva
     ``turn`` is the heading change made before the move; ``resolution`` the spacing of the
     candidate advances [m]; ``clip`` the largest mismatch one point may add [m].
     """
-    p = hit_points(before, proximity_range, rotate=turn)  # in the frame of the move
-    q = hit_points(after, proximity_range)
-    if len(p) < 3 or len(q) < 3:
+    found = match_costs(before, after, turn, max_advance, proximity_range,
+                        resolution=resolution, clip=clip)
+    if found is None:
         return None
-    cands = np.linspace(0.0, max_advance, max(int(round(max_advance / resolution)), 1) + 1)
-    shifted = q[None, :, :] + np.stack([cands, np.zeros_like(cands)], axis=1)[:, None, :]
-    d2 = ((shifted[:, :, None, :] - p[None, None, :, :]) ** 2).sum(-1)  # (A, |q|, |p|)
-    cost = np.minimum(np.sqrt(d2.min(axis=2)), clip).sum(axis=1)
+    cands, cost = found
     return float(cands[int(np.argmin(cost))])
