@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import sys
 import warnings
 from pathlib import Path
 
@@ -25,6 +26,7 @@ def _load_example():
     spec = importlib.util.spec_from_file_location("train_rl_policy",
                                                   ROOT / "examples" / "train_rl_policy.py")
     module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up there
     spec.loader.exec_module(module)
     return module
 
