@@ -60,6 +60,36 @@ def run(sensor: str, runs: int, seed: int, policies: list[str] | None = None,
     return {name: np.array(rows) for name, rows in out.items()}
 
 
+def save_csv(results: dict[str, dict[str, np.ndarray]], path: str, seed: int) -> None:
+    """Tidy rows (sensor, policy, layout, steps, mpe), written atomically."""
+    import csv
+
+    from lfmdr_gym.atomic import atomic_write
+
+    with atomic_write(path) as fh:
+        out = csv.writer(fh)
+        out.writerow(["sensor", "policy", "seed", "layout", "steps", "mpe"])
+        for sensor, res in results.items():
+            for name, rows in res.items():
+                for r, row in enumerate(rows):
+                    for n, v in zip(STEPS, row, strict=True):
+                        out.writerow([sensor, name, seed, r, n, repr(float(v))])
+
+
+def load_csv(paths: list[str]) -> dict[str, dict[str, np.ndarray]]:
+    """The results :func:`save_csv` wrote, merged over files (policies run separately)."""
+    import csv
+
+    cells: dict[str, dict[str, dict[int, dict[int, float]]]] = {}
+    for path in paths:
+        with open(path, newline="", encoding="utf-8") as fh:
+            for row in csv.DictReader(fh):
+                per = cells.setdefault(row["sensor"], {}).setdefault(row["policy"], {})
+                per.setdefault(int(row["layout"]), {})[int(row["steps"])] = float(row["mpe"])
+    return {sensor: {name: np.array([[runs[r][n] for n in STEPS] for r in sorted(runs)])
+                     for name, runs in res.items()} for sensor, res in cells.items()}
+
+
 def plot(results: dict[str, dict[str, np.ndarray]], path: str) -> None:
     import matplotlib
 
@@ -93,15 +123,24 @@ def main() -> None:
     ap.add_argument("--rl-model", default=None, metavar="FILE.npz",
                     help="score this model as the 'rl' policy (default: the shipped one)")
     ap.add_argument("--plot", default=None, metavar="FILE.png")
+    ap.add_argument("--csv", default=None, metavar="FILE.csv", help="write the per-run MPEs")
+    ap.add_argument("--load", nargs="+", default=None, metavar="FILE.csv",
+                    help="print and plot these saved runs (merged) instead of running")
     args = ap.parse_args()
     kwargs = {"rl": {"model": args.rl_model}} if args.rl_model else None
-    results = {}
-    for sensor in args.sensors:
-        res = results[sensor] = run(sensor, args.runs, args.seed, args.policies, kwargs)
-        print(f"\n{sensor}: mean MPE [m] over {args.runs} fresh layouts (seed {args.seed})")
-        print(f"  {'policy':12s}" + "".join(f"{n:>9d}" for n in STEPS))
+    if args.load:
+        results = load_csv(args.load)
+    else:
+        results = {sensor: run(sensor, args.runs, args.seed, args.policies, kwargs)
+                   for sensor in args.sensors}
+    if args.csv:
+        save_csv(results, args.csv, args.seed)
+    for sensor, res in results.items():
+        n_runs = len(next(iter(res.values())))
+        print(f"\n{sensor}: mean MPE [m] over {n_runs} layouts")
+        print(f"  {'policy':14s}" + "".join(f"{n:>9d}" for n in STEPS))
         for name, rows in res.items():
-            print(f"  {name:12s}" + "".join(f"{v:9.4f}" for v in rows.mean(axis=0)))
+            print(f"  {name:14s}" + "".join(f"{v:9.4f}" for v in rows.mean(axis=0)))
         if "random-walk" not in res:
             continue
         target = res["random-walk"][:, STEPS.index(2000)].mean()
