@@ -47,7 +47,7 @@ __all__ = ["AgentView", "ViewConfig"]
 
 _DIRECTIONS = 8
 _DISTANCES = (1, 2, 4)  # in steps
-_SHIELD_OFFSETS = np.concatenate([[0.0], np.repeat(np.arange(1, 17), 2) * 0.1 * np.tile([1, -1], 16)])
+_SHIELD_STEP = 0.1  # [rad] spacing of the turns the shield tries around the wish
 
 
 @dataclass(frozen=True)
@@ -143,11 +143,16 @@ class AgentView:
         d = np.array(_DISTANCES, float) * c.step_length
         self._probe_angles = np.repeat(a, len(d))
         self._probe_dist = np.tile(d, _DIRECTIONS)
+        # Turns the shield tries, nearest the wish first: 0, +0.1, -0.1, +0.2, -0.2, ... far
+        # enough to reach the whole +-max_turn range from any wish (then clipped to it).
+        k = np.arange(1, int(math.ceil(2.0 * c.max_turn / _SHIELD_STEP)) + 1)
+        self._offsets = np.concatenate([[0.0], np.stack([k, -k], axis=1).ravel() * _SHIELD_STEP])
         self._proximity: np.ndarray | None = None
         self.visits = np.zeros((self._n, self._n))
         self.odometry = np.zeros(3)
         self.sensed = np.zeros(c.n_objects)
         self._steps = 0
+        self._now = 0.0  # fraction of objects sensed in the last observation
 
     def _cell(self, x: float, y: float) -> tuple[int, int]:
         n, c = self._n, self.config
@@ -197,7 +202,7 @@ class AgentView:
             raise ValueError(f"action must be a finite number, got {action!r}")
         mt = self.config.max_turn
         wish = min(max(a, -1.0), 1.0) * mt
-        turns = np.clip(wish + _SHIELD_OFFSETS, -mt, mt)
+        turns = np.clip(wish + self._offsets, -mt, mt)
         first = self._walker._first_choice(self._proximity, turns)
         if first >= 0:
             self._walker._stuck_sign = np.zeros(1)
