@@ -42,6 +42,7 @@ class TrainConfig:
     learning_rate: float = 3e-4
     gamma: float = 0.95
     ent_coef: float = 0.0
+    presence: bool = True  # the two presence figures in the observation
 
 
 def make_vec_env(cfg: TrainConfig):
@@ -57,7 +58,8 @@ def make_vec_env(cfg: TrainConfig):
 
     def factory(k: int):
         return lambda: Monitor(MappingRewardWrapper(
-            gym.make(ids[k % 2], max_episode_steps=cfg.episode_steps), reward=cfg.reward))
+            gym.make(ids[k % 2], max_episode_steps=cfg.episode_steps), reward=cfg.reward,
+            presence=cfg.presence))
 
     venv = DummyVecEnv([factory(k) for k in range(cfg.n_envs)])
     venv.seed(cfg.seed)
@@ -100,6 +102,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--episode-steps", type=int, default=TrainConfig.episode_steps)
     ap.add_argument("--reward", default=TrainConfig.reward, choices=("odometry", "pose"))
     ap.add_argument("--seed", type=int, default=TrainConfig.seed)
+    ap.add_argument("--no-presence", action="store_true",
+                    help="leave the presence figures out of the agent's observation")
     ap.add_argument("--out", default="rl_policy.npz", help="model file to write (.npz)")
     ap.add_argument("--verbose", type=int, default=0)
     args = ap.parse_args(argv)
@@ -107,7 +111,8 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--timesteps, --n-envs and --episode-steps must be positive")
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     cfg = TrainConfig(timesteps=args.timesteps, n_envs=args.n_envs,
-                      episode_steps=args.episode_steps, reward=args.reward, seed=args.seed)
+                      episode_steps=args.episode_steps, reward=args.reward, seed=args.seed,
+                      presence=not args.no_presence)
     start = time.perf_counter()
     _, path, diff = train(cfg, args.out, verbose=args.verbose)
     print(f"trained {cfg.timesteps} steps in {time.perf_counter() - start:.0f} s; wrote "

@@ -10,9 +10,10 @@ count per cell of a grid in the robot's dead-reckoned frame (as
 - the novelty ``1 / (1 + visits)`` of the cells 1, 2 and 4 steps away in 8 directions around the
   heading (the ground the robot has covered, seen from where it stands);
 - its dead-reckoned position (scaled by the grid's half-width) and heading (cos, sin);
-- two presence figures: the fraction of objects sensed now and the fraction sensed at least
-  once. Presence is the visibility reading, or the ``"observed"`` mask under sensing limits;
-  the bearing and range sensors without limits sense every object, so both read 1.
+- two presence figures (``presence=True``): the fraction of objects sensed now and the
+  fraction sensed at least once. Presence is the visibility reading, or the ``"observed"`` mask
+  under sensing limits; the bearing and range sensors without limits sense every object, so
+  both read 1.
 
 It reads observations and its own turns only, never ``info``. Dead reckoning: a move advances
 the step, or less if the proximity ring reports less room along the turn
@@ -67,6 +68,7 @@ class ViewConfig:
     cell: float = 0.25
     extent: float = 3.0
     correct_drift: bool = True
+    presence: bool = True
 
     def __post_init__(self) -> None:
         for name in ("n_rays", "n_objects"):
@@ -78,15 +80,16 @@ class ViewConfig:
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-        if not isinstance(self.correct_drift, bool | np.bool_):
-            raise ValueError(f"correct_drift must be True or False, got {self.correct_drift!r}")
+        for name in ("correct_drift", "presence"):
+            if not isinstance(getattr(self, name), bool | np.bool_):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
         if self.extent < self.cell:
             raise ValueError(f"extent must be at least one cell ({self.cell}), got {self.extent!r}")
 
     @property
     def n_features(self) -> int:
         """Length of the feature vector."""
-        return self.n_rays + _DIRECTIONS * len(_DISTANCES) + 4 + 2
+        return self.n_rays + _DIRECTIONS * len(_DISTANCES) + 4 + (2 if self.presence else 0)
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -255,7 +258,7 @@ class AgentView:
         j = np.clip(np.floor(py).astype(int), 0, self._n - 1)
         novelty = 1.0 / (1.0 + self.visits[i, j])
         odo = [np.clip(x / c.extent, -1, 1), np.clip(y / c.extent, -1, 1), math.cos(h), math.sin(h)]
-        presence = [self._now, float((self.sensed > 0).mean())]
+        presence = [self._now, float((self.sensed > 0).mean())] if c.presence else []
         out = np.concatenate([np.minimum(self._proximity / c.proximity_range, 1.0), novelty, odo,
                               presence])
         return out.astype(np.float32)

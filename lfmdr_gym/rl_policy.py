@@ -33,8 +33,8 @@ FORMAT = 1
 DEFAULT_MODEL = "rl_policy.npz"
 """The shipped model, in the package folder ``lfmdr_gym/models``."""
 
-# The geometry that must match between the env and the trained model (the cell and extent of
-# the visit grid come from the model file; they are part of what the agent learned).
+# The geometry that must match between the env and the trained model (the visit grid's cell
+# and extent and the feature options come from the model file: part of what the agent learned).
 _MATCHED = ("n_rays", "proximity_range", "max_turn", "step_length", "robot_radius",
             "object_radius")
 
@@ -137,8 +137,8 @@ class MLPExplorationPolicy:
             if not np.isclose(float(getattr(config, key)), float(value)):
                 raise ValueError(f"the model was trained with {key}={value}, the env has "
                                  f"{key}={getattr(config, key)}; train a model for this env")
-        config = ViewConfig(**{**config.as_dict(), "cell": meta.get("cell", config.cell),
-                               "extent": meta.get("extent", config.extent)})
+        learned = {k: meta[k] for k in ("cell", "extent", "correct_drift", "presence") if k in meta}
+        config = ViewConfig(**{**config.as_dict(), **learned})
         if self.layers[0][0].shape[1] != config.n_features:
             raise ValueError(f"the model takes {self.layers[0][0].shape[1]} features, the view "
                              f"gives {config.n_features}")

@@ -41,7 +41,7 @@ class MappingRewardWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     ## Observation Space
 
-    ``Box(-1, 1, (n,), float32)`` with n = n_rays + 30: the features of
+    ``Box(-1, 1, (n,), float32)`` with n = n_rays + 30 (n_rays + 28 without presence): the features of
     :class:`~lfmdr_gym.agent_view.AgentView` (proximity ring, novelty of the dead-reckoned cells
     around, dead-reckoned pose, presence summary).
 
@@ -59,18 +59,20 @@ class MappingRewardWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     ## Arguments
 
-    ``MappingRewardWrapper(env, reward="odometry", cell=0.25)``: ``cell`` is the side of the
-    grid cells [m] for the reward and the features.
+    ``MappingRewardWrapper(env, reward="odometry", cell=0.25, presence=True)``: ``cell`` is the
+    side of the grid cells [m] for the reward and the features; ``presence=False`` leaves the
+    two presence figures out of the observation.
     """
 
-    def __init__(self, env: gym.Env, *, reward: str = "odometry", cell: float = 0.25) -> None:
+    def __init__(self, env: gym.Env, *, reward: str = "odometry", cell: float = 0.25,
+                 presence: bool = True) -> None:
         # RecordConstructorArgs: env.spec can then rebuild the wrapped env (check_env does).
-        gym.utils.RecordConstructorArgs.__init__(self, reward=reward, cell=cell)
+        gym.utils.RecordConstructorArgs.__init__(self, reward=reward, cell=cell, presence=presence)
         gym.Wrapper.__init__(self, env)
         if reward not in REWARDS:
             raise ValueError(f"reward must be one of {REWARDS}, got {reward!r}")
         self.reward_kind = reward
-        self.view = AgentView(ViewConfig.for_env(env, cell=cell))
+        self.view = AgentView(ViewConfig.for_env(env, cell=cell, presence=presence))
         n = self.view.config.n_features
         self.observation_space = spaces.Box(-1.0, 1.0, (n,), np.float32)
         self.action_space = spaces.Box(-1.0, 1.0, (1,), np.float32)
