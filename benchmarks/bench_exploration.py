@@ -29,9 +29,16 @@ STEPS = (250, 500, 1000, 2000)
 
 
 def _mpe(hist, n: int) -> float:
+    """MPE of the map of the first n steps; NaN when no map can be made (fewer than 3 anchors
+    sensed yet: a policy that has not been near three corners has no map to score)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        m = mappers.build_map(hist.head(n), hist.anchor_ids, hist.anchor_positions)
+        try:
+            m = mappers.build_map(hist.head(n), hist.anchor_ids, hist.anchor_positions)
+        except ValueError as exc:
+            if "anchors remain" not in str(exc):
+                raise
+            return float("nan")
     truth = hist.object_positions
     keep = np.setdiff1d(np.arange(len(truth)), [*hist.anchor_ids, *m.unmapped])
     return mappers.mean_position_error(m.positions[keep], truth[keep])
@@ -101,7 +108,7 @@ def plot(results: dict[str, dict[str, np.ndarray]], path: str) -> None:
     fig, axes = plt.subplots(1, len(results), figsize=(4.2 * len(results), 3.4), squeeze=False)
     for ax, (sensor, res) in zip(axes[0], results.items(), strict=True):
         for name, rows in res.items():
-            ax.plot(STEPS, rows.mean(axis=0), marker="o", label=name)
+            ax.plot(STEPS, np.nanmean(rows, axis=0), marker="o", label=name)
         ax.set(title=f"{sensor} (CAL-SMA, {len(rows)} layouts)", xlabel="steps",
                ylabel="mean MPE [m]", xscale="log")
         ax.set_xticks(STEPS, [str(n) for n in STEPS])
@@ -140,11 +147,13 @@ def main() -> None:
         print(f"\n{sensor}: mean MPE [m] over {n_runs} layouts")
         print(f"  {'policy':14s}" + "".join(f"{n:>9d}" for n in STEPS))
         for name, rows in res.items():
-            print(f"  {name:14s}" + "".join(f"{v:9.4f}" for v in rows.mean(axis=0)))
+            failed = np.isnan(rows).sum(axis=0)
+            note = "" if not failed.any() else f"   (no map, fewer than 3 anchors sensed: {failed.tolist()})"
+            print(f"  {name:14s}" + "".join(f"{v:9.4f}" for v in np.nanmean(rows, axis=0)) + note)
         if "random-walk" not in res:
             continue
-        target = res["random-walk"][:, STEPS.index(2000)].mean()
-        best, value = min(((n, r[:, STEPS.index(500)].mean()) for n, r in res.items()),
+        target = np.nanmean(res["random-walk"][:, STEPS.index(2000)])
+        best, value = min(((n, np.nanmean(r[:, STEPS.index(500)])) for n, r in res.items()),
                           key=lambda t: t[1])
         print(f"  goal: best at 500 steps ({best}, {value:.4f}) <= random walk at 2000 "
               f"({target:.4f}): {'met' if value <= target else 'NOT met'}")
