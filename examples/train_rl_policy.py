@@ -10,8 +10,8 @@ forward pass gives SB3's deterministic actions on the last observations.
 
     python examples/train_rl_policy.py --out lfmdr_gym/models/rl_policy.npz   # the shipped model
 
-150,000 steps take about 6 minutes on one idle core (15 on our 2-core machine under the load of
-other jobs); seed 0 and the defaults made the shipped model.
+150,000 steps take under 3 minutes on an idle machine (15 on our 2-core machine under the load
+of other jobs); seed 0 and the defaults made the shipped model.
 
     python examples/train_rl_policy.py --reward pose --out /tmp/pose.npz  # ground-truth reward
     python examples/train_rl_policy.py --timesteps 512 --out /tmp/m.npz   # smoke test
