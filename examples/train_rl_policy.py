@@ -10,8 +10,8 @@ forward pass gives SB3's deterministic actions on the last observations.
 
     python examples/train_rl_policy.py --out lfmdr_gym/models/rl_policy.npz   # the shipped model
 
-150,000 steps take under 3 minutes on an idle machine (15 on our 2-core machine under the load
-of other jobs); seed 0 and the defaults made the shipped model.
+300,000 steps take about 4 minutes on an idle machine (more under other jobs' load); seed 0 and
+the defaults made the shipped model (training is deterministic: a rerun gives the same weights).
 
     python examples/train_rl_policy.py --reward pose --out /tmp/pose.npz  # ground-truth reward
     python examples/train_rl_policy.py --timesteps 512 --out /tmp/m.npz   # smoke test
@@ -32,7 +32,7 @@ import numpy as np
 class TrainConfig:
     """What a training run is fixed by (CleanRL-style: one frozen record)."""
 
-    timesteps: int = 150_000
+    timesteps: int = 300_000
     n_envs: int = 4
     episode_steps: int = 500
     reward: str = "odometry"
