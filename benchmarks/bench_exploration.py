@@ -9,6 +9,8 @@ figure (matplotlib, the ``plots`` extra).
 
     PYTHONPATH=. python benchmarks/bench_exploration.py --plot docs/exploration.png  # 25 layouts
     PYTHONPATH=. python benchmarks/bench_exploration.py --runs 5 --sensors visibility
+    PYTHONPATH=. python benchmarks/bench_exploration.py --runs 6 --seed 5000 --policies rl \
+        --rl-model /tmp/m.npz   # a model of one's own, on layouts for tuning
 """
 
 from __future__ import annotations
@@ -27,27 +29,72 @@ STEPS = (250, 500, 1000, 2000)
 
 
 def _mpe(hist, n: int) -> float:
+    """MPE of the map of the first n steps; NaN when no map can be made (fewer than 3 anchors
+    sensed yet: a policy that has not been near three corners has no map to score)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        m = mappers.build_map(hist.head(n), hist.anchor_ids, hist.anchor_positions)
+        try:
+            m = mappers.build_map(hist.head(n), hist.anchor_ids, hist.anchor_positions)
+        except ValueError as exc:
+            if "anchors remain" not in str(exc):
+                raise
+            return float("nan")
     truth = hist.object_positions
     keep = np.setdiff1d(np.arange(len(truth)), [*hist.anchor_ids, *m.unmapped])
     return mappers.mean_position_error(m.positions[keep], truth[keep])
 
 
-def run(sensor: str, runs: int, seed: int) -> dict[str, np.ndarray]:
-    out: dict[str, list] = {name: [] for name in POLICIES}
+def run(sensor: str, runs: int, seed: int, policies: list[str] | None = None,
+        kwargs: dict[str, dict] | None = None) -> dict[str, np.ndarray]:
+    """Per policy, an array (runs, len(STEPS)) of MPEs. ``kwargs``: per policy, factory keywords
+    (e.g. ``{"rl": {"model": "m.npz"}}`` to score a model of one's own)."""
+    names = list(POLICIES) if policies is None else policies
+    unknown = [n for n in names if n not in POLICIES]
+    if unknown:
+        raise ValueError(f"unknown policies {unknown}; registered: {list(POLICIES)}")
+    out: dict[str, list] = {name: [] for name in names}
     for r in range(runs):
         s = derived_seed(seed, r)
-        for name, factory in POLICIES.items():
+        for name in names:
             env = make_env(env_id_for(sensor), max(STEPS))
             try:
-                hist = collect(env, factory(env, seed=s), max(STEPS), seed=s)
+                policy = POLICIES[name](env, seed=s, **(kwargs or {}).get(name, {}))
+                hist = collect(env, policy, max(STEPS), seed=s)
             finally:
                 env.close()
             with threadpool_limits(limits=1):
                 out[name].append([_mpe(hist, n) for n in STEPS])
     return {name: np.array(rows) for name, rows in out.items()}
+
+
+def save_csv(results: dict[str, dict[str, np.ndarray]], path: str, seed: int) -> None:
+    """Tidy rows (sensor, policy, layout, steps, mpe), written atomically."""
+    import csv
+
+    from lfmdr_gym.atomic import atomic_write
+
+    with atomic_write(path) as fh:
+        out = csv.writer(fh)
+        out.writerow(["sensor", "policy", "seed", "layout", "steps", "mpe"])
+        for sensor, res in results.items():
+            for name, rows in res.items():
+                for r, row in enumerate(rows):
+                    for n, v in zip(STEPS, row, strict=True):
+                        out.writerow([sensor, name, seed, r, n, repr(float(v))])
+
+
+def load_csv(paths: list[str]) -> dict[str, dict[str, np.ndarray]]:
+    """The results :func:`save_csv` wrote, merged over files (policies run separately)."""
+    import csv
+
+    cells: dict[str, dict[str, dict[int, dict[int, float]]]] = {}
+    for path in paths:
+        with open(path, newline="", encoding="utf-8") as fh:
+            for row in csv.DictReader(fh):
+                per = cells.setdefault(row["sensor"], {}).setdefault(row["policy"], {})
+                per.setdefault(int(row["layout"]), {})[int(row["steps"])] = float(row["mpe"])
+    return {sensor: {name: np.array([[runs[r][n] for n in STEPS] for r in sorted(runs)])
+                     for name, runs in res.items()} for sensor, res in cells.items()}
 
 
 def plot(results: dict[str, dict[str, np.ndarray]], path: str) -> None:
@@ -61,7 +108,7 @@ def plot(results: dict[str, dict[str, np.ndarray]], path: str) -> None:
     fig, axes = plt.subplots(1, len(results), figsize=(4.2 * len(results), 3.4), squeeze=False)
     for ax, (sensor, res) in zip(axes[0], results.items(), strict=True):
         for name, rows in res.items():
-            ax.plot(STEPS, rows.mean(axis=0), marker="o", label=name)
+            ax.plot(STEPS, np.nanmean(rows, axis=0), marker="o", label=name)
         ax.set(title=f"{sensor} (CAL-SMA, {len(rows)} layouts)", xlabel="steps",
                ylabel="mean MPE [m]", xscale="log")
         ax.set_xticks(STEPS, [str(n) for n in STEPS])
@@ -79,17 +126,34 @@ def main() -> None:
     ap.add_argument("--sensors", nargs="+", default=["visibility", "bearing"])
     ap.add_argument("--runs", type=int, default=25, help="fresh layouts (one start pose each)")
     ap.add_argument("--seed", type=int, default=4711, help="never used for tuning")
+    ap.add_argument("--policies", nargs="+", default=None, help="default: every registered one")
+    ap.add_argument("--rl-model", default=None, metavar="FILE.npz",
+                    help="score this model as the 'rl' policy (default: the shipped one)")
     ap.add_argument("--plot", default=None, metavar="FILE.png")
+    ap.add_argument("--csv", default=None, metavar="FILE.csv", help="write the per-run MPEs")
+    ap.add_argument("--load", nargs="+", default=None, metavar="FILE.csv",
+                    help="print and plot these saved runs (merged) instead of running")
     args = ap.parse_args()
-    results = {}
-    for sensor in args.sensors:
-        res = results[sensor] = run(sensor, args.runs, args.seed)
-        print(f"\n{sensor}: mean MPE [m] over {args.runs} fresh layouts (seed {args.seed})")
-        print(f"  {'policy':12s}" + "".join(f"{n:>9d}" for n in STEPS))
+    kwargs = {"rl": {"model": args.rl_model}} if args.rl_model else None
+    if args.load:
+        results = load_csv(args.load)
+    else:
+        results = {sensor: run(sensor, args.runs, args.seed, args.policies, kwargs)
+                   for sensor in args.sensors}
+    if args.csv:
+        save_csv(results, args.csv, args.seed)
+    for sensor, res in results.items():
+        n_runs = len(next(iter(res.values())))
+        print(f"\n{sensor}: mean MPE [m] over {n_runs} layouts")
+        print(f"  {'policy':14s}" + "".join(f"{n:>9d}" for n in STEPS))
         for name, rows in res.items():
-            print(f"  {name:12s}" + "".join(f"{v:9.4f}" for v in rows.mean(axis=0)))
-        target = res["random-walk"][:, STEPS.index(2000)].mean()
-        best, value = min(((n, r[:, STEPS.index(500)].mean()) for n, r in res.items()),
+            failed = np.isnan(rows).sum(axis=0)
+            note = "" if not failed.any() else f"   (no map, fewer than 3 anchors sensed: {failed.tolist()})"
+            print(f"  {name:14s}" + "".join(f"{v:9.4f}" for v in np.nanmean(rows, axis=0)) + note)
+        if "random-walk" not in res:
+            continue
+        target = np.nanmean(res["random-walk"][:, STEPS.index(2000)])
+        best, value = min(((n, np.nanmean(r[:, STEPS.index(500)])) for n, r in res.items()),
                           key=lambda t: t[1])
         print(f"  goal: best at 500 steps ({best}, {value:.4f}) <= random walk at 2000 "
               f"({target:.4f}): {'met' if value <= target else 'NOT met'}")

@@ -173,7 +173,8 @@ def _add_run(sub: Any) -> None:
                         "steps) and write the growing map beside the robot as DIR/live.gif "
                         "(needs matplotlib: pip install lfmdr[plots])")
     p.add_argument("--policy", default="random-walk", metavar="NAME",
-                   help="exploration policy, a name of lfmdr_gym.POLICIES (random-walk, coverage)")
+                   help="exploration policy, a name of lfmdr_gym.POLICIES (random-walk, coverage, "
+                   "coverage-scan, rl)")
     p.set_defaults(handler=_cmd_run)
 
 
@@ -213,7 +214,8 @@ def _add_collect(sub: Any) -> None:
     _add_env_keywords(p, "--env-kw")
     p.add_argument("--out", required=True, metavar="FILE.npz", help="history file to write")
     p.add_argument("--policy", default="random-walk", metavar="NAME",
-                   help="exploration policy, a name of lfmdr_gym.POLICIES (random-walk, coverage)")
+                   help="exploration policy, a name of lfmdr_gym.POLICIES (random-walk, coverage, "
+                   "coverage-scan, rl)")
     p.set_defaults(handler=_cmd_collect)
 
 

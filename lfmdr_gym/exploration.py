@@ -16,8 +16,11 @@ It knows only what it senses and what it did, never the pose or the layout in ``
   best-scored candidate that passes :class:`~lfmdr_gym.policies.RandomWalkPolicy`'s collision
   check is taken.
 
-Dead reckoning drifts a little on moves the physics cuts short (an object hidden between two
-rays); the visit memory only needs to be right over a few cells, so this does not matter much.
+Dead reckoning drifts on moves the physics cuts short (an object hidden between two rays).
+With ``correct_drift=True`` (registered as ``"coverage-scan"``) each move is re-reckoned once the
+ring after it is known: made in full unless it ended in contact, else the advance a scan match
+of the two rings gives (:mod:`lfmdr_gym.scan_match`). It maps visibility better and bearing no
+better (``docs/online-and-exploration.md``), so the default stays off.
 """
 
 from __future__ import annotations
@@ -40,6 +43,8 @@ class CoveragePolicy(RandomWalkPolicy):
         cell: side of a grid cell [m].
         extent: half-width of the grid around the start [m]; must exceed the arena's width so
             that any start keeps the arena inside (the default fits the paper's 2.5 m arena).
+        correct_drift: re-reckon each move from the ring after it (module docstring).
+        proximity_range: the ring's range [m] (``for_env`` reads it from the env's space).
         max_turn, step_length, robot_radius, margin, obstacle_radius, plan_ahead, n_tries, seed:
             as for :class:`~lfmdr_gym.policies.RandomWalkPolicy`.
 
@@ -50,8 +55,13 @@ class CoveragePolicy(RandomWalkPolicy):
 
     def __init__(self, max_turn: float = math.pi / 4, step_length: float = 0.2,
                  robot_radius: float = 0.05, *, cell: float = 0.25, extent: float = 3.0,
+                 correct_drift: bool = False, proximity_range: float = 0.5,
                  **kwargs: Any) -> None:
         super().__init__(max_turn, step_length, robot_radius, **kwargs)
+        if not isinstance(correct_drift, bool | np.bool_):
+            raise ValueError(f"correct_drift must be True or False, got {correct_drift!r}")
+        self.correct_drift = bool(correct_drift)
+        self.proximity_range = float(proximity_range)
         for name, value in (("cell", cell), ("extent", extent)):
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive finite number, got {value!r}")
@@ -62,10 +72,35 @@ class CoveragePolicy(RandomWalkPolicy):
         self._n = 2 * int(math.ceil(extent / cell))
         self._forget()
 
+    @classmethod
+    def for_env(cls, env: Any, **kwargs: Any) -> CoveragePolicy:
+        """As :meth:`RandomWalkPolicy.for_env`, plus the proximity ring's range from the env's
+        observation space (the scan match of ``correct_drift`` needs it)."""
+        space = getattr(env, "observation_space", None)
+        try:
+            kwargs.setdefault("proximity_range", float(np.max(space["proximity"].high)))
+        except (TypeError, KeyError):
+            pass
+        return super().for_env(env, **kwargs)
+
     def _forget(self) -> None:
         self.visits = np.zeros((self._n, self._n))
         self.odometry = np.zeros(3)
         self._moved = False
+        self._last: tuple | None = None  # (x, y, heading, turn, ring) of the last move's start
+
+    def _correct(self, prox: np.ndarray) -> None:
+        """Redo the last move's dead reckoning now that the ring after it is known: a move ends
+        free after the full step, or in contact after the advance a scan match gives."""
+        from lfmdr_gym.scan_match import contact, matched_advance
+
+        x, y, heading, turn, before = self._last
+        advance = self.step_length
+        if contact(prox, self.robot_radius):
+            matched = matched_advance(before, prox, turn, self.step_length, self.proximity_range)
+            advance = self._last_advance if matched is None else matched
+        self.odometry = np.array([x + advance * math.cos(heading), y + advance * math.sin(heading),
+                                  self.odometry[2]])
 
     def reset(self, seed: int | None = None) -> None:
         """Start an episode: forget the visits and the odometry; reseed as the random walk does."""
@@ -101,6 +136,8 @@ class CoveragePolicy(RandomWalkPolicy):
                              f"per-episode memory), got proximity of shape {prox.shape}")
         if self._stuck_sign is None or self._stuck_sign.shape != (1,):
             self._stuck_sign = np.zeros(1)
+        if self.correct_drift and self._last is not None:
+            self._correct(prox)
         self.visits[self._cells(self.odometry[None, :2])] += 1
         mt = self.max_turn
         turns = self.rng.uniform(-mt, mt, self.n_tries)
@@ -115,6 +152,9 @@ class CoveragePolicy(RandomWalkPolicy):
         room = float(self.clearance(prox[None, :], np.array([[turn]]))[0, 0])
         heading = self.odometry[2] + turn
         advance = min(self.step_length, max(room, 0.0))
+        if self.correct_drift:
+            self._last = (self.odometry[0], self.odometry[1], heading, turn, prox)
+            self._last_advance = advance
         self.odometry = np.array([self.odometry[0] + advance * math.cos(heading),
                                   self.odometry[1] + advance * math.sin(heading),
                                   math.remainder(heading, 2.0 * math.pi)])

@@ -474,9 +474,23 @@ def _coverage(env: Any, **kwargs: Any) -> Any:
     return CoveragePolicy.for_env(env, **kwargs)
 
 
+def _coverage_scan(env: Any, **kwargs: Any) -> Any:
+    from lfmdr_gym.exploration import CoveragePolicy
+
+    return CoveragePolicy.for_env(env, **{"correct_drift": True, **kwargs})
+
+
+def _rl(env: Any, **kwargs: Any) -> Any:
+    from lfmdr_gym.rl_policy import MLPExplorationPolicy
+
+    return MLPExplorationPolicy.for_env(env, **kwargs)
+
+
 POLICIES: Mapping[str, Callable[..., Any]] = MappingProxyType({
     "random-walk": RandomWalkPolicy.for_env,
     "coverage": _coverage,
+    "coverage-scan": _coverage_scan,
+    "rl": _rl,
 })
 """Name -> factory ``factory(env, **kwargs) -> policy``: the exploration policies ``lfmdr collect
 --policy NAME`` offers. A factory reads only the env's geometry (turn limit, step length, robot
@@ -485,6 +499,10 @@ and object radii) and spaces; the policy then sees observations only (:func:`che
 - ``"random-walk"``: the paper's agent (:class:`RandomWalkPolicy`).
 - ``"coverage"``: even coverage from a dead-reckoned visit memory
   (:class:`lfmdr_gym.exploration.CoveragePolicy`).
+- ``"coverage-scan"``: the same with its dead reckoning corrected from the proximity rings
+  (``correct_drift=True``, :mod:`lfmdr_gym.scan_match`).
+- ``"rl"``: a PPO agent trained on the coverage reward, run in numpy from the shipped weights
+  (:class:`lfmdr_gym.rl_policy.MLPExplorationPolicy`; ``examples/train_rl_policy.py``).
 """
 
 

@@ -1,0 +1,41 @@
+"""benchmarks/bench_exploration.py: per-run results saved and merged back (policies run apart)."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _bench():
+    spec = importlib.util.spec_from_file_location("bench_exploration",
+                                                  ROOT / "benchmarks" / "bench_exploration.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_results_round_trip_through_csv_and_merge(tmp_path):
+    bench = _bench()
+    rng = np.random.default_rng(0)
+    a = {"visibility": {"random-walk": rng.random((3, 4))}, "bearing": {"random-walk": rng.random((3, 4))}}
+    b = {"visibility": {"rl": rng.random((3, 4))}}
+    bench.save_csv(a, tmp_path / "a.csv", seed=1)
+    bench.save_csv(b, tmp_path / "b.csv", seed=1)
+    merged = bench.load_csv([tmp_path / "a.csv", tmp_path / "b.csv"])
+    assert set(merged) == {"visibility", "bearing"}
+    np.testing.assert_array_equal(merged["visibility"]["random-walk"], a["visibility"]["random-walk"])
+    np.testing.assert_array_equal(merged["visibility"]["rl"], b["visibility"]["rl"])
+    np.testing.assert_array_equal(merged["bearing"]["random-walk"], a["bearing"]["random-walk"])
+
+
+def test_run_refuses_an_unknown_policy():
+    import pytest
+
+    with pytest.raises(ValueError, match="no-such"):
+        _bench().run("visibility", 1, 0, ["no-such"])
