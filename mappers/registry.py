@@ -166,6 +166,7 @@ def _load_builtins() -> None:
     from mappers import (
         calibrated,
         covis_calibrated,
+        covis_consensus,
         dropout_blend,
         ensemble,
         masked,
@@ -177,7 +178,8 @@ def _load_builtins() -> None:
     )
 
     for spec in (*methods.SPECS, calibrated.SPEC, unfolding.SPEC, scalable.SPEC, *masked.SPECS,
-                 ensemble.SPEC, *covis_calibrated.SPECS, dropout_blend.SPEC, range_bearing.SPEC,
+                 ensemble.SPEC, *covis_calibrated.SPECS, covis_consensus.SPEC, dropout_blend.SPEC,
+                 range_bearing.SPEC,
                  visibility_bearing.SPEC):
         _METHODS.setdefault(spec.label, spec)
 
