@@ -5,11 +5,11 @@ the steps) the masked maps fail in two different ways:
 
 - ``covis-power`` (:mod:`mappers.masked`: a power link fitted to the co-observation rates,
   started from the ordinal ``covis-nonmetric`` map) is the more precise when its ordinal start
-  is right, and fails outright when it is not (0.39 and 0.54 m on 2 of 20 of our layouts, where
+  is right, and fails when it is not (0.39, 0.54 and 0.14 m on 3 of 20 of our layouts, where
   the ordinal fit settles in a wrong layout; the same happens started from a good map).
 - ``covis-cal`` (:mod:`mappers.covis_calibrated`: CAL-SMA of the coefficients) never failed
-  that way on our layouts (largest run 0.095 m) but is less precise (mean 0.073 against 0.058
-  on the 18 layouts where ``covis-power`` did not fail).
+  that way on our layouts (largest run 0.095 m) but is less precise (mean 0.073 against 0.057
+  on the 17 layouts where ``covis-power`` did not fail).
 
 Both are anchored, so they are in one frame and their disagreement, the mean distance between
 an object's two positions, is measured from the data alone: 0.03–0.09 m where ``covis-power`` was
