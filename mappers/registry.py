@@ -166,7 +166,6 @@ def _load_builtins() -> None:
     from mappers import (
         calibrated,
         covis_calibrated,
-        covis_consensus,
         dropout_blend,
         ensemble,
         masked,
@@ -178,8 +177,7 @@ def _load_builtins() -> None:
     )
 
     for spec in (*methods.SPECS, calibrated.SPEC, unfolding.SPEC, scalable.SPEC, *masked.SPECS,
-                 ensemble.SPEC, *covis_calibrated.SPECS, covis_consensus.SPEC, dropout_blend.SPEC,
-                 range_bearing.SPEC,
+                 ensemble.SPEC, *covis_calibrated.SPECS, dropout_blend.SPEC, range_bearing.SPEC,
                  visibility_bearing.SPEC):
         _METHODS.setdefault(spec.label, spec)
 
@@ -210,7 +208,7 @@ DEFAULT_METHODS: dict[tuple[str | frozenset[str], bool], str] = {
     ("visibility", False): "CAL-SMA",
     ("bearing", False): "CAL-SMA",
     ("range", False): "UNFOLD",
-    ("visibility", True): "covis-nonmetric",
+    ("visibility", True): "covis-power",
     ("bearing", True): "covis-auto",
     ("range", True): "range-quantile",
     (frozenset({"range", "bearing"}), False): "LOC-SMA",
