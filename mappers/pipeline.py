@@ -17,8 +17,8 @@ import scipy.sparse as sp
 from threadpoolctl import ThreadpoolController
 
 from mappers.align import apply_affine, check_anchors, check_not_collinear, fit_affine
-from mappers.fused import check_fused
 from mappers.flicker import FLICKER_THRESHOLD, flicker_rate
+from mappers.fused import check_fused
 from mappers.registry import (
     DROPOUT_DEFAULTS,
     SCALABLE_ABOVE_OBJECTS,
