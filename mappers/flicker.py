@@ -3,7 +3,8 @@
 A robot that walks smoothly sees an object come into view and go out of it in runs of steps:
 visible at ``t - 1`` and at ``t + 1`` but not at ``t`` ("a flicker") is rare with perfect
 sensing (an object hidden for one step behind another, or at the edge of sight: 3.6–4.7 % of
-the visible-on-both-sides steps on 12 of our layouts, N = 2000). A camera that misses each
+the visible-on-both-sides steps on 12 of our layouts, N = 2000; 0.6 % with 20 objects, 2.9 %
+with 200 in a 5 m arena). A camera that misses each
 visible object with probability ``p`` independently turns such a step into a 0 with probability
 ``p``, so the share of flickers among the steps whose neighbours are both visible estimates
 ``p`` (0.22–0.25 at ``miss_rate = 0.2``, 0.51–0.56 at 0.5, same layouts). The mapper is never
