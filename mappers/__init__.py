@@ -45,6 +45,9 @@ _LAZY: dict[str, str] = {
     "MaskedMapWarning": "mappers.masked",
     "masked_embedding": "mappers.masked",
     "CovisEnsemble": "mappers.ensemble",
+    "DROPOUT_DEFAULTS": "mappers.registry",
+    "flicker_rate": "mappers.flicker",
+    "DropoutBlend": "mappers.dropout_blend",
     "OnlineMapper": "mappers.online",
 }
 
