@@ -13,8 +13,9 @@ estimators that see the history differently each lose to the noise in their own 
 
 Both maps are anchored (the anchors held at their positions), so they are in one frame and their
 mean is a map; their errors are only partly shared, and the mean beats either (0.056 m, largest
-run 0.072, same layouts; at ``miss_rate = 0.2`` 0.049 against CAL-SMA's 0.053). An object one
-of them leaves unplaced takes the other's position.
+run 0.071, same layouts; at ``miss_rate = 0.2`` 0.049 against CAL-SMA's 0.053; on the 25 fresh
+layouts of ``benchmarks/bench_masked_goals.py`` at 0.5: 0.069 against CAL-SMA's 0.089 and
+``covis-nonmetric``'s 0.073). An object one of them leaves unplaced takes the other's position.
 
 *Assumes*: what CAL-SMA and ``covis-nonmetric`` assume, and that consecutive steps are close
 viewpoints (the window). ``build_map`` picks it for a complete visibility history whose flicker
