@@ -17,7 +17,7 @@ import scipy.sparse as sp
 from threadpoolctl import ThreadpoolController
 
 from mappers.align import apply_affine, check_anchors, check_not_collinear, fit_affine
-from mappers.flicker import FLICKER_THRESHOLD, flicker_rate
+from mappers.flicker import FLICKER_THRESHOLD, MIN_PERSISTENCE, flicker_rate, persistence
 from mappers.fused import check_fused
 from mappers.registry import (
     DROPOUT_DEFAULTS,
@@ -347,13 +347,16 @@ def build_map(
 
 def _dropout_default(X, mask, sensor, timeline, notes: list[str]) -> str | None:
     """The dropout default (:data:`mappers.registry.DROPOUT_DEFAULTS`) when a complete, dense
-    history of at most :data:`SCALABLE_ABOVE_OBJECTS` objects flickers like a sensor with
-    dropouts (:func:`mappers.flicker.flicker_rate` above :data:`FLICKER_THRESHOLD`), with a note
-    saying so; else None (the ordinary default). Perfect histories never get here: their rate is
-    a few percent."""
+    history of at most :data:`SCALABLE_ABOVE_OBJECTS` objects, whose steps are ordered like a
+    walk's (:func:`mappers.flicker.persistence` at least :data:`MIN_PERSISTENCE`), flickers like
+    a sensor with dropouts (:func:`mappers.flicker.flicker_rate` above
+    :data:`FLICKER_THRESHOLD`), with a note saying so; else None (the ordinary default). Perfect
+    histories never get here: their rate is a few percent."""
     label = DROPOUT_DEFAULTS.get(sensor)
     if label is None or mask is not None or sp.issparse(X) or X.shape[0] > SCALABLE_ABOVE_OBJECTS:
         return None
+    if not persistence(X, timeline) >= MIN_PERSISTENCE:
+        return None  # unordered viewpoints: a flicker says nothing about misses
     rate = flicker_rate(X, timeline)
     if not rate > FLICKER_THRESHOLD:
         return None

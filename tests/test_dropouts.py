@@ -13,7 +13,13 @@ from lfmdr_gym.policies import RandomWalkPolicy
 from lfmdr_gym.recording import collect
 from mappers import build_map, mean_position_error
 from mappers.dropout_blend import DropoutBlend, smooth_steps
-from mappers.flicker import FLICKER_THRESHOLD, flicker_rate, step_runs
+from mappers.flicker import (
+    FLICKER_THRESHOLD,
+    MIN_PERSISTENCE,
+    flicker_rate,
+    persistence,
+    step_runs,
+)
 
 
 @pytest.fixture(autouse=True)
@@ -64,6 +70,23 @@ def test_flicker_rate_reads_the_miss_rate_and_not_perfect_sensing():
         h = _episode(3, 1000, miss_rate=miss)
         assert h.mask is None or h.mask.all()  # a miss is measured: the history is complete
         assert flicker_rate(h.matrix) == pytest.approx(miss + rate * (1 - miss), abs=0.04)
+
+
+def test_unordered_viewpoints_are_not_read_as_dropouts():
+    """Viewpoints drawn at random (no walk): steps two apart are unrelated, so a 0 between two
+    1s says nothing about misses; persistence tells, and build_map keeps CAL-SMA."""
+    rng = np.random.default_rng(0)
+    P = rng.uniform(-1.2, 1.2, size=(30, 2))
+    robot = rng.uniform(-1.2, 1.2, size=(1500, 2))
+    X = (np.linalg.norm(P[:, None] - robot[None], axis=2) < 0.55).astype(float)
+    assert flicker_rate(X) > FLICKER_THRESHOLD  # it would be read as dropouts
+    assert persistence(X) < 1.3 < MIN_PERSISTENCE
+    walk = _episode(3, 1000, miss_rate=0.5)
+    assert persistence(walk.matrix) > 2 * MIN_PERSISTENCE
+    anchors = [int(np.argmin(np.linalg.norm(P - c, axis=1))) for c in ((-1, -1), (1, -1), (1, 1))]
+    assert build_map(X, anchors, P[anchors]).method == "CAL-SMA"
+    with pytest.raises(ValueError, match="2-D"):
+        persistence(np.ones(3))
 
 
 def test_smooth_steps_averages_within_each_run():
