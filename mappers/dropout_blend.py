@@ -15,7 +15,9 @@ Both maps are anchored (the anchors held at their positions), so they are in one
 mean is a map; their errors are only partly shared, and the mean beats either (0.056 m, largest
 run 0.071, same layouts; at ``miss_rate = 0.2`` 0.049 against CAL-SMA's 0.053; on the 25 fresh
 layouts of ``benchmarks/bench_masked_goals.py`` at 0.5: 0.069 against CAL-SMA's 0.089 and
-``covis-nonmetric``'s 0.073). An object one of them leaves unplaced takes the other's position.
+``covis-nonmetric``'s 0.073). An object one of them leaves unplaced takes the other's position;
+one whose two positions lie farther apart than the anchors' spread (a member's failure, not
+noise) keeps CAL-SMA's, with a warning.
 
 *Assumes*: what CAL-SMA and ``covis-nonmetric`` assume, and that consecutive steps are close
 viewpoints (the window). ``build_map`` picks it for a complete visibility history whose flicker
@@ -25,12 +27,14 @@ rate (:func:`mappers.flicker.flicker_rate`) says it has dropouts
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
 from mappers.calibrated import CalibratedSMACOF
 from mappers.flicker import step_runs
-from mappers.masked import MaskedMapper
+from mappers.masked import MaskedMapper, MaskedMapWarning
 from mappers.registry import MethodSpec
 
 __all__ = ["DropoutBlend", "smooth_steps"]
@@ -84,7 +88,20 @@ class DropoutBlend:
                                                    anchor_positions=anchor_positions),
         }
         a, b = self.maps_.values()
-        return np.where(np.isnan(a), b, np.where(np.isnan(b), a, 0.5 * (a + b)))
+        Y = np.where(np.isnan(a), b, np.where(np.isnan(b), a, 0.5 * (a + b)))
+        # covis-nonmetric's lower bounds can fling a weakly tied object kilometres away on very
+        # sparse data (N = 300 at miss_rate 0.7); an object whose two positions lie farther
+        # apart than the anchors' spread keeps CAL-SMA's
+        pos = np.asarray(anchor_positions, dtype=float)
+        spread = float(np.sqrt(np.mean(np.sum((pos - pos.mean(axis=0)) ** 2, axis=1))))
+        with np.errstate(invalid="ignore"):
+            apart = np.linalg.norm(a - b, axis=1) > spread
+        if apart.any():
+            Y[apart] = a[apart]
+            warnings.warn(f"dropout-blend: objects {np.flatnonzero(apart).tolist()} lie farther "
+                          f"apart in the two maps than the anchors' spread ({spread:.2f} m); "
+                          "they keep the CAL-SMA position", MaskedMapWarning, stacklevel=2)
+        return Y
 
 
 def _dropout_blend(window=3, n_neighbors=None, min_co=3, max_iter=300,

@@ -35,7 +35,7 @@ from mappers.sensors import (
     sensor_name,
 )
 
-__all__ = ["Map", "build_map"]
+__all__ = ["Map", "build_map", "default_method"]
 
 # Up to this many objects one BLAS thread is fastest: the matrices are small and the machine's
 # other threads (or processes) only add contention. Above it, the BLAS library decides.
@@ -343,6 +343,16 @@ def build_map(
     Y, caught = _embed(spec.label, est, Xm, inputs, allow_nan_rows=spec.takes_masks, n=mapped.size)
     notes.extend(caught)
     return _finish(spec, merged, sensor, Y, m, mapped, ids, pos, unmapped, notes)
+
+
+def default_method(histories: Any, *, sensor: str | None = None, mask: np.ndarray | None = None,
+                   timeline: np.ndarray | None = None) -> str:
+    """The label ``build_map(histories, ...)`` uses when no method is given (single-sensor
+    histories, as ``build_map`` takes them): the sensor's complete or masked default, the
+    scalable one for many objects, or the dropout default for a flickering history."""
+    X, mask, sensor, timeline = _inputs(histories, sensor, mask, timeline)
+    label = _dropout_default(X, mask, sensor, timeline, [])
+    return resolve_method(label, sensor, masked=mask is not None, n_objects=X.shape[0]).label
 
 
 def _dropout_default(X, mask, sensor, timeline, notes: list[str]) -> str | None:

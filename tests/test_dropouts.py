@@ -11,7 +11,7 @@ from threadpoolctl import threadpool_limits
 import lfmdr_gym  # noqa: F401 - registers the envs
 from lfmdr_gym.policies import RandomWalkPolicy
 from lfmdr_gym.recording import collect
-from mappers import build_map, mean_position_error
+from mappers import build_map, default_method, mean_position_error
 from mappers.dropout_blend import DropoutBlend, smooth_steps
 from mappers.flicker import (
     FLICKER_THRESHOLD,
@@ -108,6 +108,12 @@ def test_perfect_histories_keep_the_complete_default_exactly():
     assert np.array_equal(default.positions, named.positions)
 
 
+def test_default_method_names_what_build_map_picks():
+    assert default_method(_episode(4, 300)) == "CAL-SMA"
+    assert default_method(_episode(4, 300, miss_rate=0.5)) == "dropout-blend"
+    assert default_method(_episode(4, 300, fov_deg=90)) == "covis-power"
+
+
 def test_a_flickering_history_is_mapped_by_dropout_blend_and_better():
     """miss_rate 0.5 on two layouts: the default reads the flicker, says so, and its maps beat
     CAL-SMA's on the same histories."""
@@ -143,3 +149,31 @@ def test_dropout_blend_refuses_what_it_cannot_map():
         DropoutBlend().fit_transform(X, sensor="visibility")
     with pytest.raises(ValueError, match="window"):
         DropoutBlend(window=0)
+
+
+def test_an_object_flung_away_by_one_member_keeps_the_cal_sma_position(monkeypatch):
+    """covis-nonmetric can fling a weakly tied object kilometres away on very sparse data; the
+    blend then keeps CAL-SMA's position for it, and says so."""
+    import mappers.dropout_blend as db
+
+    h = _episode(5, 600, miss_rate=0.3)
+    ids = list(h.anchor_ids)
+    far = int(np.setdiff1d(np.arange(h.n_objects), ids)[0])
+
+    class Flung:
+        def __init__(self, *args, **kwargs):
+            pass
+
+        def fit_transform(self, X, mask=None, **kw):
+            Y = h.object_positions.copy()
+            Y[far] += 1000.0
+            return Y
+
+    monkeypatch.setattr(db, "MaskedMapper", Flung)
+    est = DropoutBlend()
+    with pytest.warns(UserWarning, match=rf"objects \[{far}\].*CAL-SMA"):
+        Y = est.fit_transform(h.matrix, sensor="visibility", anchor_ids=ids,
+                              anchor_positions=h.anchor_positions)
+    assert np.array_equal(Y[far], est.maps_["CAL-SMA"][far])
+    others = np.setdiff1d(np.arange(h.n_objects), [far])
+    assert np.allclose(Y[others], 0.5 * (est.maps_["CAL-SMA"][others] + h.object_positions[others]))
