@@ -208,7 +208,7 @@ DEFAULT_METHODS: dict[tuple[str | frozenset[str], bool], str] = {
     ("visibility", False): "CAL-SMA",
     ("bearing", False): "CAL-SMA",
     ("range", False): "UNFOLD",
-    ("visibility", True): "covis-power",
+    ("visibility", True): "dropout-blend",
     ("bearing", True): "covis-auto",
     ("range", True): "range-quantile",
     (frozenset({"range", "bearing"}), False): "LOC-SMA",
