@@ -55,7 +55,7 @@ PANELS: dict[str, tuple[str, str, tuple[Any, ...], dict[str, Any]]] = {
 # slow for a sweep of hundreds of maps; name it with --methods to include it.
 SLOW = ("covis-ensemble",)
 FIELDS = ("panel", "sensor", "setting", "value", "env_kwargs", "run", "method", "kind",
-          "mpe_nonanchor", "unmapped", "seconds", "error")
+          "mpe_nonanchor", "unmapped", "seconds", "error", "default")
 
 
 def _methods(sensor: str, masked: bool, chosen: list[str] | None) -> list[str]:
@@ -82,8 +82,14 @@ def _task(panel: str, value: Any, run: int, steps: int, seed: int,
     with threadpool_limits(1):  # one BLAS thread per map, as the protocol
         history = collect_episode(episode)
         masked = history.mask is not None and not history.mask.all()
+        from mappers import default_method
+
+        default = default_method(history)  # what build_map picks (a flickering history: dropouts)
+        methods = _methods(sensor, masked, chosen)
+        if chosen is None and default not in methods:
+            methods.insert(0, default)
         rows = []
-        for method in _methods(sensor, masked, chosen):
+        for method in methods:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 t0 = time.perf_counter()
@@ -94,6 +100,7 @@ def _task(panel: str, value: Any, run: int, steps: int, seed: int,
                 "run": run, "method": method, "kind": "masked" if masked else "complete",
                 "mpe_nonanchor": result["mpe_nonanchor"], "unmapped": result["unmapped"],
                 "seconds": time.perf_counter() - t0, "error": result["error"],
+                "default": default,
             })
     return rows
 
@@ -102,6 +109,8 @@ def _is_default(row: dict[str, Any]) -> bool:
     """Whether ``row``'s method is the one ``build_map`` picks for its history by default."""
     from mappers import DEFAULT_METHODS
 
+    if row.get("default"):  # recorded since the flicker routing (mappers.flicker)
+        return row["method"] == row["default"]
     return row["method"] == DEFAULT_METHODS[(row["sensor"], row["kind"] == "masked")]
 
 

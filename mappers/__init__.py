@@ -27,6 +27,7 @@ _LAZY: dict[str, str] = {
     "resolve_method": "mappers.registry",
     "Map": "mappers.pipeline",
     "build_map": "mappers.pipeline",
+    "default_method": "mappers.pipeline",
     "apply_affine": "mappers.align",
     "fit_affine": "mappers.align",
     "mean_orientation_error": "mappers.scores",
@@ -45,6 +46,9 @@ _LAZY: dict[str, str] = {
     "MaskedMapWarning": "mappers.masked",
     "masked_embedding": "mappers.masked",
     "CovisEnsemble": "mappers.ensemble",
+    "DROPOUT_DEFAULTS": "mappers.registry",
+    "flicker_rate": "mappers.flicker",
+    "DropoutBlend": "mappers.dropout_blend",
     "OnlineMapper": "mappers.online",
 }
 

@@ -27,6 +27,8 @@ look far from everything. The methods here use only what was observed (the pair 
     coefficient: the missing-data analogue of the paper's L2-normalised visibility, eq. 7); only
     its order is trusted: non-metric weighted SMACOF with weights ``sqrt(C_ij)``, anchors fixed.
     Pairs seen together in fewer than ``min_co`` steps are lower bounds, not measurements.
+    A history that sensed every object in every step (complete bearing or range) has no such
+    pattern and is refused (ValueError), as by ``covis-power``.
     *Assumes*: the chance of seeing two landmarks in one step falls monotonically with their
     distance, the same way everywhere.
 
@@ -85,6 +87,10 @@ from mappers.smacof_variants import bounded_smacof, nonmetric_smacof, power_link
 __all__ = ["MASKED_METHODS", "MaskedMap", "MaskedMapWarning", "MaskedMapper", "masked_embedding"]
 
 _COVIS = ("covis-nonmetric", "covis-power", "covis-angle")
+_PATTERN_ONLY = ("covis-nonmetric", "covis-power")
+"""The methods that read only the pattern of what was sensed: refused on a history that sensed
+every object in every step (a complete bearing or range history), where they would draw a map
+from no information."""
 _OWN_DEFAULT = {"visibility": "covis-nonmetric", "bearing": "covis-nonmetric", "range": "range-quantile"}
 """What :func:`masked_embedding` uses when no method is given (``build_map``'s masked defaults,
 :data:`mappers.registry.DEFAULT_METHODS`, may be methods of other modules)."""
@@ -287,6 +293,14 @@ def masked_embedding(
     keep = np.setdiff1d(np.arange(M), never)
     if len(keep) < 3:
         raise ValueError(f"only {len(keep)} object(s) were ever sensed; need at least 3")
+    if method in _PATTERN_ONLY and seen[keep].all():
+        raise ValueError(
+            f"method {method!r} reads only which objects were sensed together, and this {sensor} "
+            f"history sensed every object in every step (a complete {sensor} history): that "
+            f"pattern says nothing about distance. Use the complete default (CAL-SMA"
+            f"{', UNFOLD for range' if sensor == 'range' else ''})"
+            f"{' or covis-angle' if sensor == 'bearing' else ''}, or pass the history's mask"
+        )
     pairs = _pair_statistics(method, seen[keep], values[keep], sensor, p)
     comps = pair_components(pairs.counts)
     comps_full = [[int(keep[i]) for i in c] for c in comps]  # the data's groups, object ids

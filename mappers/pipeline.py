@@ -17,8 +17,16 @@ import scipy.sparse as sp
 from threadpoolctl import ThreadpoolController
 
 from mappers.align import apply_affine, check_anchors, check_not_collinear, fit_affine
+from mappers.flicker import FLICKER_THRESHOLD, MIN_PERSISTENCE, flicker_rate, persistence
 from mappers.fused import check_fused
-from mappers.registry import MappingError, MethodSpec, check_size, resolve_method
+from mappers.registry import (
+    DROPOUT_DEFAULTS,
+    SCALABLE_ABOVE_OBJECTS,
+    MappingError,
+    MethodSpec,
+    check_size,
+    resolve_method,
+)
 from mappers.sensors import (
     COLUMNS_PER_STEP,
     check_sensor,
@@ -27,7 +35,7 @@ from mappers.sensors import (
     sensor_name,
 )
 
-__all__ = ["Map", "build_map"]
+__all__ = ["Map", "build_map", "default_method"]
 
 # Up to this many objects one BLAS thread is fastest: the matrices are small and the machine's
 # other threads (or processes) only add contention. Above it, the BLAS library decides.
@@ -294,8 +302,10 @@ def build_map(
         anchor_positions: (A, 2) their known positions [m]; not collinear.
         method: a label of :data:`mappers.METHODS` (case-insensitive) that maps this kind of
             history; None = the default for the sensor and for complete or masked histories
-            (:data:`mappers.DEFAULT_METHODS`). A label that does not fit is a ValueError listing
-            the labels that do.
+            (:data:`mappers.DEFAULT_METHODS`); a complete visibility history that flickers like a
+            camera with dropouts goes to :data:`mappers.registry.DROPOUT_DEFAULTS` instead (with
+            a note in ``Map.warnings``). A label that does not fit is a ValueError listing the
+            labels that do.
         sensor: "visibility", "bearing" or "range"; None = inferred (:func:`infer_sensor`); for
             fused histories the keys name the sensors (a given ``sensor`` must agree).
         mask: optional (M, D) bool, True where observed; an all-True mask is no mask. Fused
@@ -325,6 +335,9 @@ def build_map(
                                 timeline, normalize, random_state, params)
     X, mask, sensor, timeline = _inputs(histories, sensor, mask, timeline)
     m = X.shape[0]
+    notes: list[str] = []
+    if method is None:
+        method = _dropout_default(X, mask, sensor, timeline, notes)
     spec = resolve_method(method, sensor, masked=mask is not None, n_objects=m)
     merged = _method_params(spec, params, normalize, random_state)
     ids, pos = check_anchors(anchor_ids, anchor_positions, m)
@@ -334,7 +347,6 @@ def build_map(
     else:
         has_data = np.any((X != 0) if mask is None else (mask & (X != 0)), axis=1)
     unmapped = tuple(int(i) for i in np.flatnonzero(~has_data))
-    notes: list[str] = []
     ids, pos = _usable_anchors(ids, pos, has_data[ids], "have empty histories", notes)
     mapped = np.flatnonzero(has_data)
     _check_neighbors(merged, mapped.size)
@@ -353,6 +365,37 @@ def build_map(
     Y, caught = _embed(spec.label, est, Xm, inputs, allow_nan_rows=spec.takes_masks, n=mapped.size)
     notes.extend(caught)
     return _finish(spec, merged, sensor, Y, m, mapped, ids, pos, unmapped, notes)
+
+
+def default_method(histories: Any, *, sensor: str | None = None, mask: np.ndarray | None = None,
+                   timeline: np.ndarray | None = None) -> str:
+    """The label ``build_map(histories, ...)`` uses when no method is given (single-sensor
+    histories, as ``build_map`` takes them): the sensor's complete or masked default, the
+    scalable one for many objects, or the dropout default for a flickering history."""
+    X, mask, sensor, timeline = _inputs(histories, sensor, mask, timeline)
+    label = _dropout_default(X, mask, sensor, timeline, [])
+    return resolve_method(label, sensor, masked=mask is not None, n_objects=X.shape[0]).label
+
+
+def _dropout_default(X, mask, sensor, timeline, notes: list[str]) -> str | None:
+    """The dropout default (:data:`mappers.registry.DROPOUT_DEFAULTS`) when a complete, dense
+    history of at most :data:`SCALABLE_ABOVE_OBJECTS` objects, whose steps are ordered like a
+    walk's (:func:`mappers.flicker.persistence` at least :data:`MIN_PERSISTENCE`), flickers like
+    a sensor with dropouts (:func:`mappers.flicker.flicker_rate` above
+    :data:`FLICKER_THRESHOLD`), with a note saying so; else None (the ordinary default). Perfect
+    histories never get here: their rate is a few percent."""
+    label = DROPOUT_DEFAULTS.get(sensor)
+    if label is None or mask is not None or sp.issparse(X) or X.shape[0] > SCALABLE_ABOVE_OBJECTS:
+        return None
+    if not persistence(X, timeline) >= MIN_PERSISTENCE:
+        return None  # unordered viewpoints: a flicker says nothing about misses
+    rate = flicker_rate(X, timeline)
+    if not rate > FLICKER_THRESHOLD:
+        return None
+    notes.append(f"the history flickers (visible at the steps before and after, not at the step: "
+                 f"{rate:.0%} of such steps, above {FLICKER_THRESHOLD:.0%}): a sensor with "
+                 f"dropouts, mapped with {label!r}")
+    return label
 
 
 def _finish(spec, merged, sensor, Y, m, mapped, ids, pos, unmapped, notes) -> Map:

@@ -22,6 +22,7 @@ from mappers.sensors import SENSORS, check_sensor_set, sensor_name
 
 __all__ = [
     "DEFAULT_METHODS",
+    "DROPOUT_DEFAULTS",
     "DENSE_MAX_OBJECTS",
     "SCALABLE_ABOVE_OBJECTS",
     "SCALABLE_DEFAULTS",
@@ -166,6 +167,7 @@ def _load_builtins() -> None:
         calibrated,
         covis_calibrated,
         covis_sparse,
+        dropout_blend,
         ensemble,
         masked,
         methods,
@@ -176,8 +178,8 @@ def _load_builtins() -> None:
     )
 
     for spec in (*methods.SPECS, calibrated.SPEC, unfolding.SPEC, scalable.SPEC, *masked.SPECS,
-                 ensemble.SPEC, *covis_calibrated.SPECS, covis_sparse.SPEC, range_bearing.SPEC,
-                 visibility_bearing.SPEC):
+                 ensemble.SPEC, *covis_calibrated.SPECS, covis_sparse.SPEC, dropout_blend.SPEC,
+                 range_bearing.SPEC, visibility_bearing.SPEC):
         _METHODS.setdefault(spec.label, spec)
 
 
@@ -207,7 +209,7 @@ DEFAULT_METHODS: dict[tuple[str | frozenset[str], bool], str] = {
     ("visibility", False): "CAL-SMA",
     ("bearing", False): "CAL-SMA",
     ("range", False): "UNFOLD",
-    ("visibility", True): "covis-nonmetric",
+    ("visibility", True): "dropout-blend",
     ("bearing", True): "covis-auto",
     ("range", True): "range-quantile",
     (frozenset({"range", "bearing"}), False): "LOC-SMA",
@@ -217,6 +219,14 @@ DEFAULT_METHODS: dict[tuple[str | frozenset[str], bool], str] = {
 """(sensor, masked) -> the label ``build_map`` uses when no method is given; a fused set of
 sensors is keyed by its frozenset. The measured figures behind each choice are in the README
 and ``benchmarks/``."""
+
+DROPOUT_DEFAULTS: dict[str, str] = {
+    "visibility": "dropout-blend",
+}
+"""sensor -> the label ``build_map`` uses instead of the complete default when no method is given
+and the complete history's flicker rate (:func:`mappers.flicker.flicker_rate`) is above
+:data:`mappers.flicker.FLICKER_THRESHOLD`: the history has dropouts (a camera's misses), which
+perfect sensing does not produce. Perfect histories stay on :data:`DEFAULT_METHODS`."""
 
 SCALABLE_DEFAULTS: dict[tuple[str, bool], str] = {
     ("visibility", False): "CAL-SMA-SPARSE",

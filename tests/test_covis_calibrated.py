@@ -117,3 +117,19 @@ def test_bad_input_is_refused_with_its_name():
         with pytest.raises(ValueError, match="range"):
             resolve_method(label, "range", masked=True)
         assert resolve_method(label, "bearing", masked=True).label == label
+
+
+@pytest.mark.parametrize("method", ["covis-nonmetric", "covis-power"])
+def test_pattern_only_methods_refuse_a_complete_bearing_history(method):
+    """Every object sensed in every step: the co-observation pattern is uniform, and these
+    methods used to draw a ~0.8 m map of it silently. They refuse, naming the alternatives;
+    a masked history of the same camera still maps."""
+    P, X, mask, a = _camera(360, n_obj=20, n_steps=400)
+    assert mask.all()
+    with pytest.raises(ValueError, match="sensed every object in every step.*covis-angle"):
+        build_map(X, a, P[a], method, sensor="bearing")
+    with pytest.raises(ValueError, match="sensed every object in every step"):
+        masked_embedding(X, None, "bearing", method, anchor_ids=a, anchor_positions=P[a])
+    P, X, mask, a = _camera(90, n_obj=20, n_steps=1500)
+    m = build_map(X, a, P[a], method, sensor="bearing", mask=mask)
+    assert np.isfinite(m.positions).all()

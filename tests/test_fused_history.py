@@ -169,6 +169,6 @@ def test_a_compact_masked_fused_recording_keeps_sparse_masks_through_a_file(tmp_
         np.testing.assert_allclose(back.parts[name].matrix, dense.parts[name].matrix, atol=1e-6)
     assert back.head(100).masked
     with pytest.raises(ValueError, match="parts"):
-        back.sparse_mask
+        _ = back.sparse_mask
     result = build_map(back, back.anchor_ids, back.anchor_positions)
     assert result.method == "LOC-SMA"
