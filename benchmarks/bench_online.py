@@ -11,6 +11,7 @@ the columns of 10 new steps at a time and prints, over the runs:
 
     PYTHONPATH=. python benchmarks/bench_online.py                  # 25 layouts per sensor
     PYTHONPATH=. python benchmarks/bench_online.py --runs 5 --sensors bearing
+    PYTHONPATH=. python benchmarks/bench_online.py --runs 8 --seed 777 --warm-rounds 2   # variants
 """
 
 from __future__ import annotations
@@ -34,9 +35,9 @@ def _mpe(result, hist) -> float:
     return mappers.mean_position_error(result.positions[keep], truth[keep])
 
 
-def one_run(hist, steps: int, batch: int, checkpoints: tuple[int, ...]) -> dict:
+def one_run(hist, steps: int, batch: int, checkpoints: tuple[int, ...], **online) -> dict:
     c = COLUMNS_PER_STEP[hist.sensor]
-    om = mappers.OnlineMapper(hist.anchor_ids, hist.anchor_positions, sensor=hist.sensor)
+    om = mappers.OnlineMapper(hist.anchor_ids, hist.anchor_positions, sensor=hist.sensor, **online)
     times, ratios, online, offline = [], [], [], []
     for s in range(0, steps, batch):
         t0 = time.process_time()
@@ -61,20 +62,24 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=31337, help="never used for tuning")
     ap.add_argument("--steps", type=int, default=2000)
     ap.add_argument("--batch", type=int, default=10, help="new steps per update")
+    ap.add_argument("--warm-rounds", type=int, default=1, help="OnlineMapper's warm_rounds")
+    ap.add_argument("--refit-growth", type=float, default=4.0, help="OnlineMapper's refit_growth")
     args = ap.parse_args()
     checkpoints = tuple(n for n in (500, 1000, 1500) if n < args.steps) + (args.steps,)
     for sensor in args.sensors:
         cfg = ProtocolConfig(sensor=sensor, layouts=args.runs, poses=1, steps=args.steps,
                              seed=args.seed, methods=("LPCA",))
         with threadpool_limits(limits=1):
-            rows = [one_run(collect_episode(ep), args.steps, args.batch, checkpoints)
+            rows = [one_run(collect_episode(ep), args.steps, args.batch, checkpoints,
+                            warm_rounds=args.warm_rounds, refit_growth=args.refit_growth)
                     for ep in cfg.episodes()]
         med = np.median([r["median"] for r in rows])
         mean = np.mean([r["mean"] for r in rows])
         rebuild = np.median([r["rebuild"] for r in rows])
         R = np.array([r["ratios"] for r in rows])
         print(f"\n{sensor}: {len(rows)} fresh layouts (seed {args.seed}), updates of {args.batch} "
-              f"steps, N = {args.steps}")
+              f"steps, N = {args.steps}, warm_rounds {args.warm_rounds}, refit_growth "
+              f"{args.refit_growth:g}")
         print(f"  rebuild at N: {rebuild * 1e3:.1f} ms;  update: median {med * 1e3:.2f} ms "
               f"({rebuild / med:.1f}x cheaper), mean incl. refits {mean * 1e3:.2f} ms "
               f"({rebuild / mean:.1f}x); full refits per run {np.mean([r['refits'] for r in rows]):.1f}")
