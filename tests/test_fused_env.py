@@ -74,6 +74,7 @@ def test_one_camera_decides_for_both_sensors_and_the_noise_is_independent():
               line_of_sight=True)
     env = LFMDREnv("range-bearing", **kw)
     obs, info = env.reset(seed=11)
+    env.action_space.seed(11)  # the same path on every run
     r_err, b_err = [], []
     for _ in range(100):
         r, theta = _geometry(info)
@@ -91,7 +92,8 @@ def test_one_camera_decides_for_both_sensors_and_the_noise_is_independent():
     assert r_err.size > 100
     assert 0.025 < r_err.std() < 0.035 and abs(r_err.mean()) < 0.005
     assert math.radians(2.5) < b_err.std() < math.radians(3.5)
-    assert abs(np.corrcoef(r_err, b_err)[0, 1]) < 0.15  # drawn independently
+    # drawn independently: the sample correlation of n independent pairs has spread 1/sqrt(n)
+    assert abs(np.corrcoef(r_err, b_err)[0, 1]) < 4.0 / math.sqrt(r_err.size)
 
 
 def test_limits_of_other_sensors_are_refused_and_bad_sensors_named():
