@@ -216,6 +216,13 @@ class AgentView:
             turn = self._walker._unstick(0, self._proximity)
         return float(np.float32(turn))
 
+    @property
+    def in_contact(self) -> bool:
+        """Whether the last observation's ring shows the robot touching an obstacle."""
+        if self._proximity is None:
+            raise RuntimeError("call reset(observation) before in_contact")
+        return contact(self._proximity, self.config.robot_radius)
+
     def step(self, turn: float, observation: Mapping[str, Any]) -> tuple[np.ndarray, float]:
         """Dead-reckon the move just made with ``turn`` and take its observation.
 

@@ -130,6 +130,17 @@ def test_rl_policy_is_registered_and_deterministic(env_id):
     env.close()
 
 
+def test_rl_policy_gets_out_of_a_pocket():
+    """Layout seed 3 (bearing) wedges the robot between the wall and a cylinder: the network
+    alone repeated blocked moves (453 of 500 blocked); with the random walk taking over after
+    STUCK_STEPS observations in contact, about as few are blocked as for the random walk."""
+    env = gym.make("LFMDR-Bearing-v0")
+    history = collect(env, POLICIES["rl"](env), 500, seed=3)
+    walk = collect(env, POLICIES["random-walk"](env), 500, seed=3)
+    assert history.meta["blocked_moves"] < max(2 * walk.meta["blocked_moves"], 60)
+    env.close()
+
+
 def test_rl_policy_refuses_a_mismatched_env_and_bad_files(tmp_path):
     env = gym.make("LFMDR-Visibility-v0", n_proximity_rays=16)
     with pytest.raises(ValueError, match="n_rays"):
