@@ -114,9 +114,9 @@ def _sparse_inputs(X: Any, sensor: str | None, mask: Any) -> tuple[Any, Any, str
     if X.ndim != 2 or X.shape[0] < 3 or X.shape[1] < 1:
         raise ValueError(f"histories need at least 3 objects and 1 column, got shape {X.shape}")
     if mask is not None:
-        if not sp.issparse(mask) and np.asarray(mask).dtype != bool:
-            raise ValueError(f"mask must be a boolean array (True = observed), got dtype "
-                             f"{np.asarray(mask).dtype}")
+        dtype = mask.dtype if sp.issparse(mask) else np.asarray(mask).dtype
+        if dtype != np.bool_:
+            raise ValueError(f"mask must be a boolean array (True = observed), got dtype {dtype}")
         mask = sp.csr_array(mask, dtype=bool)
         if mask.shape != X.shape:
             raise ValueError(f"mask must have the shape of histories {X.shape}, got {mask.shape}")

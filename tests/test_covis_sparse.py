@@ -77,3 +77,11 @@ def test_a_dense_masked_method_gets_the_sparse_history_densified(limited):
     a = mappers.build_map(small, dense.anchor_ids, dense.anchor_positions, method="covis-auto")
     b = mappers.build_map(dense, dense.anchor_ids, dense.anchor_positions, method="covis-auto")
     np.testing.assert_array_equal(a.positions, b.positions)
+
+
+def test_a_sparse_mask_that_is_not_boolean_is_refused(limited):
+    _, small = limited
+    ids, pos = small.anchor_ids, small.anchor_positions
+    numbers = sp.csr_array(small.sparse_mask, dtype=float)  # 1.0 / 0.0, not True / False
+    with pytest.raises(ValueError, match="mask must be a boolean array.*float64"):
+        mappers.build_map(small.sparse, ids, pos, mask=numbers, sensor="bearing")
