@@ -14,7 +14,7 @@ from lfmdr_gym.grid import CellGrid
 from lfmdr_gym.imperfect import SensingLimits
 from lfmdr_gym.render import HumanViewer, available_render_modes, draw_frame, human_rendering_error
 from lfmdr_gym.world import World, check_int, check_real
-from mappers.sensors import FUSED_SENSORS, SENSORS, check_sensor
+from mappers.sensors import SENSORS, check_sensor, sensors_of
 
 __all__ = ["LFMDREnv", "OBSERVATION_TYPES", "observation_factory"]
 
@@ -238,13 +238,7 @@ class LFMDREnv(gym.Env):
         line_of_sight: bool = False,
         render_mode: str | None = None,
     ) -> None:
-        if sensor in FUSED_SENSORS:
-            sensors_of = tuple(s for s in SENSORS if s in FUSED_SENSORS[sensor])
-        elif isinstance(sensor, str) and sensor in SENSORS:
-            sensors_of = (sensor,)
-        else:
-            raise ValueError(f"sensor must be one of {list(SENSORS)} or a fused set of "
-                             f"{list(FUSED_SENSORS)}, got {sensor!r}")
+        names = sensors_of(sensor)
         self.world = World(
             n_objects=n_objects,
             arena_size=arena_size,
@@ -282,13 +276,12 @@ class LFMDREnv(gym.Env):
         self.render_mode = render_mode
 
         # One observation type per sensor (several for a fused set, read from the same pose).
-        self.sensors = sensors_of
-        self._obs_types = {s: observation_factory(self, s) for s in sensors_of}
-        self._fused = len(sensors_of) > 1
+        self.sensors = names
+        self._obs_types = {s: observation_factory(self, s) for s in names}
+        self._fused = len(names) > 1
         # The sensor drawn by render(): a fused set's other than bearing (whose rays go to every
         # object), i.e. range or visibility.
-        self._key = (sensors_of[0] if not self._fused
-                     else next(s for s in sensors_of if s != "bearing"))
+        self._key = names[0] if not self._fused else next(s for s in names if s != "bearing")
         self._obs_type = self._obs_types[self._key]
         range_type = self._obs_types.get("range")
         # Imperfect sensing (lfmdr_gym.imperfect): built only when a limit is on.
@@ -382,20 +375,11 @@ class LFMDREnv(gym.Env):
         prox = sensors.proximity_kernel(
             x, y, h, rc, q, w.arena_half, self._dirs, self.proximity_range, xy
         )
-        if self._fused:
-            readings = {k: t.observe(rel, d2, h, cand, rc, dc2, q) for k, t in self._obs_types.items()}
-            obs = {**readings, "proximity": prox.astype(np.float32)}
-            if self._limits is not None:
-                limited, obs["observed"] = self._limits.apply_all(readings, rel, d2, h)
-                obs.update(limited)
-            self._last_obs = obs
-            return obs
-        obs = {
-            self._key: self._obs_type.observe(rel, d2, h, cand, rc, dc2, q),
-            "proximity": prox.astype(np.float32),
-        }
+        readings = {k: t.observe(rel, d2, h, cand, rc, dc2, q) for k, t in self._obs_types.items()}
+        obs = {**readings, "proximity": prox.astype(np.float32)}
         if self._limits is not None:
-            obs[self._key], obs["observed"] = self._limits.apply(obs[self._key], rel, d2, h)
+            limited, obs["observed"] = self._limits.apply(readings, rel, d2, h)
+            obs.update(limited)
         self._last_obs = obs
         return obs
 

@@ -35,8 +35,8 @@ from mappers.align import check_anchor_ids
 from mappers.sensors import (
     COLUMNS_PER_STEP,
     FUSED_SENSORS,
-    SENSORS,
     check_timeline,
+    sensors_of,
 )
 
 FORMAT = "lfmdr-history"
@@ -95,12 +95,9 @@ class History:
     timeline: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        if isinstance(self.sensor, str) and self.sensor in FUSED_SENSORS:
+        if len(sensors_of(self.sensor)) > 1:  # (a name it does not know: a ValueError)
             self._init_fused()
             return
-        if not isinstance(self.sensor, str) or self.sensor not in SENSORS:
-            raise ValueError(f"sensor must be one of {list(SENSORS)} or a fused set of "
-                             f"{list(FUSED_SENSORS)}, got {self.sensor!r}")
         if isinstance(self.__dict__["_data"], Mapping):
             raise ValueError(f"a mapping sensor -> matrix is a fused history: its sensor must name "
                              f"the set (one of {list(FUSED_SENSORS)}), got {self.sensor!r}")
@@ -147,7 +144,7 @@ class History:
 
     def _init_fused(self) -> None:
         """Validate a fused history: one single-sensor History per sensor of the set (:attr:`parts`)."""
-        names = tuple(s for s in SENSORS if s in FUSED_SENSORS[self.sensor])
+        names = sensors_of(self.sensor)
         matrices = self.__dict__["_data"]
         if not isinstance(matrices, Mapping):
             raise ValueError(f"a {self.sensor} history needs a mapping sensor -> matrix with the "

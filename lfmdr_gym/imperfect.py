@@ -22,7 +22,7 @@ import numpy as np
 
 from lfmdr_gym import sensors
 from lfmdr_gym.world import check_real
-from mappers.sensors import FUSED_SENSORS, SENSORS
+from mappers.sensors import sensors_of
 
 __all__ = ["LIMIT_DEFAULTS", "SensingLimits"]
 
@@ -59,7 +59,7 @@ class SensingLimits:
             (``"range-bearing"``, ``"visibility-bearing"``): then one camera senses every sensor
             of the set, so the field of view, range and line of sight give one ``observed`` for
             all, and each sensor's own limits (noise, dropouts) apply to its reading only, drawn
-            independently (:meth:`apply_all`).
+            independently (:meth:`apply`).
         n_objects: M.
         object_radius: r [m], for ``line_of_sight``.
         fov_deg: field of view in degrees, centred on the heading, in (0, 360]: object j is
@@ -88,8 +88,7 @@ class SensingLimits:
     def __init__(self, sensor: str, n_objects: int, object_radius: float, *,
                  range_high: float, **limits: Any) -> None:
         self.sensor = sensor
-        self.sensors = tuple(s for s in SENSORS if s in FUSED_SENSORS[sensor]) \
-            if sensor in FUSED_SENSORS else (sensor,)
+        self.sensors = sensors_of(sensor)
         self.n_objects = n_objects
         self.r2 = object_radius * object_radius
         self.fov = check_real("fov_deg", limits["fov_deg"], low=0.0, low_open=True, high=360.0)
@@ -149,18 +148,11 @@ class SensingLimits:
             seen &= clear.astype(bool)
         return seen
 
-    def apply(self, reading: np.ndarray, rel: np.ndarray, d2: np.ndarray,
-              heading: float) -> tuple[np.ndarray, np.ndarray]:
-        """The imperfect reading (same shape and dtype as ``reading``) and ``observed`` (int8)."""
-        seen = self.observed(rel, d2, heading)
-        out = self._perturb(self.sensor, reading)
-        out[~seen] = 0
-        return out, seen.astype(np.int8)
-
-    def apply_all(self, readings: dict[str, np.ndarray], rel: np.ndarray, d2: np.ndarray,
-                  heading: float) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        """:meth:`apply` for a fused set: every sensor's imperfect reading (its noise drawn after
-        the previous sensor's, in :data:`SENSORS` order) and the one ``observed`` they share."""
+    def apply(self, readings: dict[str, np.ndarray], rel: np.ndarray, d2: np.ndarray,
+              heading: float) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        """Every sensor's imperfect reading (same shape and dtype as its perfect one; a fused
+        set's noise drawn sensor after sensor, in :data:`SENSORS` order) and the one
+        ``observed`` (int8) they share."""
         seen = self.observed(rel, d2, heading)
         out = {}
         for sensor in self.sensors:

@@ -48,19 +48,23 @@ def step_runs(n_steps: int, timeline=None) -> list[np.ndarray]:
     return [run for run in np.split(order, breaks) if run.size]
 
 
+def _visible_runs(X, timeline):
+    """``(V, runs)``: the (M, N) visible flags of ``X`` and each run of :func:`step_runs` of at
+    least 3 steps as its (M, steps) block of ``V``."""
+    V = np.asarray(X) != 0
+    if V.ndim != 2:
+        raise ValueError(f"X must be a 2-D (objects, steps) visibility history, got shape {V.shape}")
+    return V, [V[:, run] for run in step_runs(V.shape[1], timeline) if run.size >= 3]
+
+
 def flicker_rate(X, timeline=None) -> float:
     """Share of the (object, step) entries visible at the step before and after (in the same
     run of :func:`step_runs`) that read not visible: an estimate of the miss rate (module
     docstring). ``X``: (M, N) visibility history (non-zero = visible). NaN when no entry has
     both neighbours visible."""
-    V = np.asarray(X) != 0
-    if V.ndim != 2:
-        raise ValueError(f"X must be a 2-D (objects, steps) visibility history, got shape {V.shape}")
+    _, runs = _visible_runs(X, timeline)
     both = flicks = 0
-    for run in step_runs(V.shape[1], timeline):
-        if run.size < 3:
-            continue
-        R = V[:, run]
+    for R in runs:
         sides = R[:, :-2] & R[:, 2:]
         both += int(sides.sum())
         flicks += int((sides & ~R[:, 1:-1]).sum())
@@ -72,15 +76,10 @@ def persistence(X, timeline=None) -> float:
     run of :func:`step_runs`) than at a step taken at random: ``P(x[t+2] | x[t]) / P(x)``.
     About 1 for unordered viewpoints, several times that for a walk; dropouts scale both sides
     alike. NaN when nothing is visible."""
-    V = np.asarray(X) != 0
-    if V.ndim != 2:
-        raise ValueError(f"X must be a 2-D (objects, steps) visibility history, got shape {V.shape}")
+    V, runs = _visible_runs(X, timeline)
     base = V.mean() if V.size else 0.0
     first = both = 0
-    for run in step_runs(V.shape[1], timeline):
-        if run.size < 3:
-            continue
-        R = V[:, run]
+    for R in runs:
         first += int(R[:, :-2].sum())
         both += int((R[:, :-2] & R[:, 2:]).sum())
     return both / first / base if first and base else float("nan")

@@ -28,6 +28,7 @@ __all__ = [
     "sensor_name",
     "check_timeline",
     "infer_sensor",
+    "sensors_of",
     "step_observations",
 ]
 
@@ -80,6 +81,17 @@ def check_sensor_set(sensors: object) -> str | frozenset[str]:
     if len(set(names)) != len(names):
         raise ValueError(f"sensors of a fused set must be distinct, got {names}")
     return names[0] if len(names) == 1 else frozenset(names)
+
+
+def sensors_of(sensor: object) -> tuple[str, ...]:
+    """The sensors a name stands for, in :data:`SENSORS` order: ``(sensor,)`` for one sensor, the
+    set's for a name of :data:`FUSED_SENSORS`; anything else is a ValueError naming both."""
+    if isinstance(sensor, str) and sensor in FUSED_SENSORS:
+        return tuple(s for s in SENSORS if s in FUSED_SENSORS[sensor])
+    if isinstance(sensor, str) and sensor in SENSORS:
+        return (sensor,)
+    raise ValueError(f"sensor must be one of {list(SENSORS)} or a fused set of "
+                     f"{list(FUSED_SENSORS)}, got {sensor!r}")
 
 
 def sensor_name(key: str | frozenset[str]) -> str:
