@@ -373,7 +373,7 @@ class LFMDREnv(gym.Env):
             cand, rc, dc2 = near.take(sel), rel.take(sel, axis=0), d2.take(sel)
         q = dc2 - self._r2  # d^2 - r^2, shared by the proximity ring and visibility
         prox = sensors.proximity_kernel(
-            x, y, h, rc, q, w.arena_half, self._dirs, self.proximity_range, xy
+            x, y, h, rc, q, w.arena_half, self._dirs, self.proximity_range
         )
         readings = {k: t.observe(rel, d2, h, cand, rc, dc2, q) for k, t in self._obs_types.items()}
         obs = {**readings, "proximity": prox.astype(np.float32)}

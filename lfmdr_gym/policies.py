@@ -21,6 +21,8 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from lfmdr_gym import kernels
+
 __all__ = ["POLICIES", "Policy", "PredictPolicy", "RandomWalkPolicy", "as_policy", "check_policy"]
 
 
@@ -172,14 +174,12 @@ class RandomWalkPolicy:
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         self._stuck_sign: np.ndarray | None = None  # per row: turn direction while stuck
-        # Headings tried after a move (plan_ahead), as (cos, sin) pairs for _first_choice and as
-        # frame rotations exp(-i turn) for _plan_choice: computed once, np.linspace costs
-        # microseconds.
+        # Headings tried after a move (plan_ahead), as cosines and sines for _first_choice:
+        # computed once, np.linspace costs microseconds.
         probes = np.linspace(-self.max_turn, self.max_turn, 5)
-        self._probes = list(zip(np.cos(probes).tolist(), np.sin(probes).tolist(), strict=True))
-        self._probe_rot = np.exp(-1j * probes)[:, None]
+        self._probe_c, self._probe_s = np.cos(probes), np.sin(probes)
         self._ray_cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-        self._ray_part_cache: dict[int, tuple[list[float], list[float]]] = {}
+        self._ray_part_cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._unstick_cache: dict[int, np.ndarray] = {}
 
     @classmethod
@@ -224,11 +224,11 @@ class RandomWalkPolicy:
             self._ray_cache[n_rays] = (wrapped, ray)
         return self._ray_cache[n_rays]
 
-    def _ray_parts(self, n_rays: int) -> tuple[list[float], list[float]]:
-        """The rays' unit directions as two lists of Python floats (x ahead, y left)."""
+    def _ray_parts(self, n_rays: int) -> tuple[np.ndarray, np.ndarray]:
+        """The rays' unit directions as two contiguous arrays (x ahead, y left)."""
         if n_rays not in self._ray_part_cache:
             _, ray = self._rays(n_rays)
-            self._ray_part_cache[n_rays] = (ray.real.tolist(), ray.imag.tolist())
+            self._ray_part_cache[n_rays] = (ray.real.copy(), ray.imag.copy())
         return self._ray_part_cache[n_rays]
 
     def _obstacles(self, proximity: np.ndarray) -> np.ndarray:
@@ -277,7 +277,7 @@ class RandomWalkPolicy:
         free: the move itself is clear. safe: free, and from where it ends some heading within
         +-max_turn (five probes) is clear for the next move too, so the walk does not run into
         a corner or a wall it cannot turn away from in one step. (The reference for
-        :meth:`_plan_choice`, which the policy runs instead: same decisions, fewer numpy calls.)
+        :meth:`_first_choice`, which the policy runs instead: the same decisions, compiled.)
         """
         need = self.step_length + self.margin
         z = self._rotate(self._obstacles(proximity), turns)  # (B, T, n)
@@ -297,105 +297,19 @@ class RandomWalkPolicy:
             safe[rows] = free[rows] & (self._travel(z2) >= need).any(axis=-1)
         return free, safe
 
-    def _plan_choice(self, proximity: np.ndarray, turns: np.ndarray) -> int:
-        """For one ring (n,) and draws (T,): the draw :meth:`_plan` picks (first safe, else
-        first free, else -1), computed with the same floating-point operations on less data.
-
-        Speed (this runs on about a quarter of the steps of a random walk, the crowded ones):
-        only rays nearer than ``need + step_length + robot_radius`` (plus 1e-6 of slack for
-        rounding) can matter: a reading at distance |p| leaves at least ``|p| - robot_radius -
-        obstacle_radius`` of room, so the others never bring a draw below ``need + step_length``
-        nor a probe below ``need``, and dropping them from a minimum changes no comparison.
-        Probes are run only for the free draws (``safe`` is ``free & probe``). numpy's complex
-        products are elementwise, so each kept value is bit-identical to :meth:`_plan`'s.
-        """
-        step = self.step_length
-        need = step + self.margin
-        keep = (proximity < need + step + self.robot_radius + 1e-6).nonzero()[0]
-        _, ray = self._rays(proximity.size)
-        z = (proximity.take(keep) + self.obstacle_radius) * ray.take(keep)
-        z = z * np.exp(-1j * turns)[:, None]  # (T, m): the obstacles seen along each draw
-        room = self._travel(z)
-        free = room >= need
-        first = int(free.argmax())  # argmax of a bool array: the first True (0 if none)
-        if not free[first]:
-            return -1
-        if not self.plan_ahead or room[first] >= need + step:
-            return first  # safe implies free, so the first free draw is the first safe one
-        cand = free.nonzero()[0]
-        moved = z.take(cand, axis=0) - step  # the obstacles seen from where each move ends
-        # A draw is safe if some probe is clear, i.e. if its best probe is.
-        best = np.maximum.reduce(self._travel(moved[:, None, :] * self._probe_rot), axis=-1)
-        ok = best >= need
-        k = int(ok.argmax())  # the first safe draw, if any
-        return int(cand[k]) if ok[k] else first
-
     def _first_choice(self, proximity: np.ndarray, turns: np.ndarray) -> int:
         """Index of the first safe draw in ``turns``, else of the first free one, else -1.
 
-        The same decision as :meth:`_plan`, made lazily in plain Python for the first three draws
-        (usually the first settles it) looking only at the few rays near enough to matter, which
-        costs a fraction of the vectorised version's numpy calls (the policy runs once per env
-        step); when those three do not settle it, :meth:`_plan_choice` decides over all the draws.
-        A reading can only block a move if it is nearer than ``need + robot_radius``, or spoil
-        the move after it if nearer than ``need + step_length + robot_radius``.
+        The decision of :meth:`_plan` for one ring (n,) and its draws (T,), made lazily, draw by
+        draw, by the compiled :func:`lfmdr_gym.kernels.first_choice` (the policy runs once per
+        env step; usually the first draw settles it). Only readings nearer than ``need +
+        step_length + robot_radius`` can block a move or spoil the one after it.
         """
-        step = self.step_length
-        need = step + self.margin
-        near = (proximity < need + step + self.robot_radius).nonzero()[0]
-        if near.size == 0:
-            return 0
-        # The modelled obstacle centres (proximity + obstacle_radius) * ray, in plain floats: the
-        # product of a real by a complex number rounds each part once, as numpy's does.
         ray_x, ray_y = self._ray_parts(proximity.size)
-        r = self.obstacle_radius
-        points = []
-        for k, p in zip(near.tolist(), proximity.take(near).tolist(), strict=True):
-            d = p + r
-            points.append((d * ray_x[k], d * ray_y[k]))
-        rr2 = (self.robot_radius + self.obstacle_radius) ** 2
-        # A point farther than this from where a move ends cannot block a probe (it leaves room
-        # >= |p| - sqrt(rr2) > need); the 1e-6 slack covers rounding, so skipping it is exact.
-        probe_reach2 = (need + math.sqrt(rr2) + 1e-6) ** 2
-        sqrt, inf = math.sqrt, math.inf
-        first_free = -1
-        for i, turn in enumerate(turns[:3].tolist()):
-            c, s = math.cos(turn), math.sin(turn)
-            room = inf
-            for px, py in points:  # obstacle centres in the candidate's frame
-                x = px * c + py * s
-                if x > 0.0:
-                    y = py * c - px * s
-                    if y * y < rr2:
-                        v = x - sqrt(rr2 - y * y)
-                        if v < room:
-                            room = v
-            if room < need:
-                continue
-            if first_free < 0:
-                first_free = i
-            if not self.plan_ahead or room >= need + step:
-                return i
-            # Is some heading clear from where this move ends? (the same arithmetic as before,
-            # on the points near enough to matter, each shifted by the step once)
-            frame = []
-            for px, py in points:
-                xm = (px * c + py * s) - step
-                y = py * c - px * s
-                if xm * xm + y * y < probe_reach2:
-                    frame.append((xm, y))
-            for pc, ps in self._probes:
-                for xm, y in frame:
-                    x2 = xm * pc + y * ps
-                    y2 = y * pc - xm * ps
-                    if x2 > 0.0 and y2 * y2 < rr2 and x2 - sqrt(rr2 - y2 * y2) < need:
-                        break
-                else:
-                    return i
-        if turns.size <= 3:
-            return first_free
-        # Crowded: decide over all the draws at once (vectorised) rather than one by one.
-        return self._plan_choice(proximity, turns)
+        return kernels.first_choice(
+            proximity, turns, ray_x, ray_y, self._probe_c, self._probe_s, self.obstacle_radius,
+            self.robot_radius, self.step_length, self.margin, self.plan_ahead,
+        )
 
     def _act(self, proximity: np.ndarray) -> np.ndarray:
         batch = proximity.shape[0]

@@ -19,6 +19,8 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import ArrayLike
 
+from lfmdr_gym import kernels
+
 __all__ = [
     "bearing",
     "proximity",
@@ -108,44 +110,12 @@ def visibility_kernel(
     q: np.ndarray,
     occlusion: bool,
 ) -> np.ndarray:
-    """:func:`visibility_from_candidates` with ``d_vis^2`` and ``q = dc2 - radius^2`` precomputed.
-
-    The environment calls this once per step and shares ``q`` with the proximity ring, so the
-    kernel keeps its numpy calls few (each costs about a microsecond on arrays this small).
-    """
+    """:func:`visibility_from_candidates` with ``d_vis^2`` and ``q = dc2 - radius^2`` precomputed
+    (the env shares ``q`` with the proximity ring): the compiled
+    :func:`lfmdr_gym.kernels.visible_targets`."""
     out = np.zeros(n_objects, dtype=np.int8)
-    # 2 asin(r/d) > visual_angle  <=>  d < d_vis  (asin is increasing; r/d > 1 is always visible)
-    tk = (dc2 < d_vis2).nonzero()[0]
-    if tk.size == 0:
-        return out
-    if occlusion and rc.shape[0] > 1:
-        # Usually every candidate is a target (the candidates' reach exceeds d_vis by a sliver):
-        # then tk is arange(K) and dc2 serves as it is. (rt must not be rc itself: numpy computes
-        # rc @ rc.T with BLAS syrk, whose rounding differs from gemm's in the last bit.)
-        every = tk.size == rc.shape[0]
-        rt = rc.copy() if every else rc.take(tk, axis=0)  # take: as rc[tk], cheaper
-        dt2 = dc2 if every else dc2.take(tk)
-        # For target j (line of sight rt_j, length d_j) and object k, p = rc_k . rt_j = t d_j
-        # where t is the position of k's foot along the line of sight, and the perpendicular h
-        # from k's centre obeys h^2 d_j^2 = d_k^2 d_j^2 - p^2. So k blocks j (0 <= t <= d_j and
-        # h < r) iff 0 <= p <= d_j^2 and p^2 > (d_k^2 - r^2) d_j^2 — no square roots needed.
-        p = rc @ rt.T
-        blk = p * p > q[:, None] * dt2
-        blk &= p >= 0.0
-        blk &= p <= dt2
-        # a target does not hide itself (row tk[j], column j; the diagonal when every)
-        if every:
-            blk.reshape(-1)[::tk.size + 1] = False
-        else:
-            blk[tk, _arange(tk.size)] = False
-        tk = tk[~np.logical_or.reduce(blk, axis=0)]  # == ~blk.any(axis=0), minus its wrapper
-    out[cand.take(tk)] = 1
+    kernels.visible_targets(cand, rc, dc2, d_vis2, q, bool(occlusion), out)
     return out
-
-
-@lru_cache(maxsize=1024)
-def _arange(n: int) -> np.ndarray:
-    return np.arange(n)
 
 
 def visibility(
@@ -239,7 +209,7 @@ def proximity_from_candidates(
     ``rc`` (K, 2), ``dc2`` (K,): offsets and squared distances of (at least) every object nearer
     than ``max_range + radius``."""
     return proximity_kernel(
-        x, y, heading, rc, dc2 - radius * radius, arena_half, dirs, max_range, np.array((x, y))
+        x, y, heading, rc, dc2 - radius * radius, arena_half, dirs, max_range
     )
 
 
@@ -252,47 +222,12 @@ def proximity_kernel(
     arena_half: float,
     dirs: np.ndarray,
     max_range: float,
-    xy: np.ndarray,
 ) -> np.ndarray:
-    """:func:`proximity_from_candidates` with ``q = dc2 - radius^2`` and ``xy = (x, y)`` as an
-    array precomputed (see :func:`visibility_kernel`).
-
-    Speed notes (the env runs this every step on a few objects and 32 rays, where numpy's
-    per-call overhead dominates): the min over the two wall axes is one binary ``minimum`` rather
-    than an axis-1 reduction (3x dearer on an (n, 2) array), and rays that meet an object
-    behind the robot are left out of the min by the reduction's ``where=`` rather than masked
-    with ``np.where`` first.
-    """
-    c, s = math.cos(heading), math.sin(heading)
-    u = dirs @ np.array(((c, s), (-s, c)))  # rays rotated into the world frame, (n, 2)
-    a = arena_half
-    # Misses are computed as inf/NaN and dropped by fmin rather than masked out first: fewer
-    # numpy calls per step (np.errstate is cheap next to the masks it saves).
-    with np.errstate(divide="ignore", invalid="ignore"):
-        if a - abs(x) < max_range or a - abs(y) < max_range:  # a wall within range
-            # Seen from inside the square, the wall ahead along axis i is at (+-a - p_i) / u_i
-            # with the sign of u_i; u_i = +-0 gives +inf (the numerator has u_i's sign).
-            walls = np.copysign(a, u)
-            walls -= xy
-            walls /= u
-            hit = np.minimum(walls[:, 0], walls[:, 1])
-            np.minimum(hit, max_range, out=hit)
-        else:
-            hit = np.full(dirs.shape[0], max_range)
-        if rc.shape[0]:
-            # Ray k meets circle j at t - sqrt(r^2 - (d^2 - t^2)), t = u_k . rc_j: NaN when the
-            # ray misses (negative root argument, dropped by fmin); behind the robot when t <= 0
-            # (the robot's centre is outside every object, so both roots then lie behind it:
-            # left out of the min). Laid out (objects, rays), so that the min over objects runs
-            # along the outer axis (twice as fast as along the inner one); rc @ u.T holds the
-            # same dot products as u @ rc.T.
-            t = rc @ u.T
-            entry = t * t
-            entry -= q[:, None]  # == t^2 + (r^2 - d^2), bit for bit (IEEE a - b is a + (-b))
-            np.sqrt(entry, out=entry)
-            np.subtract(t, entry, out=entry)
-            np.fmin(hit, np.fmin.reduce(entry, axis=0, where=t > 0.0, initial=np.inf), out=hit)
-    return hit
+    """:func:`proximity_from_candidates` with ``q = dc2 - radius^2`` precomputed (the env shares
+    it with the visibility test): the compiled :func:`lfmdr_gym.kernels.proximity_ring`."""
+    return kernels.proximity_ring(
+        x, y, math.cos(heading), math.sin(heading), rc, q, arena_half, dirs, max_range
+    )
 
 
 def proximity(
