@@ -11,6 +11,10 @@ method that refuses a size prints its reason; one that runs past ``--timeout`` i
     PYTHONPATH=. python benchmarks/bench_scale.py                  # M = 50, 200, 1000
     PYTHONPATH=. python benchmarks/bench_scale.py --full           # and M = 10,000 (~5 CPU-min)
     PYTHONPATH=. python benchmarks/bench_scale.py --sensor bearing --max-range 1.5  # masked
+    PYTHONPATH=. python benchmarks/bench_scale.py --full --plot docs/scale.png --json scale.json
+
+``--plot`` draws CPU time and peak memory against M for collect and each method (log-log; a
+method that cannot run at a size has no point there), ``--json`` keeps every row.
 
 With ``--max-range`` (a sensing limit of issue #11) the histories are masked and recorded
 sparse at M = 1,000 (the observed entries and the mask), and the methods are those of
@@ -116,6 +120,8 @@ def main() -> None:
     parser.add_argument("--max-range", type=float, default=None)
     parser.add_argument("--seed", type=int, default=101, help="episode seed (not tuned on)")
     parser.add_argument("--timeout", type=float, default=900.0, help="seconds per method case")
+    parser.add_argument("--plot", default=None, help="write the figure (PNG) here")
+    parser.add_argument("--json", default=None, help="write every row (JSON) here")
     parser.add_argument("--child", nargs="+", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
@@ -132,11 +138,13 @@ def main() -> None:
         args.methods = list(MASKED_METHODS if args.max_range is not None else METHODS)
     print(f"{args.sensor} histories, 8 % random anchors, seed {args.seed}; wall s (CPU s), peak RSS MB "
           f"(import baseline)")
+    rows: list[dict] = []
     with tempfile.TemporaryDirectory() as tmp:
         for m in sizes:
             path = str(Path(tmp) / f"h{m}.npz")
             c = _child(["collect", str(m), path, args.sensor, str(args.max_range).lower(),
                         str(args.seed)], 4 * 3600)
+            rows.append({"M": m, "what": "collect", **c})
             if "refused" in c:
                 print(f"M={m:>6} collect: {c['refused']}")
                 continue
@@ -144,6 +152,7 @@ def main() -> None:
                   f"peak {c['peak_mb']:7.0f} MB ({c['base_mb']:.0f}) compact={c['compact']}")
             for method in args.methods:
                 r = _child(["map", path, method], args.timeout)
+                rows.append({"M": m, "what": method, **r})
                 if "refused" in r:
                     print(f"         {method:<15} cannot run: {r['refused'][:150]}")
                     continue
@@ -152,6 +161,43 @@ def main() -> None:
                       f"{r['peak_mb']:7.0f} MB ({r['base_mb']:.0f})  MPE {r['mpe']:.4f} m  "
                       f"MOE {r['moe']:.3f} % ({r['moe_how']}, {r['moe_seconds']:.1f} s)")
             sys.stdout.flush()
+    if args.json:
+        from lfmdr_gym.atomic import atomic_write_text
+
+        atomic_write_text(args.json, json.dumps(rows, indent=1) + "\n")
+    if args.plot:
+        plot(rows, args.plot, f"{args.sensor}, seed {args.seed}")
+
+
+def plot(rows: list[dict], path: str, title: str) -> None:
+    """CPU time and peak memory against M, one line per case (collect and each method)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from lfmdr_gym.atomic import atomic_savefig
+
+    fig, (ax_t, ax_m) = plt.subplots(1, 2, figsize=(9.0, 3.6), constrained_layout=True)
+    for what in dict.fromkeys(r["what"] for r in rows):
+        done = [r for r in rows if r["what"] == what and "refused" not in r]
+        if not done:
+            continue
+        label = what if what != "default" else f"default ({done[-1]['method']})"
+        style = {"marker": "o", "ls": "--" if what == "collect" else "-"}
+        ms = [r["M"] for r in done]
+        ax_t.plot(ms, [r["cpu_seconds"] for r in done], label=label, **style)
+        ax_m.plot(ms, [r["peak_mb"] for r in done], label=label, **style)
+    for ax, ylabel in ((ax_t, "CPU time [s]"), (ax_m, "peak resident memory [MB]")):
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("objects M (N steps grows with M)")
+        ax.set_ylabel(ylabel)
+        ax.grid(True, which="both", alpha=0.3)
+    ax_t.legend(fontsize=7)
+    fig.suptitle(f"lfmdr at scale: {title} (no point: refused or timed out)", fontsize=9)
+    atomic_savefig(fig, path)
+    plt.close(fig)
 
 
 if __name__ == "__main__":

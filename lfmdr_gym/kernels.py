@@ -5,7 +5,8 @@ with numpy, each is a dozen array calls whose fixed cost (about a microsecond ea
 their arithmetic many times over, and the random walk's choice is a plain-Python loop; compiled
 with numba they are plain loops over a few dozen numbers. numba is the well-kept way to do this
 from Python (no C extension to build); the functions are compiled on first use and cached on
-disk (``cache=True``), so a process pays the compilation once per installation.
+disk (``cache=True``), so a process pays the compilation once per installation. numba itself
+is imported on first use (see :func:`__getattr__`).
 
 Each kernel computes the same geometry as the vectorised numpy code it replaced, with the same
 formulas in the same order; the two differ at most in the last bit of a value where numpy's
@@ -21,13 +22,31 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
-
 __all__ = ["first_choice", "proximity_ring", "visible_targets"]
 
 
-@njit(cache=True, nogil=True)
-def proximity_ring(x, y, c, s, rc, q, arena_half, dirs, max_range):  # pragma: no cover - compiled
+def __getattr__(name: str):
+    """Compile the kernels on first use of any of them (PEP 562).
+
+    numba is imported here and not at the top: it costs about 90 MB of memory and 0.25 s, which
+    code that only reads histories or maps (``lfmdr map FILE``, :class:`~lfmdr_gym.History`)
+    should not pay. The plain functions below are compiled (``_room`` first: the compiled
+    ``first_choice`` calls it as a global, so it must be compiled when that is) and bound under
+    their public names, so every later access is an ordinary attribute lookup.
+    """
+    if name not in __all__:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    from numba import njit
+
+    g = globals()
+    compile_ = njit(cache=True, nogil=True)
+    g["_room"] = compile_(g["_room"])
+    for public in __all__:
+        g[public] = compile_(g["_" + public])
+    return g[name]
+
+
+def _proximity_ring(x, y, c, s, rc, q, arena_half, dirs, max_range):  # pragma: no cover - compiled
     """Distance along each ray to the first wall or object surface, capped at ``max_range``.
 
     ``(x, y)`` the robot's centre, ``(c, s)`` the cosine and sine of its heading, ``rc`` (K, 2)
@@ -65,8 +84,7 @@ def proximity_ring(x, y, c, s, rc, q, arena_half, dirs, max_range):  # pragma: n
     return hit
 
 
-@njit(cache=True, nogil=True)
-def visible_targets(cand, rc, dc2, d_vis2, q, occlusion, out):  # pragma: no cover - compiled
+def _visible_targets(cand, rc, dc2, d_vis2, q, occlusion, out):  # pragma: no cover - compiled
     """Set ``out[cand[j]] = 1`` for every candidate j nearer than ``d_vis`` whose line of sight no
     other candidate blocks (``occlusion``), and return how many.
 
@@ -97,14 +115,13 @@ def visible_targets(cand, rc, dc2, d_vis2, q, occlusion, out):  # pragma: no cov
     return count
 
 
-@njit(cache=True, nogil=True)
-def _room(px, py, n, c, s, shift, rr2):  # pragma: no cover - compiled
+def _room(px, py, n, c, s, rr2):  # pragma: no cover - compiled
     """How far the disc can advance along the frame's +x before touching an obstacle centre
     (inf if none is in the way): the points ``(px, py)[:n]`` seen from the frame turned by
-    (c, s) and moved back by ``shift`` along it."""
+    (c, s)."""
     room = math.inf
     for i in range(n):
-        xm = (px[i] * c + py[i] * s) - shift
+        xm = px[i] * c + py[i] * s
         if xm > 0.0:
             y = py[i] * c - px[i] * s
             if y * y < rr2:
@@ -114,8 +131,7 @@ def _room(px, py, n, c, s, shift, rr2):  # pragma: no cover - compiled
     return room
 
 
-@njit(cache=True, nogil=True)
-def first_choice(proximity, turns, ray_x, ray_y, probe_c, probe_s, obstacle_radius,
+def _first_choice(proximity, turns, ray_x, ray_y, probe_c, probe_s, obstacle_radius,
                  robot_radius, step, margin, plan_ahead):  # pragma: no cover - compiled
     """Index of the first safe draw in ``turns``, else of the first free one, else -1.
 
@@ -146,7 +162,7 @@ def first_choice(proximity, turns, ray_x, ray_y, probe_c, probe_s, obstacle_radi
     first_free = -1
     for i in range(turns.shape[0]):
         c, s = math.cos(turns[i]), math.sin(turns[i])
-        room = _room(px, py, m, c, s, 0.0, rr2)
+        room = _room(px, py, m, c, s, rr2)
         if room < need:
             continue
         if first_free < 0:
@@ -161,6 +177,6 @@ def first_choice(proximity, turns, ray_x, ray_y, probe_c, probe_s, obstacle_radi
             qx[j] = (px[j] * c + py[j] * s) - step
             qy[j] = py[j] * c - px[j] * s
         for b in range(probe_c.shape[0]):
-            if _room(qx, qy, m, probe_c[b], probe_s[b], 0.0, rr2) >= need:
+            if _room(qx, qy, m, probe_c[b], probe_s[b], rr2) >= need:
                 return i
     return first_free
