@@ -22,7 +22,7 @@ import os
 import zipfile
 import zlib
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -281,6 +281,25 @@ class History:
                 return out
             self.__dict__["_dense"] = out
         return self.__dict__["_dense"]
+
+    def replace(self, **changes: Any) -> History:
+        """A new History with ``changes`` (any of its fields), the rest as stored.
+
+        Use this rather than ``dataclasses.replace``, which reads ``matrix`` and ``mask`` through
+        their properties and so densifies a compact history (or refuses one beyond the memory
+        budget); here a compact matrix or mask is passed on as it is.
+        """
+        names = [f.name for f in fields(self)]
+        unknown = sorted(set(changes) - set(names))
+        if unknown:
+            raise ValueError(f"History has no field(s) {unknown}; its fields are {names}")
+        stored = {"matrix": self.__dict__["_data"],
+                  "mask": self.__dict__["_mask"] if self.masked else None}
+        values = {name: stored[name] if name in stored else getattr(self, name) for name in names}
+        values.update(changes)
+        return History(**values)
+
+    __replace__ = replace  # copy.replace (Python 3.13 and later)
 
     def head(self, n_steps: int) -> History:
         """The history of the first ``n_steps`` steps (a checkpoint of the same episode)."""

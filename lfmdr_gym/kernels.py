@@ -22,7 +22,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-__all__ = ["first_choice", "proximity_ring", "visible_targets"]
+
+__all__ = ["first_choice", "proximity_ring", "visible_targets"]  # noqa: F822 - bound by __getattr__
 
 
 def __getattr__(name: str):

@@ -119,3 +119,21 @@ def test_masked_compact_histories_keep_a_sparse_mask(tmp_path, env_id, kwargs):
     np.testing.assert_array_equal(loaded.mask, dense.mask)
     np.testing.assert_array_equal(loaded.matrix, dense.matrix)
     assert "masked=True" in repr(loaded)
+
+
+def test_replace_keeps_a_compact_history_compact(monkeypatch):
+    # dataclasses.replace reads matrix and mask through their properties (densifying);
+    # History.replace passes the stored forms on, so a history beyond the budget survives it.
+    h = collect("LFMDR-Bearing-v0", RandomWalkPolicy(seed=0), 200, seed=2,
+                make_kwargs={"max_range": 1.5}, compact=True)
+    monkeypatch.setattr(sp.csr_array, "toarray", lambda *a, **k: pytest.fail("densified"))
+    new = h.replace(meta={**h.meta, "note": "relabelled"})
+    assert new.meta["note"] == "relabelled" and new.compact and new.is_sparse
+    for key in ("_data", "_mask"):
+        stored = new.__dict__[key]
+        assert sp.issparse(stored) and (stored != h.__dict__[key]).nnz == 0
+    monkeypatch.undo()
+    np.testing.assert_array_equal(new.mask, h.mask)
+    assert not h.replace(mask=None).masked
+    with pytest.raises(ValueError, match="no field.*'colour'"):
+        h.replace(colour="red")

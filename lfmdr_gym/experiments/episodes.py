@@ -7,7 +7,6 @@ of any env can also be collected on its own (``lfmdr collect``, ``lfmdr run``).
 
 from __future__ import annotations
 
-import dataclasses
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -86,7 +85,7 @@ def collect_episode(episode: Episode) -> History:
         history = collect(fixed, policy, episode.steps, seed=episode.pose_seed)
     finally:
         env.close()
-    return dataclasses.replace(history, meta={
+    return history.replace(meta={
         **history.meta, "env_id": episode.env_id, "layout": episode.layout, "pose": episode.pose,
         "layout_seed": episode.layout_seed, "pose_seed": episode.pose_seed,
     })
@@ -124,7 +123,7 @@ def collect_history(
         history = collect(env, agent, int(steps), seed=seed)
     finally:
         env.close()
-    history = dataclasses.replace(history, meta={**history.meta, "env_id": env_id, "seed": seed})
+    history = history.replace(meta={**history.meta, "env_id": env_id, "seed": seed})
     if out is not None:
         history.save(out)
     return history

@@ -228,8 +228,8 @@ def map_mrclam_run(
     method, bin_width, params, alias_fill = _plan(sensor, method, bin_width, dict(params))
     histories, report = _load(run_dir, key, robots, bin_width, anchors, groundtruth_fixes)
     if zero_fill or alias_fill:
-        histories = (dataclasses.replace(histories, mask=None) if isinstance(key, str) else
-                     {s: dataclasses.replace(h, mask=None) for s, h in histories.items()})
+        histories = (histories.replace(mask=None) if isinstance(key, str) else
+                     {s: h.replace(mask=None) for s, h in histories.items()})
     history = histories if isinstance(key, str) else next(iter(histories.values()))
     msgs = list(report.warnings)
     result = build_map(histories, history.anchor_ids, history.anchor_positions, method, **params)
