@@ -164,6 +164,7 @@ def _load_builtins() -> None:
         return
     _BUILTINS_LOADED = True
     from mappers import (
+        bearing_adjustment,
         calibrated,
         covis_calibrated,
         covis_sparse,
@@ -179,7 +180,7 @@ def _load_builtins() -> None:
 
     for spec in (*methods.SPECS, calibrated.SPEC, unfolding.SPEC, scalable.SPEC, *masked.SPECS,
                  ensemble.SPEC, *covis_calibrated.SPECS, covis_sparse.SPEC, dropout_blend.SPEC,
-                 range_bearing.SPEC, visibility_bearing.SPEC):
+                 range_bearing.SPEC, visibility_bearing.SPEC, bearing_adjustment.SPEC):
         _METHODS.setdefault(spec.label, spec)
 
 

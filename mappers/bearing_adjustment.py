@@ -1,0 +1,437 @@
+"""Bearing-only bundle adjustment of a bearing map (label ``"BEARING-BA"``).
+
+The paper's methods, and every other mapper here, never estimate where the robot was. This one
+does: it starts from the map the bearing default draws (``start``: CAL-SMA for a complete
+history, ``covis-auto`` for a masked one) and refines it by treating each step's viewpoint as a
+latent pose ``(x, y, heading)``, alternating
+
+1. *resection*: each step's pose from the bearings of the objects it observed, the objects
+   where the map puts them (Gauss-Newton on the wrapped angle residuals, batched over the steps:
+   one 3 x 3 system per step); a step that observed fewer than ``min_step_objects`` objects, or
+   whose system is ill-conditioned, is left out;
+2. *intersection*: each non-anchor object's position from the rays of the steps that observed
+   it (linear least squares on the perpendicular offsets divided by the current range, i.e. the
+   angle residuals to first order: one 2 x 2 system per object); the anchors stay at their known
+   positions, which fix the gauge (shift, rotation, scale);
+3. *robust weights*: Huber (or Cauchy) weights on the angle residuals, the scale read from their
+   median absolute value, so 30 degrees of noise or a wrong reading does not dominate;
+
+until no object moves more than ``tol`` [m] (at most ``max_rounds`` rounds).
+
+Guards: an object seen from fewer than ``min_views`` usable steps, or from nearly parallel rays
+(the smallest to largest eigenvalue of its rays' normal matrix below ``min_spread``), keeps its
+start position; if the refined solution's robust angle cost is not below the start's (with the
+start's poses resected), or anything is not finite, the start map is returned. Each case is a
+:class:`BearingAdjustmentWarning` (``build_map`` lists them in ``Map.warnings``).
+
+*Assumes*: the bearings of one step are taken from one viewpoint and are relative to the robot's
+heading at that step (one unknown heading per step, no calibration offset); a static world;
+bearings to the objects' centres. No motion model and no odometry: the steps are independent
+viewpoints, found from the history alone.
+"""
+
+from __future__ import annotations
+
+import warnings
+from numbers import Integral, Real
+
+import numpy as np
+from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.utils._param_validation import Interval, StrOptions
+
+from mappers.align import check_anchors
+from mappers.registry import MethodSpec
+
+__all__ = ["BearingAdjustment", "BearingAdjustmentWarning", "bearing_angles"]
+
+_UNIT_TOL = 1e-3
+"""How far an observed (cos, sin) pair's norm may be from 1 (float32 storage, rounding)."""
+
+_MIN_RANGE = 0.05
+"""Smallest range [m] used in the angle weights of the intersection (an object at the viewpoint)."""
+
+_HEADINGS = 24
+"""Headings tried per step to start the resection from the start map."""
+
+
+class BearingAdjustmentWarning(UserWarning):
+    """The refinement kept (part of) the start map: too few views, parallel rays, no gain."""
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def bearing_angles(X, mask=None) -> tuple[np.ndarray, np.ndarray]:
+    """``(theta, seen)``, both (N, M): the bearing [rad] of each object at each step, relative to
+    the heading, and whether it was observed (masked in, and not the (0, 0) of an object at the
+    viewpoint). ValueError when ``X`` is not a history of unit (cos, sin) pairs."""
+    X = np.asarray(X, dtype=float)
+    if X.ndim != 2 or X.shape[1] % 2 or X.shape[1] == 0:
+        raise ValueError(f"a bearing history has 2 columns (cos, sin) per step, got shape {X.shape}")
+    c, s = X[:, 0::2].T, X[:, 1::2].T
+    seen = (c != 0) | (s != 0)
+    if mask is not None:
+        mask = np.asarray(mask, dtype=bool)
+        if mask.shape != X.shape:
+            raise ValueError(f"mask must have the shape of the history {X.shape}, got {mask.shape}")
+        seen &= mask[:, 0::2].T & mask[:, 1::2].T
+    norm = np.hypot(c, s)[seen]
+    if not np.all(np.isfinite(norm)) or np.any(np.abs(norm - 1.0) > _UNIT_TOL):
+        bad = norm[np.abs(norm - 1.0) > _UNIT_TOL]
+        raise ValueError(
+            "a bearing history holds unit (cos, sin) pairs; found observed pairs of norm "
+            f"{bad[:3].round(3).tolist()} (a visibility or range history, or normalised rows? "
+            "pass normalize=False)"
+        )
+    return np.arctan2(s, c), seen
+
+
+def _robust(res: np.ndarray, scale: float, loss: str | None) -> np.ndarray:
+    """IRLS weights of the residuals for the loss (1 inside the scale)."""
+    if loss is None:
+        return np.ones_like(res)
+    u = np.abs(res) / scale
+    if loss == "huber":
+        return np.where(u <= 1.0, 1.0, 1.0 / np.maximum(u, 1e-300))
+    return 1.0 / (1.0 + u * u)  # cauchy
+
+
+def _rho(res: np.ndarray, scale: float, loss: str | None) -> np.ndarray:
+    """The loss of each residual (least squares: ``res**2 / 2``)."""
+    if loss is None:
+        return 0.5 * res * res
+    u = np.abs(res) / scale
+    if loss == "huber":
+        return scale * scale * np.where(u <= 1.0, 0.5 * u * u, u - 0.5)
+    return 0.5 * scale * scale * np.log1p(u * u)
+
+
+def _residuals(P, C, phi, theta):
+    """Angle residuals (N, M) and the offsets object - viewpoint (N, M, 2)."""
+    d = P[None, :, :] - C[:, None, :]
+    return _wrap(np.arctan2(d[..., 1], d[..., 0]) - phi[:, None] - theta), d
+
+
+def _initial_poses(P, theta, W):
+    """Each step's pose by trying ``_HEADINGS`` headings: for each, the viewpoint is the least
+    squares intersection of the rays' lines (back through the objects); the heading whose
+    viewpoint explains the bearings best (sum of ``1 - cos`` of the angle residuals) wins."""
+    n = theta.shape[0]
+    best = np.full(n, np.inf)
+    C, phi = np.zeros((n, 2)), np.zeros(n)
+    for h in np.linspace(-np.pi, np.pi, _HEADINGS, endpoint=False):
+        a = theta + h
+        nx, ny = -np.sin(a), np.cos(a)  # normals of the rays
+        rhs = nx * P[None, :, 0] + ny * P[None, :, 1]
+        A11, A12, A22 = (W * nx * nx).sum(1), (W * nx * ny).sum(1), (W * ny * ny).sum(1)
+        b1, b2 = (W * nx * rhs).sum(1), (W * ny * rhs).sum(1)
+        det = A11 * A22 - A12 * A12
+        ok = det > 1e-12 * (A11 + A22) ** 2
+        det = np.where(ok, det, 1.0)
+        c = np.stack([(A22 * b1 - A12 * b2) / det, (A11 * b2 - A12 * b1) / det], axis=1)
+        res, _ = _residuals(P, c, np.full(n, h), theta)
+        cost = np.where(ok, (W * (1.0 - np.cos(res))).sum(1), np.inf)
+        better = cost < best
+        best[better], C[better], phi[better] = cost[better], c[better], h
+    return C, phi
+
+
+def _resect(P, C, phi, theta, W, iters: int):
+    """Gauss-Newton on each step's pose (batched 3 x 3 systems), the objects fixed; returns the
+    poses and which steps have a well-conditioned system."""
+    ok = np.ones(len(C), dtype=bool)
+    for _ in range(iters):
+        res, d = _residuals(P, C, phi, theta)
+        r2 = np.maximum(np.einsum("nmk,nmk->nm", d, d), _MIN_RANGE**2)
+        J = np.stack([d[..., 1] / r2, -d[..., 0] / r2, -np.ones_like(r2)], axis=-1)  # (N, M, 3)
+        H = np.einsum("nm,nmi,nmj->nij", W, J, J)
+        g = np.einsum("nm,nmi,nm->ni", W, J, res)
+        H[:, [0, 1, 2], [0, 1, 2]] *= 1.0 + 1e-9
+        ev = np.linalg.eigvalsh(H)
+        ok = ev[:, 0] > 1e-8 * np.maximum(ev[:, -1], 1e-300)
+        H[~ok] = np.eye(3)
+        step = -np.linalg.solve(H, g[..., None])[..., 0]
+        step[~ok] = 0.0
+        step[:, 2] = np.clip(step[:, 2], -0.5, 0.5)
+        C = C + step[:, :2]
+        phi = _wrap(phi + step[:, 2])
+    return C, phi, ok
+
+
+def _intersect(P, C, phi, theta, W):
+    """Each object's least-squares point of its rays' lines, the perpendicular offsets divided by
+    the current range; returns the points (M, 2) and each object's 2 x 2 normal matrix."""
+    a = theta + phi[:, None]
+    nx, ny = -np.sin(a), np.cos(a)
+    d = P[None, :, :] - C[:, None, :]
+    w = W / np.maximum(np.einsum("nmk,nmk->nm", d, d), _MIN_RANGE**2)
+    rhs = nx * C[:, 0:1] + ny * C[:, 1:2]
+    A11, A12, A22 = (w * nx * nx).sum(0), (w * nx * ny).sum(0), (w * ny * ny).sum(0)
+    b1, b2 = (w * nx * rhs).sum(0), (w * ny * rhs).sum(0)
+    det = A11 * A22 - A12 * A12
+    safe = np.where(det > 0, det, 1.0)
+    Q = np.stack([(A22 * b1 - A12 * b2) / safe, (A11 * b2 - A12 * b1) / safe], axis=1)
+    return np.where((det > 0)[:, None], Q, P), np.stack([A11, A12, A22], axis=1)
+
+
+def _spread(W, theta, phi):
+    """Per object, the smallest over the largest eigenvalue of its rays' (unweighted) normal
+    matrix: 0 for parallel rays, 1 for rays in every direction."""
+    a = theta + phi[:, None]
+    nx, ny = -np.sin(a), np.cos(a)
+    used = W > 0
+    A11, A12, A22 = (used * nx * nx).sum(0), (used * nx * ny).sum(0), (used * ny * ny).sum(0)
+    tr, det = A11 + A22, A11 * A22 - A12 * A12
+    disc = np.sqrt(np.maximum(tr * tr / 4 - det, 0.0))
+    return np.where(tr > 0, (tr / 2 - disc) / np.maximum(tr / 2 + disc, 1e-300), 0.0)
+
+
+def _normal_blocks(P, C, phi, theta, w, free):
+    """The blocks of the Gauss-Newton normal equations of the joint problem (poses and free
+    objects): ``U`` (N, 3, 3), ``V`` (F, 2, 2), ``Wf`` (N, 3, 2F), gradients ``g`` (N, 3) and
+    ``h`` (F, 2), for weighted residuals ``w * res**2 / 2``."""
+    res, d = _residuals(P, C, phi, theta)
+    r2 = np.maximum(np.einsum("nmk,nmk->nm", d, d), _MIN_RANGE**2)
+    a = np.stack([d[..., 1] / r2, -d[..., 0] / r2, -np.ones_like(r2)], axis=-1)  # d res / d pose
+    b = -a[..., :2]  # d res / d object
+    U = np.einsum("nm,nmi,nmj->nij", w, a, a)
+    g = np.einsum("nm,nmi,nm->ni", w, a, res)
+    wf, af, bf = w[:, free], a[:, free], b[:, free]
+    V = np.einsum("nm,nmi,nmj->mij", wf, bf, bf)
+    h = np.einsum("nm,nmi,nm->mi", wf, bf, res[:, free])
+    Wf = np.einsum("nm,nmi,nmj->nimj", wf, af, bf).reshape(len(C), 3, -1)
+    return U, V, Wf, g, h
+
+
+def _joint_step(U, V, Wf, g, h, lam):
+    """The damped Gauss-Newton step (Levenberg-Marquardt, ``diag *= 1 + lam``) of the poses and
+    the free objects, the poses eliminated per step (Schur complement on the objects)."""
+    n, f = len(U), len(V)
+    U = U.copy()
+    U[:, [0, 1, 2], [0, 1, 2]] *= 1.0 + lam
+    U[:, [0, 1, 2], [0, 1, 2]] += 1e-12
+    Ui = np.linalg.inv(U)
+    S = np.zeros((2 * f, 2 * f))
+    idx = np.arange(f)
+    for i in range(2):
+        for j in range(2):
+            S[2 * idx + i, 2 * idx + j] = V[:, i, j] * (1.0 + lam if i == j else 1.0)
+    Y = Ui @ Wf  # (N, 3, 2F)
+    S -= Wf.reshape(3 * n, -1).T @ Y.reshape(3 * n, -1)
+    Uig = np.einsum("nij,nj->ni", Ui, g)
+    rhs = -h.reshape(-1) + Wf.reshape(3 * n, -1).T @ Uig.reshape(-1)
+    dp = np.linalg.solve(S + 1e-12 * np.eye(2 * f), rhs)
+    dc = -Uig - Y @ dp
+    return dc, dp.reshape(f, 2)
+
+
+class BearingAdjustment(TransformerMixin, BaseEstimator):
+    """Refine a bearing map by estimating each step's viewpoint (module docstring).
+
+    Parameters:
+        start: label of the method that draws the start map (None: the bearing default before
+            this method, CAL-SMA for a complete history and ``covis-auto`` for a masked one).
+        loss: ``"huber"``, ``"cauchy"`` or None (least squares) on the angle residuals.
+        robust_scale: the loss's scale in robust standard deviations of the residuals (1.4826
+            times their median absolute value).
+        max_rounds: rounds of resection and intersection at most.
+        tol: stop when no object moves more than this [m].
+        pose_iters: Gauss-Newton iterations of the resection per round.
+        min_step_objects: a step that observed fewer objects gives no pose (3 unknowns).
+        min_views: an object observed from fewer usable steps keeps its start position.
+        min_spread: an object whose rays' normal matrix has a smaller eigenvalue ratio (nearly
+            parallel rays) keeps its start position.
+        random_state: handed to the start method.
+
+    Attributes:
+        embedding_ (M, 2) in world coordinates; start_ the start map; poses_ (N, 3) the
+        estimated viewpoints (NaN rows: steps left out); kept_ indices of non-anchor objects
+        that kept their start; n_rounds_, cost_, start_cost_ (robust angle cost, start's scale);
+        refined_ whether the refinement was kept.
+    """
+
+    _parameter_constraints: dict = {
+        "start": [str, None],
+        "loss": [StrOptions({"huber", "cauchy"}), None],
+        "robust_scale": [Interval(Real, 0, None, closed="neither")],
+        "max_rounds": [Interval(Integral, 1, None, closed="left")],
+        "tol": [Interval(Real, 0, None, closed="left")],
+        "pose_iters": [Interval(Integral, 1, None, closed="left")],
+        "min_step_objects": [Interval(Integral, 3, None, closed="left")],
+        "min_views": [Interval(Integral, 2, None, closed="left")],
+        "min_spread": [Interval(Real, 0, 1, closed="both")],
+        "solver": [StrOptions({"joint", "alternate"})],
+        "random_state": ["random_state"],
+    }
+
+    def __init__(self, *, start: str | None = None, loss: str | None = "huber",
+                 robust_scale: float = 2.0, max_rounds: int = 100, tol: float = 1e-7,
+                 pose_iters: int = 2, min_step_objects: int = 3, min_views: int = 5,
+                 min_spread: float = 1e-3, solver: str = "joint", random_state=0) -> None:
+        self.start = start
+        self.loss = loss
+        self.robust_scale = robust_scale
+        self.max_rounds = max_rounds
+        self.tol = tol
+        self.pose_iters = pose_iters
+        self.min_step_objects = min_step_objects
+        self.min_views = min_views
+        self.min_spread = min_spread
+        self.solver = solver
+        self.random_state = random_state
+
+    def _start_map(self, X, mask, ids, pos) -> np.ndarray:
+        from mappers.pipeline import build_map  # the pipeline imports the registry
+
+        masked = mask is not None and not np.all(mask)
+        label = self.start or ("covis-auto" if masked else "CAL-SMA")
+        if label.strip().upper() == "BEARING-BA":
+            raise ValueError("start must name another method than 'BEARING-BA'")
+        m = build_map(X, ids, pos, label, sensor="bearing", mask=mask if masked else None,
+                      random_state=self.random_state)
+        for note in m.warnings:
+            warnings.warn(f"start map ({m.method}): {note}", BearingAdjustmentWarning, stacklevel=3)
+        return m.positions
+
+    def fit(self, X, y=None, *, mask=None, sensor: str = "bearing", anchor_ids=None,
+            anchor_positions=None, start_positions=None):
+        """Map the bearing history ``X`` ((M, 2N), unit (cos, sin) per step; ``mask`` True where
+        observed) with the anchors (rows of X) held at their positions. ``start_positions``
+        ((M, 2), NaN rows: not placed) replaces the start method's map."""
+        self._validate_params()
+        if sensor != "bearing":
+            raise ValueError(f"BEARING-BA maps bearing histories, got a {sensor} history")
+        theta, seen = bearing_angles(X, mask)
+        m = theta.shape[1]
+        if anchor_ids is None or anchor_positions is None:
+            raise ValueError("BEARING-BA needs anchor_ids and anchor_positions (they fix the map's "
+                             "frame)")
+        ids, pos = check_anchors(anchor_ids, anchor_positions, m)
+        if start_positions is None:
+            P0 = self._start_map(X, mask, ids, pos)
+        else:
+            P0 = np.array(start_positions, dtype=float)
+            if P0.shape != (m, 2):
+                raise ValueError(f"start_positions must have shape ({m}, 2), got {P0.shape}")
+        P0[ids] = pos
+        self.start_ = P0.copy()
+        self.embedding_ = self._refine(theta, seen, P0, ids)
+        return self
+
+    def _refine(self, theta, seen, P0, ids) -> np.ndarray:
+        placed = np.all(np.isfinite(P0), axis=1)
+        free = placed.copy()
+        free[ids] = False
+        seen = seen & placed[None, :]
+        P = np.where(placed[:, None], P0, 0.0)
+        usable = seen.sum(1) >= self.min_step_objects
+        W = (seen & usable[:, None]).astype(float)
+        self.kept_ = np.array([], dtype=int)
+        C, phi = _initial_poses(P, theta, W)
+        C, phi, ok = _resect(P, C, phi, theta, W, 5)
+        Wb = W * ok[:, None]
+        res, _ = _residuals(P, C, phi, theta)
+        obs = Wb > 0
+        scale = self.robust_scale * 1.4826 * max(float(np.median(np.abs(res[obs]))) if obs.any()
+                                                 else 0.0, 1e-9)
+        self.start_cost_ = float(np.sum(Wb * _rho(res, scale, self.loss)))
+        # objects the usable steps do not pin down keep their start
+        views = (Wb > 0).sum(0)
+        weak = free & ((views < self.min_views) | (_spread(Wb, theta, phi) < self.min_spread))
+        if weak.any():
+            self.kept_ = np.flatnonzero(weak)
+            warnings.warn(f"objects {self.kept_.tolist()} are seen from too few steps or along "
+                          "nearly parallel rays: they keep the start map's positions",
+                          BearingAdjustmentWarning, stacklevel=3)
+        free &= ~weak
+        if self.solver == "joint":
+            P, C, phi, rounds = self._joint(P, C, phi, theta, Wb, free, scale)
+        else:
+            P, C, phi, Wb, rounds = self._alternate(P, C, phi, theta, W, Wb, free, scale)
+        ok = np.any(Wb > 0, axis=1)
+        res, _ = _residuals(P, C, phi, theta)
+        self.cost_ = float(np.sum(Wb * _rho(res, scale, self.loss)))
+        self.n_rounds_ = rounds
+        self.poses_ = np.where(ok[:, None], np.column_stack([C, phi]), np.nan)
+        finite = np.all(np.isfinite(P[placed]))
+        self.refined_ = bool(finite and self.cost_ < self.start_cost_)
+        if not self.refined_:
+            warnings.warn(f"the refined map explains the bearings no better than the start "
+                          f"(robust angle cost {self.cost_:.4g} against {self.start_cost_:.4g}"
+                          f"{'' if finite else ', not finite'}): the start map is kept",
+                          BearingAdjustmentWarning, stacklevel=3)
+            return P0
+        return np.where(placed[:, None], P, np.nan)
+
+    def _alternate(self, P, C, phi, theta, W, Wb, free, scale):
+        """Resection and intersection in turn (see the module docstring)."""
+        rounds = 0
+        for rounds in range(1, self.max_rounds + 1):
+            res, _ = _residuals(P, C, phi, theta)
+            Wr = Wb * _robust(res, scale, self.loss)
+            Q, _ = _intersect(P, C, phi, theta, Wr)
+            move = np.abs(Q[free] - P[free]).max() if free.any() else 0.0
+            P[free] = Q[free]
+            C, phi, ok = _resect(P, C, phi, theta, Wr, self.pose_iters)
+            Wb = W * ok[:, None]
+            if move <= self.tol:
+                break
+        return P, C, phi, Wb, rounds
+
+    def _joint(self, P, C, phi, theta, Wb, free, scale):
+        """Levenberg-Marquardt on the poses and the free objects together, robust weights
+        renewed at every step (IRLS), the poses eliminated per step (Schur complement)."""
+
+        def cost(P, C, phi):
+            return float(np.sum(Wb * _rho(_residuals(P, C, phi, theta)[0], scale, self.loss)))
+
+        lam, current, rounds = 1e-4, cost(P, C, phi), 0
+        for rounds in range(1, self.max_rounds + 1):
+            res, _ = _residuals(P, C, phi, theta)
+            blocks = _normal_blocks(P, C, phi, theta, Wb * _robust(res, scale, self.loss), free)
+            for _ in range(12):
+                dc, dp = _joint_step(*blocks, lam)
+                P2 = P.copy()
+                P2[free] += dp
+                C2, phi2 = C + dc[:, :2], _wrap(phi + dc[:, 2])
+                new = cost(P2, C2, phi2)
+                if np.isfinite(new) and new <= current:
+                    break
+                lam *= 10.0
+            else:
+                break  # no step lowers the cost: converged (or stuck)
+            P, C, phi, current, lam = P2, C2, phi2, new, max(lam / 10.0, 1e-9)
+            if not dp.size or np.abs(dp).max() <= self.tol:
+                break
+        return P, C, phi, rounds
+
+    def fit_transform(self, X, y=None, *, mask=None, sensor: str = "bearing", anchor_ids=None,
+                      anchor_positions=None, start_positions=None):
+        """Fit and return the (M, 2) map in world coordinates (NaN rows: not placed)."""
+        return self.fit(X, mask=mask, sensor=sensor, anchor_ids=anchor_ids,
+                        anchor_positions=anchor_positions,
+                        start_positions=start_positions).embedding_
+
+
+def _bearing_ba(*, start=None, loss="huber", robust_scale=2.0, max_rounds=100, tol=1e-7,
+                pose_iters=2, min_step_objects=3, min_views=5, min_spread=1e-3,
+                solver="joint", random_state=0) -> BearingAdjustment:
+    return BearingAdjustment(start=start, loss=loss, robust_scale=robust_scale,
+                             max_rounds=max_rounds, tol=tol, pose_iters=pose_iters,
+                             min_step_objects=min_step_objects, min_views=min_views,
+                             min_spread=min_spread, solver=solver, random_state=random_state)
+
+
+SPEC = MethodSpec(
+    "BEARING-BA",
+    _bearing_ba,
+    {},
+    {"loss": ["huber", "cauchy", None]},
+    "the bearing default's map refined by estimating the viewpoints (bearing-only bundle "
+    "adjustment), anchors fixed",
+    uses_anchors=True,
+    sensors=("bearing",),
+    normalize=False,
+    histories=("complete", "masked"),
+)
