@@ -107,47 +107,64 @@ def _rho(res: np.ndarray, scale: float, loss: str | None) -> np.ndarray:
     return 0.5 * scale * scale * np.log1p(u * u)
 
 
-def _residuals(P, C, phi, theta):
-    """Angle residuals (N, M) and the offsets object - viewpoint (N, M, 2)."""
-    d = P[None, :, :] - C[:, None, :]
-    return _wrap(np.arctan2(d[..., 1], d[..., 0]) - phi[:, None] - theta), d
+def _sum(idx: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """Per index, the sum of ``values`` (K,) or (K, ...) over the observations with that index."""
+    if values.ndim == 1:
+        return np.bincount(idx, weights=values, minlength=n)
+    flat = values.reshape(len(values), -1)
+    out = np.stack([np.bincount(idx, weights=flat[:, k], minlength=n) for k in range(flat.shape[1])],
+                   axis=1)
+    return out.reshape((n, *values.shape[1:]))
 
 
-def _initial_poses(P, theta, W):
+def _residuals(P, C, phi, obs):
+    """Angle residuals (K,) of the observations ``obs = (t, i, theta)`` and the offsets object -
+    viewpoint (K, 2)."""
+    t, i, th = obs
+    d = P[i] - C[t]
+    return _wrap(np.arctan2(d[:, 1], d[:, 0]) - phi[t] - th), d
+
+
+def _pose_jacobian(d):
+    """d residual / d (x, y, heading) of the viewpoint, (K, 3); the object's is minus the first two."""
+    r2 = np.maximum(np.einsum("kj,kj->k", d, d), _MIN_RANGE**2)
+    return np.column_stack([d[:, 1] / r2, -d[:, 0] / r2, -np.ones_like(r2)])
+
+
+def _initial_poses(P, obs, w, n):
     """Each step's pose by trying ``_HEADINGS`` headings: for each, the viewpoint is the least
     squares intersection of the rays' lines (back through the objects); the heading whose
     viewpoint explains the bearings best (sum of ``1 - cos`` of the angle residuals) wins."""
-    n = theta.shape[0]
+    t, i, th = obs
     best = np.full(n, np.inf)
     C, phi = np.zeros((n, 2)), np.zeros(n)
-    for h in np.linspace(-np.pi, np.pi, _HEADINGS, endpoint=False):
-        a = theta + h
+    for head in np.linspace(-np.pi, np.pi, _HEADINGS, endpoint=False):
+        a = th + head
         nx, ny = -np.sin(a), np.cos(a)  # normals of the rays
-        rhs = nx * P[None, :, 0] + ny * P[None, :, 1]
-        A11, A12, A22 = (W * nx * nx).sum(1), (W * nx * ny).sum(1), (W * ny * ny).sum(1)
-        b1, b2 = (W * nx * rhs).sum(1), (W * ny * rhs).sum(1)
+        rhs = nx * P[i, 0] + ny * P[i, 1]
+        A11, A12, A22 = (_sum(t, w * nx * nx, n), _sum(t, w * nx * ny, n), _sum(t, w * ny * ny, n))
+        b1, b2 = _sum(t, w * nx * rhs, n), _sum(t, w * ny * rhs, n)
         det = A11 * A22 - A12 * A12
         ok = det > 1e-12 * (A11 + A22) ** 2
         det = np.where(ok, det, 1.0)
-        c = np.stack([(A22 * b1 - A12 * b2) / det, (A11 * b2 - A12 * b1) / det], axis=1)
-        res, _ = _residuals(P, c, np.full(n, h), theta)
-        cost = np.where(ok, (W * (1.0 - np.cos(res))).sum(1), np.inf)
+        c = np.column_stack([(A22 * b1 - A12 * b2) / det, (A11 * b2 - A12 * b1) / det])
+        res, _ = _residuals(P, c, np.full(n, head), obs)
+        cost = np.where(ok, _sum(t, w * (1.0 - np.cos(res)), n), np.inf)
         better = cost < best
-        best[better], C[better], phi[better] = cost[better], c[better], h
+        best[better], C[better], phi[better] = cost[better], c[better], head
     return C, phi
 
 
-def _resect(P, C, phi, theta, W, iters: int):
+def _resect(P, C, phi, obs, w, iters: int):
     """Gauss-Newton on each step's pose (batched 3 x 3 systems), the objects fixed; returns the
     poses and which steps have a well-conditioned system."""
-    ok = np.ones(len(C), dtype=bool)
+    n, t = len(C), obs[0]
+    ok = np.ones(n, dtype=bool)
     for _ in range(iters):
-        res, d = _residuals(P, C, phi, theta)
-        r2 = np.maximum(np.einsum("nmk,nmk->nm", d, d), _MIN_RANGE**2)
-        J = np.stack([d[..., 1] / r2, -d[..., 0] / r2, -np.ones_like(r2)], axis=-1)  # (N, M, 3)
-        H = np.einsum("nm,nmi,nmj->nij", W, J, J)
-        g = np.einsum("nm,nmi,nm->ni", W, J, res)
-        H[:, [0, 1, 2], [0, 1, 2]] *= 1.0 + 1e-9
+        res, d = _residuals(P, C, phi, obs)
+        a = _pose_jacobian(d)
+        H = _sum(t, w[:, None, None] * a[:, :, None] * a[:, None, :], n)
+        g = _sum(t, (w * res)[:, None] * a, n)
         ev = np.linalg.eigvalsh(H)
         ok = ev[:, 0] > 1e-8 * np.maximum(ev[:, -1], 1e-300)
         H[~ok] = np.eye(3)
@@ -159,49 +176,54 @@ def _resect(P, C, phi, theta, W, iters: int):
     return C, phi, ok
 
 
-def _intersect(P, C, phi, theta, W):
+def _intersect(P, C, phi, obs, w):
     """Each object's least-squares point of its rays' lines, the perpendicular offsets divided by
-    the current range; returns the points (M, 2) and each object's 2 x 2 normal matrix."""
-    a = theta + phi[:, None]
+    the current range (the angle residuals to first order); returns the points (M, 2)."""
+    t, i, th = obs
+    m = len(P)
+    a = th + phi[t]
     nx, ny = -np.sin(a), np.cos(a)
-    d = P[None, :, :] - C[:, None, :]
-    w = W / np.maximum(np.einsum("nmk,nmk->nm", d, d), _MIN_RANGE**2)
-    rhs = nx * C[:, 0:1] + ny * C[:, 1:2]
-    A11, A12, A22 = (w * nx * nx).sum(0), (w * nx * ny).sum(0), (w * ny * ny).sum(0)
-    b1, b2 = (w * nx * rhs).sum(0), (w * ny * rhs).sum(0)
+    d = P[i] - C[t]
+    w = w / np.maximum(np.einsum("kj,kj->k", d, d), _MIN_RANGE**2)
+    rhs = nx * C[t, 0] + ny * C[t, 1]
+    A11, A12, A22 = _sum(i, w * nx * nx, m), _sum(i, w * nx * ny, m), _sum(i, w * ny * ny, m)
+    b1, b2 = _sum(i, w * nx * rhs, m), _sum(i, w * ny * rhs, m)
     det = A11 * A22 - A12 * A12
     safe = np.where(det > 0, det, 1.0)
-    Q = np.stack([(A22 * b1 - A12 * b2) / safe, (A11 * b2 - A12 * b1) / safe], axis=1)
-    return np.where((det > 0)[:, None], Q, P), np.stack([A11, A12, A22], axis=1)
+    Q = np.column_stack([(A22 * b1 - A12 * b2) / safe, (A11 * b2 - A12 * b1) / safe])
+    return np.where((det > 0)[:, None], Q, P)
 
 
-def _spread(W, theta, phi):
+def _spread(phi, obs, used, m):
     """Per object, the smallest over the largest eigenvalue of its rays' (unweighted) normal
     matrix: 0 for parallel rays, 1 for rays in every direction."""
-    a = theta + phi[:, None]
-    nx, ny = -np.sin(a), np.cos(a)
-    used = W > 0
-    A11, A12, A22 = (used * nx * nx).sum(0), (used * nx * ny).sum(0), (used * ny * ny).sum(0)
+    t, i, th = obs
+    a = th + phi[t]
+    nx, ny = -np.sin(a) * used, np.cos(a) * used
+    A11, A12, A22 = _sum(i, nx * nx, m), _sum(i, nx * ny, m), _sum(i, ny * ny, m)
     tr, det = A11 + A22, A11 * A22 - A12 * A12
     disc = np.sqrt(np.maximum(tr * tr / 4 - det, 0.0))
     return np.where(tr > 0, (tr / 2 - disc) / np.maximum(tr / 2 + disc, 1e-300), 0.0)
 
 
-def _normal_blocks(P, C, phi, theta, w, free):
+def _normal_blocks(P, C, phi, obs, w, free_index, n_free):
     """The blocks of the Gauss-Newton normal equations of the joint problem (poses and free
     objects): ``U`` (N, 3, 3), ``V`` (F, 2, 2), ``Wf`` (N, 3, 2F), gradients ``g`` (N, 3) and
     ``h`` (F, 2), for weighted residuals ``w * res**2 / 2``."""
-    res, d = _residuals(P, C, phi, theta)
-    r2 = np.maximum(np.einsum("nmk,nmk->nm", d, d), _MIN_RANGE**2)
-    a = np.stack([d[..., 1] / r2, -d[..., 0] / r2, -np.ones_like(r2)], axis=-1)  # d res / d pose
-    b = -a[..., :2]  # d res / d object
-    U = np.einsum("nm,nmi,nmj->nij", w, a, a)
-    g = np.einsum("nm,nmi,nm->ni", w, a, res)
-    wf, af, bf = w[:, free], a[:, free], b[:, free]
-    V = np.einsum("nm,nmi,nmj->mij", wf, bf, bf)
-    h = np.einsum("nm,nmi,nm->mi", wf, bf, res[:, free])
-    Wf = np.einsum("nm,nmi,nmj->nimj", wf, af, bf).reshape(len(C), 3, -1)
-    return U, V, Wf, g, h
+    t, i, _ = obs
+    n = len(C)
+    res, d = _residuals(P, C, phi, obs)
+    a = _pose_jacobian(d)
+    U = _sum(t, w[:, None, None] * a[:, :, None] * a[:, None, :], n)
+    g = _sum(t, (w * res)[:, None] * a, n)
+    f = free_index[i]
+    k = np.flatnonzero(f >= 0)
+    tf, ff, wf, af, bf = t[k], f[k], w[k], a[k], -a[k, :2]
+    V = _sum(ff, wf[:, None, None] * bf[:, :, None] * bf[:, None, :], n_free)
+    h = _sum(ff, (wf * res[k])[:, None] * bf, n_free)
+    Wf = np.zeros((n, 3, n_free, 2))
+    Wf[tf, :, ff, :] = wf[:, None, None] * af[:, :, None] * bf[:, None, :]
+    return U, V, Wf.reshape(n, 3, 2 * n_free), g, h
 
 
 def _joint_step(U, V, Wf, g, h, lam):
@@ -214,9 +236,9 @@ def _joint_step(U, V, Wf, g, h, lam):
     Ui = np.linalg.inv(U)
     S = np.zeros((2 * f, 2 * f))
     idx = np.arange(f)
-    for i in range(2):
-        for j in range(2):
-            S[2 * idx + i, 2 * idx + j] = V[:, i, j] * (1.0 + lam if i == j else 1.0)
+    for r in range(2):
+        for c in range(2):
+            S[2 * idx + r, 2 * idx + c] = V[:, r, c] * (1.0 + lam if r == c else 1.0)
     Y = Ui @ Wf  # (N, 3, 2F)
     S -= Wf.reshape(3 * n, -1).T @ Y.reshape(3 * n, -1)
     Uig = np.einsum("nij,nj->ni", Ui, g)
@@ -320,25 +342,30 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         return self
 
     def _refine(self, theta, seen, P0, ids) -> np.ndarray:
+        n, m = theta.shape
         placed = np.all(np.isfinite(P0), axis=1)
         free = placed.copy()
         free[ids] = False
         seen = seen & placed[None, :]
+        seen &= (seen.sum(1) >= self.min_step_objects)[:, None]
+        t, i = np.nonzero(seen)
+        obs = (t, i, theta[t, i])
         P = np.where(placed[:, None], P0, 0.0)
-        usable = seen.sum(1) >= self.min_step_objects
-        W = (seen & usable[:, None]).astype(float)
         self.kept_ = np.array([], dtype=int)
-        C, phi = _initial_poses(P, theta, W)
-        C, phi, ok = _resect(P, C, phi, theta, W, 5)
-        Wb = W * ok[:, None]
-        res, _ = _residuals(P, C, phi, theta)
-        obs = Wb > 0
-        scale = self.robust_scale * 1.4826 * max(float(np.median(np.abs(res[obs]))) if obs.any()
-                                                 else 0.0, 1e-9)
-        self.start_cost_ = float(np.sum(Wb * _rho(res, scale, self.loss)))
+        C, phi = _initial_poses(P, obs, np.ones(len(t)), n)
+        C, phi, ok = _resect(P, C, phi, obs, np.ones(len(t)), 5)
+        lo, hi = P[placed].min(0), P[placed].max(0)
+        self._box = (lo - (hi - lo).max(), hi + (hi - lo).max())
+        ok &= self._inside(C)
+        wb = ok[t].astype(float)  # steps whose pose the start map pins down
+        res, _ = _residuals(P, C, phi, obs)
+        used = wb > 0
+        scale = self.robust_scale * 1.4826 * max(
+            float(np.median(np.abs(res[used]))) if used.any() else 0.0, 1e-9)
+        self.start_cost_ = float(np.sum(wb * _rho(res, scale, self.loss)))
         # objects the usable steps do not pin down keep their start
-        views = (Wb > 0).sum(0)
-        weak = free & ((views < self.min_views) | (_spread(Wb, theta, phi) < self.min_spread))
+        views = _sum(i, wb, m)
+        weak = free & ((views < self.min_views) | (_spread(phi, obs, wb, m) < self.min_spread))
         if weak.any():
             self.kept_ = np.flatnonzero(weak)
             warnings.warn(f"objects {self.kept_.tolist()} are seen from too few steps or along "
@@ -346,16 +373,17 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
                           BearingAdjustmentWarning, stacklevel=3)
         free &= ~weak
         if self.solver == "joint":
-            P, C, phi, rounds = self._joint(P, C, phi, theta, Wb, free, scale)
+            P, C, phi, wb, rounds = self._joint(P, C, phi, obs, wb, free, scale)
+            ok = np.zeros(n, dtype=bool)
+            ok[t[wb > 0]] = True
         else:
-            P, C, phi, Wb, rounds = self._alternate(P, C, phi, theta, W, Wb, free, scale)
-        ok = np.any(Wb > 0, axis=1)
-        res, _ = _residuals(P, C, phi, theta)
-        self.cost_ = float(np.sum(Wb * _rho(res, scale, self.loss)))
+            P, C, phi, wb, ok, rounds = self._alternate(P, C, phi, obs, wb, free, scale)
+        res, _ = _residuals(P, C, phi, obs)
+        self.cost_ = float(np.sum(wb * _rho(res, scale, self.loss)))
         self.n_rounds_ = rounds
         self.poses_ = np.where(ok[:, None], np.column_stack([C, phi]), np.nan)
-        finite = np.all(np.isfinite(P[placed]))
-        self.refined_ = bool(finite and self.cost_ < self.start_cost_)
+        finite = bool(np.all(np.isfinite(P[placed])))
+        self.refined_ = finite and self.cost_ < self.start_cost_
         if not self.refined_:
             warnings.warn(f"the refined map explains the bearings no better than the start "
                           f"(robust angle cost {self.cost_:.4g} against {self.start_cost_:.4g}"
@@ -364,32 +392,41 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
             return P0
         return np.where(placed[:, None], P, np.nan)
 
-    def _alternate(self, P, C, phi, theta, W, Wb, free, scale):
+    def _inside(self, C):
+        """Viewpoints within the map's bounding box widened by its size on every side: a pose
+        beyond drifted along a degenerate direction (three objects nearly in line)."""
+        return np.all((C >= self._box[0]) & (C <= self._box[1]), axis=1)
+
+    def _alternate(self, P, C, phi, obs, wb, free, scale):
         """Resection and intersection in turn (see the module docstring)."""
-        rounds = 0
+        rounds, ok, t = 0, wb > 0, obs[0]
         for rounds in range(1, self.max_rounds + 1):
-            res, _ = _residuals(P, C, phi, theta)
-            Wr = Wb * _robust(res, scale, self.loss)
-            Q, _ = _intersect(P, C, phi, theta, Wr)
+            res, _ = _residuals(P, C, phi, obs)
+            w = wb * _robust(res, scale, self.loss)
+            Q = _intersect(P, C, phi, obs, w)
             move = np.abs(Q[free] - P[free]).max() if free.any() else 0.0
             P[free] = Q[free]
-            C, phi, ok = _resect(P, C, phi, theta, Wr, self.pose_iters)
-            Wb = W * ok[:, None]
+            C, phi, ok_steps = _resect(P, C, phi, obs, w, self.pose_iters)
+            ok = ok_steps & self._inside(C)
+            wb = wb * ok[t]
             if move <= self.tol:
                 break
-        return P, C, phi, Wb, rounds
+        return P, C, phi, wb, ok, rounds
 
-    def _joint(self, P, C, phi, theta, Wb, free, scale):
+    def _joint(self, P, C, phi, obs, wb, free, scale):
         """Levenberg-Marquardt on the poses and the free objects together, robust weights
         renewed at every step (IRLS), the poses eliminated per step (Schur complement)."""
 
         def cost(P, C, phi):
-            return float(np.sum(Wb * _rho(_residuals(P, C, phi, theta)[0], scale, self.loss)))
+            return float(np.sum(wb * _rho(_residuals(P, C, phi, obs)[0], scale, self.loss)))
 
+        free_index = np.full(len(P), -1)
+        free_index[free] = np.arange(free.sum())
         lam, current, rounds = 1e-4, cost(P, C, phi), 0
         for rounds in range(1, self.max_rounds + 1):
-            res, _ = _residuals(P, C, phi, theta)
-            blocks = _normal_blocks(P, C, phi, theta, Wb * _robust(res, scale, self.loss), free)
+            res, _ = _residuals(P, C, phi, obs)
+            blocks = _normal_blocks(P, C, phi, obs, wb * _robust(res, scale, self.loss),
+                                    free_index, int(free.sum()))
             for _ in range(12):
                 dc, dp = _joint_step(*blocks, lam)
                 P2 = P.copy()
@@ -401,10 +438,17 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
                 lam *= 10.0
             else:
                 break  # no step lowers the cost: converged (or stuck)
-            P, C, phi, current, lam = P2, C2, phi2, new, max(lam / 10.0, 1e-9)
-            if not dp.size or np.abs(dp).max() <= self.tol:
+            P, C, phi, lam = P2, C2, phi2, max(lam / 10.0, 1e-9)
+            done = current - new <= 1e-9 * current or not dp.size or np.abs(dp).max() <= self.tol
+            current = new
+            out = ~self._inside(C)
+            if out.any():  # drifting viewpoints leave the problem
+                wb = wb * ~out[obs[0]]
+                current = cost(P, C, phi)
+                done = False
+            if done:
                 break
-        return P, C, phi, rounds
+        return P, C, phi, wb, rounds
 
     def fit_transform(self, X, y=None, *, mask=None, sensor: str = "bearing", anchor_ids=None,
                       anchor_positions=None, start_positions=None):
