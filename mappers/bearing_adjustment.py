@@ -50,9 +50,6 @@ _UNIT_TOL = 1e-3
 _MIN_RANGE = 0.05
 """Smallest range [m] used in the angle weights of the intersection (an object at the viewpoint)."""
 
-_HEADINGS = 24
-"""Headings tried per step to start the resection from the start map."""
-
 
 class BearingAdjustmentWarning(UserWarning):
     """The refinement kept (part of) the start map: too few views, parallel rays, no gain."""
@@ -131,28 +128,29 @@ def _pose_jacobian(d):
     return np.column_stack([d[:, 1] / r2, -d[:, 0] / r2, -np.ones_like(r2)])
 
 
-def _initial_poses(P, obs, w, n):
-    """Each step's pose by trying ``_HEADINGS`` headings: for each, the viewpoint is the least
-    squares intersection of the rays' lines (back through the objects); the heading whose
-    viewpoint explains the bearings best (sum of ``1 - cos`` of the angle residuals) wins."""
+def _initial_poses(P, obs, n):
+    """Each step's pose from the start map in closed form. In the robot's frame an object is at
+    ``e = R(phi)^T p - s`` with ``s = R(phi)^T c``, and its bearing ``v`` is parallel to ``e``:
+    ``a (p x v) + b (p . v) - s1 v_y + s2 v_x = 0`` with ``(a, b) = (cos phi, sin phi)``, linear
+    in ``(a, b, s1, s2)``; the least-squares solution is the normal matrix's eigenvector of the
+    smallest eigenvalue, scaled to ``a^2 + b^2 = 1`` and signed so that the objects lie ahead
+    along their rays. Returns the poses and which steps gave one."""
     t, i, th = obs
-    best = np.full(n, np.inf)
-    C, phi = np.zeros((n, 2)), np.zeros(n)
-    for head in np.linspace(-np.pi, np.pi, _HEADINGS, endpoint=False):
-        a = th + head
-        nx, ny = -np.sin(a), np.cos(a)  # normals of the rays
-        rhs = nx * P[i, 0] + ny * P[i, 1]
-        A11, A12, A22 = (_sum(t, w * nx * nx, n), _sum(t, w * nx * ny, n), _sum(t, w * ny * ny, n))
-        b1, b2 = _sum(t, w * nx * rhs, n), _sum(t, w * ny * rhs, n)
-        det = A11 * A22 - A12 * A12
-        ok = det > 1e-12 * (A11 + A22) ** 2
-        det = np.where(ok, det, 1.0)
-        c = np.column_stack([(A22 * b1 - A12 * b2) / det, (A11 * b2 - A12 * b1) / det])
-        res, _ = _residuals(P, c, np.full(n, head), obs)
-        cost = np.where(ok, _sum(t, w * (1.0 - np.cos(res)), n), np.inf)
-        better = cost < best
-        best[better], C[better], phi[better] = cost[better], c[better], head
-    return C, phi
+    vx, vy = np.cos(th), np.sin(th)
+    px, py = P[i, 0], P[i, 1]
+    rows = np.column_stack([px * vy - py * vx, py * vy + px * vx, -vy, vx])
+    A = _sum(t, rows[:, :, None] * rows[:, None, :], n)
+    ev, vec = np.linalg.eigh(A)
+    z = vec[:, :, 0]
+    norm = np.hypot(z[:, 0], z[:, 1])
+    ok = (norm > 1e-9) & (ev[:, 1] > 1e-12 * np.maximum(ev[:, -1], 1e-300))
+    z = z / np.where(ok, norm, 1.0)[:, None]
+    ahead = _sum(t, (rows[:, 1] * z[t, 0] - rows[:, 0] * z[t, 1]  # e . v = (R^T p - s) . v
+                     - z[t, 2] * vx - z[t, 3] * vy), n)
+    z *= np.where(ahead < 0, -1.0, 1.0)[:, None]
+    phi = np.arctan2(z[:, 1], z[:, 0])
+    C = np.column_stack([z[:, 0] * z[:, 2] - z[:, 1] * z[:, 3], z[:, 1] * z[:, 2] + z[:, 0] * z[:, 3]])
+    return C, phi, ok
 
 
 def _resect(P, C, phi, obs, w, iters: int):
@@ -288,7 +286,7 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
     }
 
     def __init__(self, *, start: str | None = None, loss: str | None = "huber",
-                 robust_scale: float = 2.0, max_rounds: int = 100, tol: float = 1e-7,
+                 robust_scale: float = 2.0, max_rounds: int = 6, tol: float = 1e-7,
                  pose_iters: int = 2, min_step_objects: int = 3, min_views: int = 5,
                  min_spread: float = 1e-3, solver: str = "joint", random_state=0) -> None:
         self.start = start
@@ -352,8 +350,9 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         obs = (t, i, theta[t, i])
         P = np.where(placed[:, None], P0, 0.0)
         self.kept_ = np.array([], dtype=int)
-        C, phi = _initial_poses(P, obs, np.ones(len(t)), n)
-        C, phi, ok = _resect(P, C, phi, obs, np.ones(len(t)), 5)
+        C, phi, ok0 = _initial_poses(P, obs, n)
+        C, phi, ok = _resect(P, C, phi, obs, np.ones(len(t)), 3)
+        ok &= ok0
         lo, hi = P[placed].min(0), P[placed].max(0)
         self._box = (lo - (hi - lo).max(), hi + (hi - lo).max())
         ok &= self._inside(C)
@@ -439,7 +438,7 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
             else:
                 break  # no step lowers the cost: converged (or stuck)
             P, C, phi, lam = P2, C2, phi2, max(lam / 10.0, 1e-9)
-            done = current - new <= 1e-9 * current or not dp.size or np.abs(dp).max() <= self.tol
+            done = current - new <= 1e-6 * current or not dp.size or np.abs(dp).max() <= self.tol
             current = new
             out = ~self._inside(C)
             if out.any():  # drifting viewpoints leave the problem
@@ -458,7 +457,7 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
                         start_positions=start_positions).embedding_
 
 
-def _bearing_ba(*, start=None, loss="huber", robust_scale=2.0, max_rounds=100, tol=1e-7,
+def _bearing_ba(*, start=None, loss="huber", robust_scale=2.0, max_rounds=6, tol=1e-7,
                 pose_iters=2, min_step_objects=3, min_views=5, min_spread=1e-3,
                 solver="joint", random_state=0) -> BearingAdjustment:
     return BearingAdjustment(start=start, loss=loss, robust_scale=robust_scale,
