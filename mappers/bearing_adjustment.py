@@ -20,8 +20,11 @@ until no object moves more than ``tol`` [m] (at most ``max_rounds`` rounds).
 
 Guards: an object seen from fewer than ``min_views`` usable steps, or from nearly parallel rays
 (the smallest to largest eigenvalue of its rays' normal matrix below ``min_spread``), keeps its
-start position; if the refined solution's robust angle cost is not below the start's (with the
-start's poses resected), or anything is not finite, the start map is returned. Each case is a
+start position, and its bearings are left out (the start is not to be trusted); a viewpoint that
+drifts beyond the map's bounding box widened by its size on every side (three objects nearly in
+line leave a pose free to run away) leaves the problem; if the refined solution's robust angle
+cost is above the start's (with the start's poses resected), or anything is not finite, the
+start map is returned. Each case is a
 :class:`BearingAdjustmentWarning` (``build_map`` lists them in ``Map.warnings``).
 
 *Assumes*: the bearings of one step are taken from one viewpoint and are relative to the robot's
@@ -48,7 +51,8 @@ _UNIT_TOL = 1e-3
 """How far an observed (cos, sin) pair's norm may be from 1 (float32 storage, rounding)."""
 
 _MIN_RANGE = 0.05
-"""Smallest range [m] used in the angle weights of the intersection (an object at the viewpoint)."""
+"""Smallest range [m] in the angle weights of the alternating intersection (an object at the
+viewpoint)."""
 
 
 class BearingAdjustmentWarning(UserWarning):
@@ -124,7 +128,7 @@ def _residuals(P, C, phi, obs):
 
 def _pose_jacobian(d):
     """d residual / d (x, y, heading) of the viewpoint, (K, 3); the object's is minus the first two."""
-    r2 = np.maximum(np.einsum("kj,kj->k", d, d), _MIN_RANGE**2)
+    r2 = np.maximum(np.einsum("kj,kj->k", d, d), 1e-12)
     return np.column_stack([d[:, 1] / r2, -d[:, 0] / r2, -np.ones_like(r2)])
 
 
@@ -371,6 +375,9 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
                           "nearly parallel rays: they keep the start map's positions",
                           BearingAdjustmentWarning, stacklevel=3)
         free &= ~weak
+        if weak.any():  # their start is not to be trusted: their bearings leave the problem
+            wb = wb * ~weak[i]
+            wb = wb * (_sum(t, wb, n) >= self.min_step_objects)[t]
         if self.solver == "joint":
             P, C, phi, wb, rounds = self._joint(P, C, phi, obs, wb, free, scale)
             ok = np.zeros(n, dtype=bool)
@@ -382,7 +389,7 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         self.n_rounds_ = rounds
         self.poses_ = np.where(ok[:, None], np.column_stack([C, phi]), np.nan)
         finite = bool(np.all(np.isfinite(P[placed])))
-        self.refined_ = finite and self.cost_ < self.start_cost_
+        self.refined_ = finite and self.cost_ <= self.start_cost_
         if not self.refined_:
             warnings.warn(f"the refined map explains the bearings no better than the start "
                           f"(robust angle cost {self.cost_:.4g} against {self.start_cost_:.4g}"
