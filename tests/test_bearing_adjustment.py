@@ -9,7 +9,8 @@ from threadpoolctl import threadpool_limits
 import mappers.bearing_adjustment as ba
 from mappers import build_map
 from mappers.bearing_adjustment import BearingAdjustment, BearingAdjustmentWarning
-from mappers.registry import methods_for
+from mappers.pipeline import default_method
+from mappers.registry import DEFAULT_METHODS, methods_for, resolve_method
 
 
 @pytest.fixture(autouse=True)
@@ -46,6 +47,14 @@ def test_registered_for_complete_and_masked_bearing_histories():
     assert "BEARING-BA" in methods_for("bearing", masked=False)
     assert "BEARING-BA" in methods_for("bearing", masked=True)
     assert "BEARING-BA" not in methods_for("visibility")
+
+
+def test_it_is_the_bearing_default_below_the_scalable_size():
+    P, X, mask, ids = _camera(fov_deg=90, n_steps=200)
+    assert DEFAULT_METHODS[("bearing", False)] == DEFAULT_METHODS[("bearing", True)] == "BEARING-BA"
+    assert default_method(X, sensor="bearing", mask=mask) == "BEARING-BA"
+    assert resolve_method(None, "bearing", masked=True, n_objects=1000).label == "covis-sparse"
+    assert resolve_method(None, "bearing", n_objects=1000).label == "CAL-SMA-SPARSE"
 
 
 def test_exact_bearings_recover_the_layout_from_a_perturbed_start():
