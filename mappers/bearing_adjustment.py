@@ -1,31 +1,37 @@
 """Bearing-only bundle adjustment of a bearing map (label ``"BEARING-BA"``).
 
 The paper's methods, and every other mapper here, never estimate where the robot was. This one
-does: it starts from the map the bearing default draws (``start``: CAL-SMA for a complete
-history, ``covis-auto`` for a masked one) and refines it by treating each step's viewpoint as a
-latent pose ``(x, y, heading)``, alternating
+does: it starts from the map the bearing default drew before it (``start``: CAL-SMA for a
+complete history, ``covis-auto`` for a masked one) and refines it by treating each step's
+viewpoint as a latent pose ``(x, y, heading)``:
 
-1. *resection*: each step's pose from the bearings of the objects it observed, the objects
-   where the map puts them (Gauss-Newton on the wrapped angle residuals, batched over the steps:
-   one 3 x 3 system per step); a step that observed fewer than ``min_step_objects`` objects, or
-   whose system is ill-conditioned, is left out;
-2. *intersection*: each non-anchor object's position from the rays of the steps that observed
-   it (linear least squares on the perpendicular offsets divided by the current range, i.e. the
-   angle residuals to first order: one 2 x 2 system per object); the anchors stay at their known
-   positions, which fix the gauge (shift, rotation, scale);
-3. *robust weights*: Huber (or Cauchy) weights on the angle residuals, the scale read from their
-   median absolute value, so 30 degrees of noise or a wrong reading does not dominate;
+1. *resection* of the start map: each step's pose from the bearings of the objects it observed,
+   the objects where the start map puts them, in closed form (linear in ``cos``, ``sin`` of the
+   heading and the rotated viewpoint; one 4 x 4 eigenproblem per step), then Gauss-Newton on
+   the wrapped angle residuals (one 3 x 3 system per step, batched); a step that observed fewer
+   than ``min_step_objects`` objects, or whose system is ill-conditioned, is left out;
+2. *adjustment* (``solver="joint"``, the default): Levenberg-Marquardt on the poses and the
+   non-anchor objects together, each step's 3 pose unknowns eliminated (Schur complement) so
+   the system solved is the objects' 2F x 2F one; the anchors stay at their known positions,
+   which fix the gauge (shift, rotation, scale). ``solver="alternate"`` instead alternates the
+   resection with an *intersection*, each object from its rays (linear least squares on the
+   perpendicular offsets over the range, a 2 x 2 system per object): simpler, but it converges
+   linearly (docs/imperfect-sensing.md has the figures);
+3. *robust weights*: Huber (or Cauchy) weights on the angle residuals, renewed at every step,
+   the scale read from the start's residuals (their median absolute value), so 30 degrees of
+   noise or a wrong reading does not dominate;
 
-until no object moves more than ``tol`` [m] (at most ``max_rounds`` rounds).
+for at most ``max_rounds`` rounds, or until no object moves more than ``tol`` [m] or the cost
+stops falling.
 
 Guards: an object seen from fewer than ``min_views`` usable steps, or from nearly parallel rays
 (the smallest to largest eigenvalue of its rays' normal matrix below ``min_spread``), keeps its
 start position, and its bearings are left out (the start is not to be trusted); a viewpoint that
 drifts beyond the map's bounding box widened by its size on every side (three objects nearly in
 line leave a pose free to run away) leaves the problem; if the refined solution's robust angle
-cost is above the start's (with the start's poses resected), or anything is not finite, the
-start map is returned. Each case is a
-:class:`BearingAdjustmentWarning` (``build_map`` lists them in ``Map.warnings``).
+cost is above the start's (with the start's poses resected, over the same readings), or anything
+is not finite, the start map is returned. Each case is a :class:`BearingAdjustmentWarning`
+(``build_map`` lists them in ``Map.warnings``).
 
 *Assumes*: the bearings of one step are taken from one viewpoint and are relative to the robot's
 heading at that step (one unknown heading per step, no calibration offset); a static world;
@@ -259,13 +265,14 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         loss: ``"huber"``, ``"cauchy"`` or None (least squares) on the angle residuals.
         robust_scale: the loss's scale in robust standard deviations of the residuals (1.4826
             times their median absolute value).
-        max_rounds: rounds of resection and intersection at most.
+        max_rounds: rounds (Levenberg-Marquardt steps, or resection and intersection) at most.
         tol: stop when no object moves more than this [m].
-        pose_iters: Gauss-Newton iterations of the resection per round.
+        pose_iters: Gauss-Newton iterations of the resection per round (``"alternate"``).
         min_step_objects: a step that observed fewer objects gives no pose (3 unknowns).
         min_views: an object observed from fewer usable steps keeps its start position.
         min_spread: an object whose rays' normal matrix has a smaller eigenvalue ratio (nearly
             parallel rays) keeps its start position.
+        solver: ``"joint"`` (Levenberg-Marquardt on poses and objects) or ``"alternate"``.
         random_state: handed to the start method.
 
     Attributes:
@@ -365,7 +372,7 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         used = wb > 0
         scale = self.robust_scale * 1.4826 * max(
             float(np.median(np.abs(res[used]))) if used.any() else 0.0, 1e-9)
-        self.start_cost_ = float(np.sum(wb * _rho(res, scale, self.loss)))
+        start_rho = _rho(res, scale, self.loss)
         # objects the usable steps do not pin down keep their start
         views = _sum(i, wb, m)
         weak = free & ((views < self.min_views) | (_spread(phi, obs, wb, m) < self.min_spread))
@@ -386,6 +393,7 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
             P, C, phi, wb, ok, rounds = self._alternate(P, C, phi, obs, wb, free, scale)
         res, _ = _residuals(P, C, phi, obs)
         self.cost_ = float(np.sum(wb * _rho(res, scale, self.loss)))
+        self.start_cost_ = float(np.sum(wb * start_rho))  # the same readings, start's poses
         self.n_rounds_ = rounds
         self.poses_ = np.where(ok[:, None], np.column_stack([C, phi]), np.nan)
         finite = bool(np.all(np.isfinite(P[placed])))
