@@ -485,7 +485,7 @@ SPEC = MethodSpec(
     "BEARING-BA",
     _bearing_ba,
     {},
-    {"loss": ["huber", "cauchy", None]},
+    {},  # the defaults were chosen on tuning layouts (docs/imperfect-sensing.md): no sweep
     "the bearing default's map refined by estimating the viewpoints (bearing-only bundle "
     "adjustment), anchors fixed",
     uses_anchors=True,
