@@ -48,6 +48,8 @@ SETTINGS = (
     ("bearing, 360 deg, 30 deg noise", "bearing", dict(bearing_noise_deg=30), 0.035, 0.043),
     ("visibility, 90 deg view", "visibility", dict(fov_deg=90), 0.05, 0.071),
     ("visibility, miss rate 0.5", "visibility", dict(miss_rate=0.5), 0.055, 0.073),
+    # a reference, no goal: the complete, perfect bearing history (CAL-SMA ~0.024 at N = 2000)
+    ("bearing, 360 deg, perfect sensing (reference)", "bearing", {}, None, None),
 )
 BEFORE = {"visibility": "covis-nonmetric", "bearing": "covis-nonmetric"}  # masked defaults before
 TIME_GOAL = 1.0  # s per map at M = 50
@@ -98,13 +100,15 @@ def main(argv=None) -> None:
                     labels[extra] = extra
                 for label, method in labels.items():
                     rows.setdefault(label, []).append(score(h, method))
-            print(f"\n{name}: goal <= {goal:.3f} m (max run <= {2 * goal:.3f}), "
-                  f"issue's figure before {issue_before:.3f} m")
+            print(f"\n{name}: " + ("no goal" if goal is None else
+                  f"goal <= {goal:.3f} m (max run <= {2 * goal:.3f}), "
+                  f"issue's figure before {issue_before:.3f} m"))
             for label, vals in rows.items():
                 a = np.array(vals)
-                ok = a[:, 0].mean() <= goal and a[:, 0].max() <= 2 * goal
+                ok = goal is not None and a[:, 0].mean() <= goal and a[:, 0].max() <= 2 * goal
                 print(f"  {label:32s} {a[:, 0].mean():.4f} / {a[:, 0].max():.4f}   "
-                      f"{np.median(a[:, 1]):.3f} s  {'met' if ok else 'NOT met'}")
+                      f"{np.median(a[:, 1]):.3f} s (max {a[:, 1].max():.3f} s)  "
+                      f"{'' if goal is None else 'met' if ok else 'NOT met'}")
 
 
 if __name__ == "__main__":

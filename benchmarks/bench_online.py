@@ -44,12 +44,13 @@ def one_run(hist, steps: int, batch: int, checkpoints: tuple[int, ...], **online
         current = om.update(hist.matrix[:, s * c:(s + batch) * c])
         times.append(time.process_time() - t0)
         if s + batch in checkpoints:
-            ref = mappers.build_map(hist.head(s + batch), hist.anchor_ids, hist.anchor_positions)
+            ref = mappers.build_map(hist.head(s + batch), hist.anchor_ids, hist.anchor_positions,
+                                    current.method)  # the online map's method (CAL-SMA)
             online.append(_mpe(current, hist))
             offline.append(_mpe(ref, hist))
             ratios.append(online[-1] / offline[-1])
     t0 = time.process_time()
-    mappers.build_map(hist.head(steps), hist.anchor_ids, hist.anchor_positions)
+    mappers.build_map(hist.head(steps), hist.anchor_ids, hist.anchor_positions, current.method)
     rebuild = time.process_time() - t0
     return {"median": np.median(times), "mean": np.mean(times), "rebuild": rebuild,
             "ratios": ratios, "online": online, "offline": offline, "refits": om.n_full_fits}

@@ -50,6 +50,7 @@ _LAZY: dict[str, str] = {
     "flicker_rate": "mappers.flicker",
     "DropoutBlend": "mappers.dropout_blend",
     "OnlineMapper": "mappers.online",
+    "BearingAdjustment": "mappers.bearing_adjustment",
 }
 
 __all__ = sorted(_LAZY)

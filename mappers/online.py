@@ -6,7 +6,8 @@ current :class:`~mappers.pipeline.Map`, the same kind of map :func:`~mappers.pip
 returns for the whole history.
 
 For the default method of complete visibility and bearing histories, CAL-SMA
-(:mod:`mappers.calibrated`), the update is incremental:
+(:mod:`mappers.calibrated`; ``build_map``'s complete bearing default is BEARING-BA, which the
+online mapper does not use unless named), the update is incremental:
 
 - Statistics: CAL-SMA needs only the dissimilarities of the L2-normalised rows (paper eq. 7),
   and both its cosine (visibility) and RMS Euclidean (bearing) dissimilarities are functions of
@@ -52,9 +53,16 @@ from mappers.pipeline import Map, _thread_limit, build_map
 from mappers.registry import MappingError, resolve_method
 from mappers.sensors import COLUMNS_PER_STEP, check_sensor, infer_sensor
 
-__all__ = ["OnlineMapper", "gram_dissimilarity"]
+__all__ = ["OnlineMapper", "gram_dissimilarity", "online_default"]
 
 _INCREMENTAL = "CAL-SMA"
+
+
+def online_default(sensor: str, masked: bool) -> str | None:
+    """The label :class:`OnlineMapper` uses when none is given, None where it is ``build_map``'s
+    default: CAL-SMA (updated incrementally) for complete bearing histories, whose ``build_map``
+    default BEARING-BA refits from the whole history."""
+    return _INCREMENTAL if sensor == "bearing" and not masked else None
 
 
 def gram_dissimilarity(gram: np.ndarray, n_columns: int, kind: str) -> np.ndarray:
@@ -87,8 +95,9 @@ class OnlineMapper:
         sensor: ``"visibility"``, ``"bearing"`` or ``"range"``; None = inferred from the first
             update that senses anything (pass it when you know it).
         method: a label of :data:`mappers.METHODS`; None = ``build_map``'s default for the
-            sensor and the kind of history (CAL-SMA for complete visibility and bearing, which
-            is updated incrementally).
+            sensor and the kind of history, except CAL-SMA for complete bearing histories
+            (``build_map``'s BEARING-BA needs the whole history at every refit): CAL-SMA, for
+            complete visibility and bearing, is updated incrementally.
         refit_growth: a full refit whenever the steps have grown by this factor (> 1) since the
             last one.
         warm_rounds: CAL-SMA rounds of the warm-started update between full refits.
@@ -169,7 +178,8 @@ class OnlineMapper:
 
     def _resolve(self) -> None:
         """Choose the method once the sensor is known; replay the batches held until then."""
-        spec = resolve_method(self.method, self.sensor, masked=self._masked)
+        spec = resolve_method(self.method or online_default(self.sensor, bool(self._masked)),
+                              self.sensor, masked=self._masked)
         self._merged = spec.resolved_params(self.params)
         if "random_state" in spec.parameters and "random_state" not in self.params:
             self._merged["random_state"] = self.random_state

@@ -2,7 +2,8 @@
 
 Every method — the paper's ten (:mod:`mappers.methods`), CAL-SMA (:mod:`mappers.calibrated`),
 UNFOLD (:mod:`mappers.unfolding`), the methods for masked histories (:mod:`mappers.masked`,
-:mod:`mappers.ensemble`, :mod:`mappers.covis_calibrated`) and any a user registers — is a
+:mod:`mappers.ensemble`, :mod:`mappers.covis_calibrated`), the bearing default BEARING-BA
+(:mod:`mappers.bearing_adjustment`) and any a user registers — is a
 :class:`MethodSpec` in :data:`METHODS`. A spec says what the method accepts (which sensors or
 fused sets of sensors, complete and/or masked histories); the pipeline, the protocol and the
 command line choose and check methods by the spec alone (:func:`resolve_method`). Fused methods
@@ -164,6 +165,7 @@ def _load_builtins() -> None:
         return
     _BUILTINS_LOADED = True
     from mappers import (
+        bearing_adjustment,
         calibrated,
         covis_calibrated,
         covis_sparse,
@@ -179,7 +181,7 @@ def _load_builtins() -> None:
 
     for spec in (*methods.SPECS, calibrated.SPEC, unfolding.SPEC, scalable.SPEC, *masked.SPECS,
                  ensemble.SPEC, *covis_calibrated.SPECS, covis_sparse.SPEC, dropout_blend.SPEC,
-                 range_bearing.SPEC, visibility_bearing.SPEC):
+                 range_bearing.SPEC, visibility_bearing.SPEC, bearing_adjustment.SPEC):
         _METHODS.setdefault(spec.label, spec)
 
 
@@ -207,10 +209,10 @@ METHODS: Mapping[str, MethodSpec] = _Registry()
 
 DEFAULT_METHODS: dict[tuple[str | frozenset[str], bool], str] = {
     ("visibility", False): "CAL-SMA",
-    ("bearing", False): "CAL-SMA",
+    ("bearing", False): "BEARING-BA",
     ("range", False): "UNFOLD",
     ("visibility", True): "dropout-blend",
-    ("bearing", True): "covis-auto",
+    ("bearing", True): "BEARING-BA",
     ("range", True): "range-quantile",
     (frozenset({"range", "bearing"}), False): "LOC-SMA",
     (frozenset({"range", "bearing"}), True): "LOC-SMA",
@@ -218,7 +220,10 @@ DEFAULT_METHODS: dict[tuple[str | frozenset[str], bool], str] = {
 }
 """(sensor, masked) -> the label ``build_map`` uses when no method is given; a fused set of
 sensors is keyed by its frozenset. The measured figures behind each choice are in the README
-and ``benchmarks/``."""
+and ``benchmarks/``. Bearing histories, complete or masked, go to BEARING-BA, which refines the
+map of the bearing default before it (CAL-SMA complete, ``covis-auto`` masked) by estimating the
+viewpoints; :class:`mappers.online.OnlineMapper` keeps CAL-SMA for complete bearing histories,
+which it updates incrementally."""
 
 DROPOUT_DEFAULTS: dict[str, str] = {
     "visibility": "dropout-blend",

@@ -89,10 +89,11 @@ def test_covis_auto_chooses_by_the_share_of_pairs_never_seen_together(max_range,
     assert _mpe(Y, P, a) < (0.2 if branch == "covis-cal" else 0.08)
 
 
-def test_covis_auto_is_the_masked_bearing_default_through_build_map():
+def test_covis_auto_maps_masked_bearing_through_build_map():
     P, X, mask, a = _camera(90, seed=3)
-    assert DEFAULT_METHODS[("bearing", True)] == "covis-auto"
-    m = build_map(X, a, P[a], mask=mask, sensor="bearing")
+    # the masked bearing default refines covis-auto's map (BEARING-BA); named here, its own map
+    assert DEFAULT_METHODS[("bearing", True)] == "BEARING-BA"
+    m = build_map(X, a, P[a], "covis-auto", mask=mask, sensor="bearing")
     assert m.method == "covis-auto" and _mpe(m.positions, P, a) < 0.2
     vis = (mask[:, 0::2]).astype(float)  # visibility: the co-observation pattern alone
     m = build_map(vis, a, P[a], "covis-cal", mask=mask[:, 0::2], sensor="visibility")

@@ -50,7 +50,7 @@ def test_sparse_coefficient_equals_the_dense_one(limited, sensor):
 def test_covis_sparse_maps_as_well_as_the_dense_default(limited):
     dense, small = limited
     ids, pos, truth = dense.anchor_ids, dense.anchor_positions, dense.object_positions
-    ref = mappers.build_map(dense, ids, pos)  # the masked bearing default (covis-auto)
+    ref = mappers.build_map(dense, ids, pos, "covis-auto")  # the dense co-observation map
     assert ref.method == "covis-auto"
     got = mappers.build_map(small, ids, pos, method="covis-sparse")  # sparse in, sparse path
     again = mappers.build_map(dense, ids, pos, method="covis-sparse")  # dense in: the same map
@@ -69,7 +69,7 @@ def test_covis_sparse_maps_as_well_as_the_dense_default(limited):
 def test_large_masked_bearing_default_is_covis_sparse():
     spec = mappers.registry.resolve_method(None, "bearing", masked=True, n_objects=1000)
     assert spec.label == "covis-sparse" and spec.sparse
-    assert mappers.registry.resolve_method(None, "bearing", masked=True, n_objects=50).label == "covis-auto"
+    assert mappers.registry.resolve_method(None, "bearing", masked=True, n_objects=50).label == "BEARING-BA"
 
 
 def test_a_dense_masked_method_gets_the_sparse_history_densified(limited):

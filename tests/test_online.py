@@ -55,7 +55,8 @@ def test_one_update_is_build_map(sensor):
     pts, ids, rng = _world(2)
     X = _histories(pts, sensor, 400, rng)
     online = OnlineMapper(ids, pts[ids], sensor=sensor).update(X)
-    offline = build_map(X, ids, pts[ids], sensor=sensor)
+    # the online default is CAL-SMA (incremental); build_map's complete bearing one is BEARING-BA
+    offline = build_map(X, ids, pts[ids], "CAL-SMA", sensor=sensor)
     assert online.method == offline.method == "CAL-SMA"
     assert online.unmapped == offline.unmapped
     assert np.allclose(online.positions, offline.positions, atol=1e-8, equal_nan=True)
@@ -71,7 +72,7 @@ def test_batches_track_build_map(sensor):
         current = om.update(X[:, s * cols:(s + 20) * cols])
     assert om.n_steps == 600 and om.n_full_fits >= 1
     keep = np.setdiff1d(np.arange(len(pts)), ids)
-    offline = build_map(X, ids, pts[ids], sensor=sensor)
+    offline = build_map(X, ids, pts[ids], "CAL-SMA", sensor=sensor)  # what the online map tracks
     err_on = mean_position_error(current.positions[keep], pts[keep])
     err_off = mean_position_error(offline.positions[keep], pts[keep])
     assert err_on <= 1.25 * err_off + 0.01
