@@ -2,7 +2,8 @@
 
 For each sensor (visibility, bearing) and each policy it walks fresh layouts (seeds never used
 to tune a policy), the same layout and start pose for every policy, and maps the first 250,
-500, 1,000 and 2,000 steps with the default mapper (CAL-SMA). It prints the mean MPE over the
+500, 1,000 and 2,000 steps with the default mapper (CAL-SMA for visibility, BEARING-BA for
+bearing). It prints the mean MPE over the
 non-anchor objects [m] per policy and number of steps, then the goal: the best policy's map
 after 500 steps at least as good as the random walk's after 2,000. ``--plot FILE`` draws the
 figure (matplotlib, the ``plots`` extra).
