@@ -14,19 +14,32 @@ For the default method of complete visibility and bearing histories, CAL-SMA
   new columns ``C``: O(M^2 k) for k new columns, never a pass over the whole history, and no
   column is kept.
 - Embedding: the last map is the start of a short CAL-SMA refinement (``warm_rounds``
-  calibrate/re-embed rounds, anchors held fixed); objects sensed for the first time start at the
-  mean position of their three most similar mapped objects. CAL-SMA's fold guard still runs: a
-  warm map that looks folded is refitted from its deterministic starts.
+  calibrate/re-embed rounds, anchors held fixed, Guttman updates stopped at the looser
+  ``warm_tol``: the start is nearly converged); objects sensed for the first time start at the
+  mean position of their three most similar mapped objects. CAL-SMA's fold check runs every
+  ``fold_check_every`` warm updates and whenever objects join the map; a warm map that looks
+  folded is refitted from scratch once the steps have grown by 1.5 since the last full fit
+  (until then it is kept, with a note in ``Map.warnings``).
 - Full refits: from scratch (CAL-SMA's two deterministic starts and all its rounds) whenever the
   number of steps has grown by the factor ``refit_growth`` since the last full fit, so a map
-  whose early shape was poor is rebuilt a logarithmic number of times in all.
+  whose early shape was poor is rebuilt a logarithmic number of times in all. They skip
+  CAL-SMA's random restarts (tried only when both deterministic starts look folded, which
+  happens in the first few dozen steps, at 3-4x the cost of a fit): such a map is refitted
+  later, with more steps.
+- Both run CAL-SMA's rounds in fewer array passes than
+  :class:`~mappers.calibrated.CalibratedSMACOF` (one solve of the anchored Guttman system per
+  neighbour graph, kept between warm updates whose graph did not change; the calibration summed
+  term by term): the same maps to rounding, at about 3/4 of the cost. ``build_map`` and the
+  offline estimator are untouched.
 
 Cost per update, with M objects: O(M^2 k) for the statistics plus O(M^2 log M) for the
 neighbours plus ``warm_rounds`` rounds of anchored weighted SMACOF (O(M^2) per Guttman update,
-a few updates per round), independent of the number of steps so far. A full refit costs what
-``build_map`` costs (``2 x n_rounds`` rounds); with ``refit_growth = g`` there are about
-``log_g(N / N_0)`` of them over a run of N steps, N_0 the steps of the first map. ``benchmarks/bench_online.py`` measures both
-against rebuilding the map.
+a few updates per round), independent of the number of steps so far. A full refit costs about
+3/4 of what ``build_map`` costs (``2 x n_rounds`` rounds), more in the first hundred steps,
+whose maps converge slowly; with ``refit_growth = g`` there are about ``log_g(N / N_0)`` of
+them over a run of N steps, N_0 the steps of the first map, plus the few a fold check asks for.
+``benchmarks/bench_online.py`` measures both against rebuilding the map (figures in the README
+and in ``docs/online-and-exploration.md``).
 
 Other methods (and masked histories, whose methods need the steps' co-observation patterns)
 keep the columns and refit with :func:`~mappers.pipeline.build_map` on the same geometric
@@ -239,12 +252,26 @@ class OnlineMapper:
         refit_growth: a full refit whenever the steps have grown by this factor (> 1) since the
             last one.
         warm_rounds: CAL-SMA rounds of the warm-started update between full refits.
+        warm_tol: relative stress decrease at which a warm round's Guttman updates stop, in
+            [0, 1) (CAL-SMA's own ``tol`` is 1e-6; from a nearly converged start 1e-4 halves
+            the updates and leaves the maps as accurate).
+        fold_check_every: CAL-SMA's fold check on every this many warm updates (integer >= 1;
+            also whenever objects join the map; 1 = every update).
         random_state: seed handed to the method, as ``build_map``'s.
         **params: the method's parameters, as for ``build_map``.
 
     Attributes:
-        n_steps: steps received so far; n_full_fits: full refits so far; map: the last map
-        (None before the first update).
+        n_steps: steps received so far; n_full_fits: full refits so far (the scheduled ones and
+        those a fold check asked for); n_fold_refits: those a fold check asked for; map: the
+        last map (None before the first update).
+
+    Cost per update (``benchmarks/bench_online.py``: M = 50 objects, updates of 10 steps,
+    N = 2,000, CPU time, one BLAS thread; 25 fresh layouts per sensor): the median update is
+    about 1.5-2 ms, 50-60x cheaper than rebuilding the map at N = 2,000 with ``build_map``;
+    the mean, the full refits included (3-4 per run, the amortised cost), 25-30x. Before issue
+    14's changes (the estimator with its input checks and a pseudo-inverse per round, tolerance
+    1e-6 and the fold check on every update, random restarts in full fits) the figures were
+    about 20x and 10-13x. See ``docs/online-and-exploration.md`` for what each change bought.
     """
 
     def __init__(self, anchor_ids, anchor_positions, *, sensor: str | None = None,
@@ -276,7 +303,8 @@ class OnlineMapper:
         self._gram: np.ndarray | None = None
         self._n_columns = 0
         self._blocks: list[tuple[np.ndarray, np.ndarray | None]] = []
-        self._last_full = 0
+        self._last_full = 0  # steps at the last full fit
+        self._last_scheduled = 0  # ... at the last one of the schedule (not a fold check's)
         self._fit_notes: tuple[str, ...] = ()
         self._Y: np.ndarray | None = None  # last embedding (M, 2), NaN rows for unmapped
         self._warm_est: _OnlineCalSMA | None = None  # keeps the last Guttman pseudo-inverse
@@ -377,7 +405,7 @@ class OnlineMapper:
             self._resolve()
         else:
             self._add(C, mask)
-        full = self._Y is None or self.n_steps >= self.refit_growth * self._last_full
+        full = self._Y is None or self.n_steps >= self.refit_growth * self._last_scheduled
         self.map = self._update_incremental(full) if self.incremental else self._update_refit(full)
         return self.map
 
@@ -432,6 +460,7 @@ class OnlineMapper:
             return self._empty("no two objects sensed together yet")
         if not full and np.isnan(self._Y[mapped]).all():
             full = True
+        scheduled = full
         is_anchor = np.isin(self.anchor_ids, mapped)
         local = np.searchsorted(mapped, self.anchor_ids[is_anchor])
         pos = self.anchor_positions[is_anchor]
@@ -456,6 +485,8 @@ class OnlineMapper:
                 notes = list(dict.fromkeys(f"{_INCREMENTAL}: {w.category.__name__}: {w.message}"
                                            for w in caught))
                 self._last_full, self.n_full_fits = self.n_steps, self.n_full_fits + 1
+                if scheduled:  # a fold check's refit leaves the schedule where it was
+                    self._last_scheduled = self.n_steps
                 self._since_check, self._m_checked = 0, m
         if k > m - 1:
             notes.append(f"n_neighbors {k} > {m - 1} objects mapped so far: used {m - 1}")
@@ -531,7 +562,8 @@ class OnlineMapper:
                 return self._empty(f"the method found nothing to map yet ({exc})")
             return dataclasses.replace(self.map, warnings=(
                 *self.map.warnings, f"refit at {self.n_steps} steps failed, map kept: {exc}"))
-        self._last_full, self.n_full_fits = self.n_steps, self.n_full_fits + 1
+        self._last_full = self._last_scheduled = self.n_steps
+        self.n_full_fits += 1
         self._Y = result.embedding
         self._fit_notes = result.warnings
         return result
