@@ -16,10 +16,12 @@ For the default method of complete visibility and bearing histories, CAL-SMA
 - Embedding: the last map is the start of a short CAL-SMA refinement (``warm_rounds``
   calibrate/re-embed rounds, anchors held fixed, Guttman updates stopped at the looser
   ``warm_tol``: the start is nearly converged); objects sensed for the first time start at the
-  mean position of their three most similar mapped objects. CAL-SMA's fold check runs every
-  ``fold_check_every`` warm updates and whenever objects join the map; a warm map that looks
+  mean position of their three most similar mapped objects. CAL-SMA's fold check runs on every
+  warm update while the map is young (before its second scheduled refit), then every
+  ``fold_check_every`` warm updates, and whenever objects join the map; a warm map that looks
   folded is refitted from scratch once the steps have grown by 1.5 since the last full fit
-  (until then it is kept, with a note in ``Map.warnings``).
+  (until then it is kept, with a note in ``Map.warnings``); such a refit leaves the schedule of
+  the scheduled ones where it was.
 - Full refits: from scratch (CAL-SMA's two deterministic starts and all its rounds) whenever the
   number of steps has grown by the factor ``refit_growth`` since the last full fit, so a map
   whose early shape was poor is rebuilt a logarithmic number of times in all. They skip
@@ -256,7 +258,9 @@ class OnlineMapper:
             [0, 1) (CAL-SMA's own ``tol`` is 1e-6; from a nearly converged start 1e-4 halves
             the updates and leaves the maps as accurate).
         fold_check_every: CAL-SMA's fold check on every this many warm updates (integer >= 1;
-            also whenever objects join the map; 1 = every update).
+            1 = every update) once the map is past its second scheduled refit (``refit_growth``
+            squared times the steps of the first map); before that, and whenever objects join
+            the map, on every warm update.
         random_state: seed handed to the method, as ``build_map``'s.
         **params: the method's parameters, as for ``build_map``.
 
@@ -306,6 +310,7 @@ class OnlineMapper:
         self._blocks: list[tuple[np.ndarray, np.ndarray | None]] = []
         self._last_full = 0  # steps at the last full fit
         self._last_scheduled = 0  # ... at the last one of the schedule (not a fold check's)
+        self._first_map: int | None = None  # steps of the first map
         self._fit_notes: tuple[str, ...] = ()
         self._Y: np.ndarray | None = None  # last embedding (M, 2), NaN rows for unmapped
         self._warm_est: _OnlineCalSMA | None = None  # keeps the last Guttman pseudo-inverse
@@ -488,6 +493,8 @@ class OnlineMapper:
                 self._last_full, self.n_full_fits = self.n_steps, self.n_full_fits + 1
                 if scheduled:  # a fold check's refit leaves the schedule where it was
                     self._last_scheduled = self.n_steps
+                    if self._first_map is None:
+                        self._first_map = self.n_steps
                 self._since_check, self._m_checked = 0, m
         if k > m - 1:
             notes.append(f"n_neighbors {k} > {m - 1} objects mapped so far: used {m - 1}")
@@ -507,7 +514,10 @@ class OnlineMapper:
         S[local] = pos
         Y, _, _, _, Dh = est._refine(D, S, loc, local)
         self._since_check += 1
-        if self._since_check < self.fold_check_every and m == self._m_checked:
+        # a young map (before the second scheduled refit) is checked at every update: early maps
+        # are the ones that fold
+        young = self.n_steps < self.refit_growth**2 * self._first_map
+        if self._since_check < self.fold_check_every and m == self._m_checked and not young:
             return Y, None
         self._since_check, self._m_checked = 0, m
         # as CAL-SMA's fit: never through a smaller neighbourhood than the default one

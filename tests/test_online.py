@@ -123,14 +123,20 @@ def test_fold_check_runs_every_k_warm_updates(monkeypatch):
     monkeypatch.setattr(mappers.online, "fold_score",
                         lambda *a, **k: calls.append(1) or real(*a, **k))
     pts, ids, rng = _world(3)
-    X = _histories(pts, "visibility", 400, rng)
+    X = _histories(pts, "visibility", 600, rng)
     om = OnlineMapper(ids, pts[ids], sensor="visibility", fold_check_every=3)
-    om.update(X[:, :200])  # a full fit: CAL-SMA's own check, not the warm one
+    om.update(X[:, :20])  # the first map: young until 16 x 20 steps
+    om.update(X[:, 20:40])
+    assert om._first_map == 20 and len(calls) == 1  # a young map is checked at every update
+    om.update(X[:, 40:400])  # a scheduled refit (400 >= 4 x 20), past youth
+    assert om._last_full == om._last_scheduled == 400
+    fits = om.n_full_fits
+    calls.clear()
     checked = []
-    for s in range(200, 400, 20):
+    for s in range(400, 600, 20):
         om.update(X[:, s:s + 20])
         checked.append(len(calls))
-    assert om.n_full_fits == 1 and checked == [0, 0, 1, 1, 1, 2, 2, 2, 3, 3]
+    assert om.n_full_fits == fits and checked == [0, 0, 1, 1, 1, 2, 2, 2, 3, 3]
 
 
 def test_folded_warm_map_is_refitted_from_scratch():
