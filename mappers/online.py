@@ -271,9 +271,9 @@ class OnlineMapper:
 
     Cost per update (``benchmarks/bench_online.py``: M = 50 objects, updates of 10 steps,
     N = 2,000, CPU time, one BLAS thread; 25 fresh layouts per sensor): the median update is
-    about 2 ms, 65x (visibility) / 61x (bearing) cheaper than rebuilding the map at N = 2,000
-    with ``build_map``; the mean, the full refits included (4-5 per run: the amortised cost),
-    25x / 33x. Before issue 14's changes (the offline estimator with its input checks and a
+    about 2 ms, 58x (visibility) / 56x (bearing) cheaper than rebuilding the map at N = 2,000
+    with ``build_map``; the mean, the full refits included (5-6 / 4-5 per run: the amortised
+    cost), 23x / 28x. Before issue 14's changes (the offline estimator with its input checks and a
     pseudo-inverse per round, tolerance 1e-6 and the fold check on every update, random
     restarts in full fits) they were 20x / 22x and 10x / 13x, at the same accuracy. See
     ``docs/online-and-exploration.md`` for what each change bought.
