@@ -504,8 +504,8 @@ class OnlineMapper:
 
     def _warm(self, D, valid, mapped, local, pos, kind, k) -> tuple[np.ndarray, float | None]:
         """``warm_rounds`` CAL-SMA rounds from the last map, and its fold score if CAL-SMA's
-        fold check (run every ``fold_check_every`` warm updates, and whenever objects joined
-        the map) finds it folded, else None."""
+        fold check (run on every warm update of a young map, then every ``fold_check_every``,
+        and whenever objects joined the map) finds it folded, else None."""
         if self._warm_est is None:
             self._warm_est = self._estimator(k, warm=True)
         est, m = self._warm_est, len(D)
