@@ -12,6 +12,7 @@ the columns of 10 new steps at a time and prints, over the runs:
     PYTHONPATH=. python benchmarks/bench_online.py                  # 25 layouts per sensor
     PYTHONPATH=. python benchmarks/bench_online.py --runs 5 --sensors bearing
     PYTHONPATH=. python benchmarks/bench_online.py --runs 8 --seed 777 --warm-rounds 2   # variants
+    PYTHONPATH=. python benchmarks/bench_online.py --runs 8 --seed 777 --warm-tol 1e-6 --fold-check-every 1
 """
 
 from __future__ import annotations
@@ -53,7 +54,8 @@ def one_run(hist, steps: int, batch: int, checkpoints: tuple[int, ...], **online
     mappers.build_map(hist.head(steps), hist.anchor_ids, hist.anchor_positions, current.method)
     rebuild = time.process_time() - t0
     return {"median": np.median(times), "mean": np.mean(times), "rebuild": rebuild,
-            "ratios": ratios, "online": online, "offline": offline, "refits": om.n_full_fits}
+            "ratios": ratios, "online": online, "offline": offline, "refits": om.n_full_fits,
+            "fold_refits": om.n_fold_refits}
 
 
 def main() -> None:
@@ -65,6 +67,9 @@ def main() -> None:
     ap.add_argument("--batch", type=int, default=10, help="new steps per update")
     ap.add_argument("--warm-rounds", type=int, default=1, help="OnlineMapper's warm_rounds")
     ap.add_argument("--refit-growth", type=float, default=4.0, help="OnlineMapper's refit_growth")
+    ap.add_argument("--warm-tol", type=float, default=1e-4, help="OnlineMapper's warm_tol")
+    ap.add_argument("--fold-check-every", type=int, default=5,
+                    help="OnlineMapper's fold_check_every")
     args = ap.parse_args()
     checkpoints = tuple(n for n in (500, 1000, 1500) if n < args.steps) + (args.steps,)
     for sensor in args.sensors:
@@ -72,7 +77,8 @@ def main() -> None:
                              seed=args.seed, methods=("LPCA",))
         with threadpool_limits(limits=1):
             rows = [one_run(collect_episode(ep), args.steps, args.batch, checkpoints,
-                            warm_rounds=args.warm_rounds, refit_growth=args.refit_growth)
+                            warm_rounds=args.warm_rounds, refit_growth=args.refit_growth,
+                            warm_tol=args.warm_tol, fold_check_every=args.fold_check_every)
                     for ep in cfg.episodes()]
         med = np.median([r["median"] for r in rows])
         mean = np.mean([r["mean"] for r in rows])
@@ -80,10 +86,12 @@ def main() -> None:
         R = np.array([r["ratios"] for r in rows])
         print(f"\n{sensor}: {len(rows)} fresh layouts (seed {args.seed}), updates of {args.batch} "
               f"steps, N = {args.steps}, warm_rounds {args.warm_rounds}, refit_growth "
-              f"{args.refit_growth:g}")
+              f"{args.refit_growth:g}, warm_tol {args.warm_tol:g}, fold_check_every "
+              f"{args.fold_check_every}")
         print(f"  rebuild at N: {rebuild * 1e3:.1f} ms;  update: median {med * 1e3:.2f} ms "
               f"({rebuild / med:.1f}x cheaper), mean incl. refits {mean * 1e3:.2f} ms "
-              f"({rebuild / mean:.1f}x); full refits per run {np.mean([r['refits'] for r in rows]):.1f}")
+              f"({rebuild / mean:.1f}x); full refits per run {np.mean([r['refits'] for r in rows]):.1f} "
+              f"({np.mean([r['fold_refits'] for r in rows]):.1f} of them after a fold check)")
         print(f"  {'steps':>6s} {'online MPE':>10s} {'offline MPE':>11s} {'ratio mean':>10s} "
               f"{'ratio max':>9s}")
         for j, n in enumerate(checkpoints):

@@ -15,19 +15,34 @@ online mapper does not use unless named), the update is incremental:
   new columns ``C``: O(M^2 k) for k new columns, never a pass over the whole history, and no
   column is kept.
 - Embedding: the last map is the start of a short CAL-SMA refinement (``warm_rounds``
-  calibrate/re-embed rounds, anchors held fixed); objects sensed for the first time start at the
-  mean position of their three most similar mapped objects. CAL-SMA's fold guard still runs: a
-  warm map that looks folded is refitted from its deterministic starts.
+  calibrate/re-embed rounds, anchors held fixed, Guttman updates stopped at the looser
+  ``warm_tol``: the start is nearly converged); objects sensed for the first time start at the
+  mean position of their three most similar mapped objects. CAL-SMA's fold check runs on every
+  warm update while the map is young (before its second scheduled refit), then every
+  ``fold_check_every`` warm updates, and whenever objects join the map; a warm map that looks
+  folded is refitted from scratch once the steps have grown by 1.5 since the last full fit
+  (until then it is kept, with a note in ``Map.warnings``); such a refit leaves the schedule of
+  the scheduled ones where it was.
 - Full refits: from scratch (CAL-SMA's two deterministic starts and all its rounds) whenever the
   number of steps has grown by the factor ``refit_growth`` since the last full fit, so a map
-  whose early shape was poor is rebuilt a logarithmic number of times in all.
+  whose early shape was poor is rebuilt a logarithmic number of times in all. They skip
+  CAL-SMA's random restarts (tried only when both deterministic starts look folded, which
+  happens in the first few dozen steps, at 3-4x the cost of a fit): such a map is refitted
+  later, with more steps.
+- Both run CAL-SMA's rounds in fewer array passes than
+  :class:`~mappers.calibrated.CalibratedSMACOF` (one solve of the anchored Guttman system per
+  neighbour graph, kept between warm updates whose graph did not change; the calibration summed
+  term by term): the same maps to rounding, at about 3/4 of the cost. ``build_map`` and the
+  offline estimator are untouched.
 
 Cost per update, with M objects: O(M^2 k) for the statistics plus O(M^2 log M) for the
 neighbours plus ``warm_rounds`` rounds of anchored weighted SMACOF (O(M^2) per Guttman update,
-a few updates per round), independent of the number of steps so far. A full refit costs what
-``build_map`` costs (``2 x n_rounds`` rounds); with ``refit_growth = g`` there are about
-``log_g(N / N_0)`` of them over a run of N steps, N_0 the steps of the first map. ``benchmarks/bench_online.py`` measures both
-against rebuilding the map.
+a few updates per round), independent of the number of steps so far. A full refit costs about
+3/4 of what ``build_map`` costs (``2 x n_rounds`` rounds), more in the first hundred steps,
+whose maps converge slowly; with ``refit_growth = g`` there are about ``log_g(N / N_0)`` of
+them over a run of N steps, N_0 the steps of the first map, plus the few a fold check asks for.
+``benchmarks/bench_online.py`` measures both against rebuilding the map (figures in the README
+and in ``docs/online-and-exploration.md``).
 
 Other methods (and masked histories, whose methods need the steps' co-observation patterns)
 keep the columns and refit with :func:`~mappers.pipeline.build_map` on the same geometric
@@ -48,14 +63,19 @@ from typing import Any
 import numpy as np
 
 from mappers.align import apply_affine, check_anchor_ids, check_anchors
-from mappers.graph import informative_pairs
+from mappers.calibrated import CalibratedSMACOF, _log_floor, fit_calibration, fold_score
+from mappers.graph import informative_pairs, knn_mask
 from mappers.pipeline import Map, _thread_limit, build_map
 from mappers.registry import MappingError, resolve_method
 from mappers.sensors import COLUMNS_PER_STEP, check_sensor, infer_sensor
+from mappers.smacof import euclidean_distance_matrix
 
 __all__ = ["OnlineMapper", "gram_dissimilarity", "online_default"]
 
 _INCREMENTAL = "CAL-SMA"
+# a warm map that looks folded is refitted from scratch once the steps have grown by this factor
+# since the last full fit (at most refit_growth), not at every update while it still looks folded
+_FOLD_REFIT_GROWTH = 1.5
 
 
 def online_default(sensor: str, masked: bool) -> str | None:
@@ -85,6 +105,148 @@ def gram_dissimilarity(gram: np.ndarray, n_columns: int, kind: str) -> np.ndarra
     return np.maximum(delta, 0.0)
 
 
+class _AnchoredGuttman:
+    """Anchored Guttman updates (:func:`mappers.smacof.weighted_smacof` with ``fixed``) for one
+    weight matrix, its system solved once.
+
+    CAL-SMA's weights depend only on the neighbour graph, so every calibrate/re-embed round of
+    a fit, and every warm update whose graph did not change, solves the same system
+    ``V_ff X_f = [B(X) X]_f - V_fa X_a``. Every pair has a positive weight (far pairs
+    ``far_weight``, or 1e-6), so ``V_ff`` is positive definite: its inverse is the
+    pseudo-inverse ``weighted_smacof`` computes in every call. :meth:`run` makes the same
+    updates with the same stopping rule, in fewer array passes and without input checks; its
+    results equal ``weighted_smacof``'s to rounding (not bit for bit).
+    """
+
+    def __init__(self, W: np.ndarray, fixed: np.ndarray) -> None:
+        self.W = W
+        self.free = np.ones(len(W), dtype=bool)
+        self.free[fixed] = False
+        V = np.diag(W.sum(axis=1)) - W
+        self.V_ff_inv = np.linalg.inv(V[np.ix_(self.free, self.free)])
+        self.V_fa = V[np.ix_(self.free, ~self.free)]
+
+    @staticmethod
+    def _squared_distances(X: np.ndarray) -> np.ndarray:
+        sq = np.einsum("ij,ij->i", X, X)
+        D2 = np.add.outer(sq, sq)
+        D2 -= 2.0 * (X @ X.T)
+        return np.maximum(D2, 0.0, out=D2)
+
+    def run(self, delta: np.ndarray, X: np.ndarray, max_iter: int, tol: float):
+        """(X, raw stress, updates) from start ``X`` (its fixed rows kept), as weighted_smacof."""
+        W, free, V_ff_inv = self.W, self.free, self.V_ff_inv
+        X = np.array(X, dtype=float)
+        rhs_fixed = self.V_fa @ X[~free]
+        wd = W * delta
+        base = float(np.vdot(W, delta * delta))
+        D2 = self._squared_distances(X)
+        D = np.sqrt(D2)
+        # raw stress 1/2 sum w (delta - d)^2, expanded: two dot products, no (M, M) temporaries
+        stress = 0.5 * (base - 2.0 * float(np.vdot(wd, D)) + float(np.vdot(W, D2)))
+        n_iter = 0
+        for n_iter in range(1, max_iter + 1):  # noqa: B007 - n_iter is returned
+            D[D <= 0] = np.inf  # B(X)_ij = 0 where d_ij = 0 (the diagonal, coinciding points)
+            R = wd / D  # B(X) = diag(R 1) - R
+            BX = R.sum(axis=1)[:, None] * X - R @ X
+            X_new = X.copy()
+            X_new[free] = V_ff_inv @ (BX[free] - rhs_fixed)
+            D2 = self._squared_distances(X_new)
+            D = np.sqrt(D2)
+            X, old = X_new, stress
+            stress = 0.5 * (base - 2.0 * float(np.vdot(wd, D)) + float(np.vdot(W, D2)))
+            if old <= 0 or (old - stress) <= tol * old:
+                break
+        return X, stress, n_iter
+
+
+def _midpoint_terms(x: np.ndarray, y: np.ndarray, degree: int):
+    """The terms of :func:`mappers.calibrated._features`, in its order, one array at a time."""
+    if degree >= 1:
+        yield x
+        yield y
+    if degree >= 2:
+        yield x * x
+        yield y * y
+        yield x * y
+    if degree >= 3:
+        yield x**3
+        yield y**3
+        yield x * x * y
+        yield x * y * y
+
+
+class _OnlineCalSMA(CalibratedSMACOF):
+    """CalibratedSMACOF with the same rounds in fewer array passes (its maps to rounding).
+
+    Used by :class:`OnlineMapper` for its full fits and warm updates: the Guttman system is
+    solved once per neighbour graph (:class:`_AnchoredGuttman`, the last one kept in
+    ``solver_``, so warm updates whose graph did not change reuse it), and the calibration sums
+    its terms instead of building an (M, M, features) array. The offline estimator is untouched.
+    """
+
+    solver_: tuple | None = None
+
+    def _solver(self, loc: np.ndarray, fixed: np.ndarray) -> _AnchoredGuttman:
+        key = (loc.tobytes(), np.asarray(fixed).tobytes(), float(self.far_weight))
+        if self.solver_ is None or self.solver_[0] != key:
+            far = ~loc
+            np.fill_diagonal(far, False)
+            W = np.where(loc, 1.0, np.where(far, self.far_weight, 0.0))
+            if self.far_weight == 0:
+                W = np.where(far, 1e-6, W)
+            np.fill_diagonal(W, 0.0)
+            self.solver_ = (key, _AnchoredGuttman(W, np.asarray(fixed)))
+        return self.solver_[1]
+
+    def _calibrate(self, D, X, pairs, lo_delta):
+        # CalibratedSMACOF._calibrate without the (M, M, features) array: the calibrated log
+        # distance summed term by term
+        i, j = np.nonzero(np.triu(pairs, 1))
+        L = np.log(np.maximum(D, lo_delta))
+        fit = fit_calibration(L[i, j], X, i, j, self.dissimilarity_degree, self.position_degree)
+        coef, target = fit.coef, fit.target
+        dd = self.dissimilarity_degree
+        expo = np.full(L.shape, coef[dd])
+        Lp = L
+        for p in range(dd):
+            expo += coef[p] * Lp
+            if p + 1 < dd:
+                Lp = Lp * L
+        u = (X - fit.centre) / fit.half  # the pair's midpoint features from the objects' own
+        x = 0.5 * (u[:, 0, None] + u[:, 0])
+        y = 0.5 * (u[:, 1, None] + u[:, 1])
+        for c, f in zip(coef[dd + 1:], _midpoint_terms(x, y, self.position_degree), strict=True):
+            expo += c * f
+        np.clip(expo, target.min() - 1.0, target.max() + 1.0, out=expo)
+        Dh = np.exp(expo)
+        Dh = 0.5 * (Dh + Dh.T)
+        np.fill_diagonal(Dh, 0.0)
+        return Dh, coef
+
+    def _refine(self, D, X, loc, fixed):
+        if fixed is None:  # no anchors (never in OnlineMapper): the estimator's own loop
+            return super()._refine(D, X, loc, fixed)
+        solver = self._solver(loc, fixed)
+        lo_delta = _log_floor(D[loc])
+        far = ~loc
+        np.fill_diagonal(far, False)
+        n_iter = 0
+        Dh = None
+        for _ in range(self.n_rounds):
+            Dh, coef = self._calibrate(D, X, loc, lo_delta)
+            R = np.where(loc, Dh, 0.0).max(axis=1)
+            bound = self.far_factor * np.maximum(R[:, None], R[None, :])
+            Dx = euclidean_distance_matrix(X)
+            T = np.where(loc, Dh, np.where(far, np.maximum(Dx, bound), 0.0))
+            X, _, it = solver.run(T, X, self.max_iter, self.tol)
+            n_iter += it
+        Dx = euclidean_distance_matrix(X)
+        w = loc.astype(float)
+        stress = float(np.sum(w * (Dx - Dh) ** 2) / max(np.sum(w * Dh**2), 1e-300))
+        return X, stress, n_iter, coef, Dh
+
+
 class OnlineMapper:
     """The map of M objects, updated as batches of steps arrive (see the module docstring).
 
@@ -101,16 +263,34 @@ class OnlineMapper:
         refit_growth: a full refit whenever the steps have grown by this factor (> 1) since the
             last one.
         warm_rounds: CAL-SMA rounds of the warm-started update between full refits.
+        warm_tol: relative stress decrease at which a warm round's Guttman updates stop, in
+            [0, 1) (CAL-SMA's own ``tol`` is 1e-6; from a nearly converged start 1e-4 halves
+            the updates and leaves the maps as accurate).
+        fold_check_every: CAL-SMA's fold check on every this many warm updates (integer >= 1;
+            1 = every update) once the map is past its second scheduled refit (``refit_growth``
+            squared times the steps of the first map); before that, and whenever objects join
+            the map, on every warm update.
         random_state: seed handed to the method, as ``build_map``'s.
         **params: the method's parameters, as for ``build_map``.
 
     Attributes:
-        n_steps: steps received so far; n_full_fits: full refits so far; map: the last map
-        (None before the first update).
+        n_steps: steps received so far; n_full_fits: full refits so far (the scheduled ones and
+        those a fold check asked for); n_fold_refits: those a fold check asked for; map: the
+        last map (None before the first update).
+
+    Cost per update (``benchmarks/bench_online.py``: M = 50 objects, updates of 10 steps,
+    N = 2,000, CPU time, one BLAS thread; 25 fresh layouts per sensor): the median update is
+    about 2 ms, 58x (visibility) / 56x (bearing) cheaper than rebuilding the map at N = 2,000
+    with ``build_map``; the mean, the full refits included (5-6 / 4-5 per run: the amortised
+    cost), 23x / 28x. Before issue 14's changes (the offline estimator with its input checks and a
+    pseudo-inverse per round, tolerance 1e-6 and the fold check on every update, random
+    restarts in full fits) they were 20x / 22x and 10x / 13x, at the same accuracy. See
+    ``docs/online-and-exploration.md`` for what each change bought.
     """
 
     def __init__(self, anchor_ids, anchor_positions, *, sensor: str | None = None,
                  method: str | None = None, refit_growth: float = 4.0, warm_rounds: int = 1,
+                 warm_tol: float = 1e-4, fold_check_every: int = 5,
                  random_state: int | None = 0, **params: Any) -> None:
         pos = np.asarray(anchor_positions, dtype=float)
         ids = check_anchor_ids(anchor_ids, np.iinfo(np.int64).max)
@@ -119,10 +299,16 @@ class OnlineMapper:
             raise ValueError(f"refit_growth must be a number > 1, got {refit_growth!r}")
         if isinstance(warm_rounds, bool) or not isinstance(warm_rounds, Integral) or warm_rounds < 1:
             raise ValueError(f"warm_rounds must be an integer >= 1, got {warm_rounds!r}")
+        if isinstance(warm_tol, bool) or not isinstance(warm_tol, Real) or not 0 <= warm_tol < 1:
+            raise ValueError(f"warm_tol must be a number in [0, 1), got {warm_tol!r}")
+        if (isinstance(fold_check_every, bool) or not isinstance(fold_check_every, Integral)
+                or fold_check_every < 1):
+            raise ValueError(f"fold_check_every must be an integer >= 1, got {fold_check_every!r}")
         self.anchor_ids, self.anchor_positions = ids, pos
         self.sensor = check_sensor(sensor, allow_none=True)
         self.method, self.params = method, dict(params)
         self.refit_growth, self.warm_rounds = float(refit_growth), int(warm_rounds)
+        self.warm_tol, self.fold_check_every = float(warm_tol), int(fold_check_every)
         self.random_state = random_state
         self.n_steps, self.n_full_fits, self.map = 0, 0, None
         self._m: int | None = None
@@ -131,9 +317,14 @@ class OnlineMapper:
         self._gram: np.ndarray | None = None
         self._n_columns = 0
         self._blocks: list[tuple[np.ndarray, np.ndarray | None]] = []
-        self._last_full = 0
+        self._last_full = 0  # steps at the last full fit
+        self._last_scheduled = 0  # ... at the last one of the schedule (not a fold check's)
+        self._first_map: int | None = None  # steps of the first map
         self._fit_notes: tuple[str, ...] = ()
         self._Y: np.ndarray | None = None  # last embedding (M, 2), NaN rows for unmapped
+        self._warm_est: _OnlineCalSMA | None = None  # keeps the last Guttman pseudo-inverse
+        self._since_check, self._m_checked = 0, 0  # warm updates since the last fold check
+        self.n_fold_refits = 0
 
     # ------------------------------------------------------------------ inputs
     def _check_batch(self, columns, mask):
@@ -230,7 +421,7 @@ class OnlineMapper:
             self._resolve()
         else:
             self._add(C, mask)
-        full = self._Y is None or self.n_steps >= self.refit_growth * self._last_full
+        full = self._Y is None or self.n_steps >= self.refit_growth * self._last_scheduled
         self.map = self._update_incremental(full) if self.incremental else self._update_refit(full)
         return self.map
 
@@ -252,16 +443,15 @@ class OnlineMapper:
             return None, f"{int(ok.sum())} anchors and {mapped.size} objects sensed so far"
         return mapped, None
 
-    def _estimator(self, kind: str, m: int, init):
-        from mappers.calibrated import CalibratedSMACOF
-
+    def _estimator(self, k: int, *, warm: bool) -> _OnlineCalSMA:
+        """CAL-SMA with the method's parameters: a full fit (no random restarts: a map that
+        still looks folded is refitted later, with more steps), or ``warm_rounds`` rounds whose
+        Guttman updates stop at ``warm_tol``."""
         kw = dict(self._merged)
-        k = kw.pop("n_neighbors", None)
-        k = (12 if kind == "cosine" else 10) if k is None else k
-        if init is not None:
-            kw["n_rounds"] = self.warm_rounds
-        return CalibratedSMACOF(dissimilarity="precomputed", n_neighbors=min(k, m - 1), init=init,
-                                **kw), k
+        kw.pop("n_neighbors", None)
+        if warm:
+            kw.update(n_rounds=self.warm_rounds, tol=self.warm_tol)
+        return _OnlineCalSMA(dissimilarity="precomputed", n_neighbors=k, n_init=0, **kw)
 
     def _start(self, mapped: np.ndarray, D: np.ndarray) -> np.ndarray:
         """The last map for objects it had; a new object at the mean of its three most similar
@@ -281,25 +471,72 @@ class OnlineMapper:
         m = mapped.size
         kind = "cosine" if self.sensor == "visibility" and self._n_columns >= 2 else "euclidean"
         D = gram_dissimilarity(G[np.ix_(mapped, mapped)], self._n_columns, kind)
-        if not informative_pairs(D).any():  # CAL-SMA's own condition: nothing to calibrate
+        valid = informative_pairs(D)
+        if not valid.any():  # CAL-SMA's own condition: nothing to calibrate
             return self._empty("no two objects sensed together yet")
         if not full and np.isnan(self._Y[mapped]).all():
             full = True
-        est, k = self._estimator(kind, m, None if full else self._start(mapped, D))
-        local = np.searchsorted(mapped, self.anchor_ids[np.isin(self.anchor_ids, mapped)])
-        pos = self.anchor_positions[np.isin(self.anchor_ids, mapped)]
-        with warnings.catch_warnings(record=True) as caught, _thread_limit(m):
-            warnings.simplefilter("always")
-            Y = est.fit_transform(D, anchor_ids=local, anchor_positions=pos)
-        notes = list(dict.fromkeys(f"{_INCREMENTAL}: {w.category.__name__}: {w.message}"
-                                   for w in caught))
+        scheduled = full
+        is_anchor = np.isin(self.anchor_ids, mapped)
+        local = np.searchsorted(mapped, self.anchor_ids[is_anchor])
+        pos = self.anchor_positions[is_anchor]
+        k = self._merged.get("n_neighbors")
+        k = (12 if kind == "cosine" else 10) if k is None else k
+        notes = []
+        with _thread_limit(m):
+            if not full:
+                Y, score = self._warm(D, valid, mapped, local, pos, kind, min(k, m - 1))
+                if score is not None:  # the warm map looks folded
+                    next_fit = min(_FOLD_REFIT_GROWTH, self.refit_growth) * self._last_full
+                    if self.n_steps >= next_fit:  # refit from CAL-SMA's deterministic starts
+                        full, self.n_fold_refits = True, self.n_fold_refits + 1
+                    else:
+                        notes.append(f"online map looks folded (fold score {score:.3f}); refit "
+                                     f"from scratch at {int(np.ceil(next_fit))} steps")
+            if full:
+                est = self._estimator(min(k, m - 1), warm=False)
+                with warnings.catch_warnings(record=True) as caught:
+                    warnings.simplefilter("always")
+                    Y = est.fit_transform(D, anchor_ids=local, anchor_positions=pos)
+                notes = list(dict.fromkeys(f"{_INCREMENTAL}: {w.category.__name__}: {w.message}"
+                                           for w in caught))
+                self._last_full, self.n_full_fits = self.n_steps, self.n_full_fits + 1
+                if scheduled:  # a fold check's refit leaves the schedule where it was
+                    self._last_scheduled = self.n_steps
+                    if self._first_map is None:
+                        self._first_map = self.n_steps
+                self._since_check, self._m_checked = 0, m
         if k > m - 1:
             notes.append(f"n_neighbors {k} > {m - 1} objects mapped so far: used {m - 1}")
-        if full:
-            self._last_full, self.n_full_fits = self.n_steps, self.n_full_fits + 1
         self._Y = np.full((self._m, 2), np.nan)
         self._Y[mapped] = Y
         return self._map(Y, mapped, local, pos, {**self._merged, "n_neighbors": k}, notes)
+
+    def _warm(self, D, valid, mapped, local, pos, kind, k) -> tuple[np.ndarray, float | None]:
+        """``warm_rounds`` CAL-SMA rounds from the last map, and its fold score if CAL-SMA's
+        fold check (run on every warm update of a young map, then every ``fold_check_every``,
+        and whenever objects joined the map) finds it folded, else None."""
+        if self._warm_est is None:
+            self._warm_est = self._estimator(k, warm=True)
+        est, m = self._warm_est, len(D)
+        loc = knn_mask(D, valid, k)
+        S = self._start(mapped, D)
+        S[local] = pos
+        Y, _, _, _, Dh = est._refine(D, S, loc, local)
+        self._since_check += 1
+        # a young map (before the second scheduled refit) is checked at every update: early maps
+        # are the ones that fold
+        young = self.n_steps < self.refit_growth**2 * self._first_map
+        if self._since_check < self.fold_check_every and m == self._m_checked and not young:
+            return Y, None
+        self._since_check, self._m_checked = 0, m
+        # as CAL-SMA's fit: never through a smaller neighbourhood than the default one
+        k_check = min(max(k, 12 if kind == "cosine" else 10), m - 1)
+        if k_check != k:
+            loc_check = knn_mask(D, valid, k_check)
+            Dh, _ = est._calibrate(D, Y, loc_check, _log_floor(D[loc_check]))
+        score = fold_score(Y, D, k_check, Dh)
+        return Y, (score if score > est.fold_threshold else None)
 
     def _map(self, Y, mapped, local, pos, params, notes) -> Map:
         # CAL-SMA held the anchors fixed: the least-squares affine fit (the identity, to
@@ -309,8 +546,10 @@ class OnlineMapper:
         embedding = np.full((self._m, 2), np.nan)
         embedding[mapped] = Y
         positions[mapped] = apply_affine(Y, T)
-        unmapped = tuple(int(i) for i in np.setdiff1d(np.arange(self._m), mapped))
-        lost = np.setdiff1d(self.anchor_ids, mapped)
+        is_mapped = np.zeros(self._m, dtype=bool)
+        is_mapped[mapped] = True
+        unmapped = tuple(int(i) for i in np.flatnonzero(~is_mapped))
+        lost = self.anchor_ids[~is_mapped[self.anchor_ids]]
         if lost.size:
             notes.append(f"anchors {lost.tolist()} have empty histories and were not used for the fit")
         return Map(positions=positions, unmapped=unmapped, embedding=embedding,
@@ -344,7 +583,8 @@ class OnlineMapper:
                 return self._empty(f"the method found nothing to map yet ({exc})")
             return dataclasses.replace(self.map, warnings=(
                 *self.map.warnings, f"refit at {self.n_steps} steps failed, map kept: {exc}"))
-        self._last_full, self.n_full_fits = self.n_steps, self.n_full_fits + 1
+        self._last_full = self._last_scheduled = self.n_steps
+        self.n_full_fits += 1
         self._Y = result.embedding
         self._fit_notes = result.warnings
         return result

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from mappers import OnlineMapper, build_map, mean_position_error
-from mappers.calibrated import history_dissimilarity
-from mappers.online import gram_dissimilarity
+from mappers.calibrated import CalibratedSMACOF, history_dissimilarity
+from mappers.online import _OnlineCalSMA, gram_dissimilarity
 
 HALF = 1.25
 
@@ -79,6 +79,90 @@ def test_batches_track_build_map(sensor):
     assert np.allclose(current.positions[ids], pts[ids])
 
 
+@pytest.mark.parametrize("sensor", ["visibility", "bearing"])
+@pytest.mark.parametrize("params", [{}, {"position_degree": 3, "n_rounds": 5}, {"n_neighbors": 6}])
+def test_online_cal_sma_is_cal_sma_to_rounding(sensor, params):
+    """The online estimator's lean rounds (one Guttman solve per graph, the calibration summed
+    term by term) give CalibratedSMACOF's map to rounding."""
+    pts, ids, rng = _world(9)
+    X = _histories(pts, sensor, 300, rng)
+    kw = dict(params, dissimilarity="cosine" if sensor == "visibility" else "euclidean")
+    ref = CalibratedSMACOF(**kw).fit(X, anchor_ids=ids, anchor_positions=pts[ids])
+    lean = _OnlineCalSMA(**kw).fit(X, anchor_ids=ids, anchor_positions=pts[ids])
+    assert lean.starts_[0][0] == ref.starts_[0][0] and lean.n_iter_ == ref.n_iter_
+    assert np.allclose(lean.embedding_, ref.embedding_, atol=1e-9)
+
+
+@pytest.mark.parametrize("every", [1, 3, 10])
+def test_fold_check_every_k_updates_tracks_build_map(every):
+    pts, ids, rng = _world(3)
+    X = _histories(pts, "visibility", 600, rng)
+    om = OnlineMapper(ids, pts[ids], sensor="visibility", fold_check_every=every)
+    for s in range(0, 600, 20):
+        current = om.update(X[:, s:s + 20])
+    keep = np.setdiff1d(np.arange(len(pts)), ids)
+    offline = build_map(X, ids, pts[ids], sensor="visibility")
+    err_on = mean_position_error(current.positions[keep], pts[keep])
+    err_off = mean_position_error(offline.positions[keep], pts[keep])
+    assert err_on <= 1.25 * err_off + 0.01
+
+
+def _fold(om, ids):
+    """Plant a fold in the mapper's last map: the objects right of the centre line mirrored
+    onto the left half."""
+    folded = om._Y.copy()
+    right = np.setdiff1d(np.flatnonzero(folded[:, 0] > 0), ids)
+    folded[right, 0] *= -1
+    om._Y = folded
+
+
+def test_fold_check_runs_every_k_warm_updates(monkeypatch):
+    import mappers.online
+
+    calls = []
+    real = mappers.online.fold_score
+    monkeypatch.setattr(mappers.online, "fold_score",
+                        lambda *a, **k: calls.append(1) or real(*a, **k))
+    pts, ids, rng = _world(3)
+    X = _histories(pts, "visibility", 600, rng)
+    om = OnlineMapper(ids, pts[ids], sensor="visibility", fold_check_every=3)
+    om.update(X[:, :20])  # the first map: young until 16 x 20 steps
+    om.update(X[:, 20:40])
+    assert om._first_map == 20 and len(calls) == 1  # a young map is checked at every update
+    om.update(X[:, 40:400])  # a scheduled refit (400 >= 4 x 20), past youth
+    assert om._last_full == om._last_scheduled == 400
+    fits = om.n_full_fits
+    calls.clear()
+    checked = []
+    for s in range(400, 600, 20):
+        om.update(X[:, s:s + 20])
+        checked.append(len(calls))
+    assert om.n_full_fits == fits and checked == [0, 0, 1, 1, 1, 2, 2, 2, 3, 3]
+
+
+def test_folded_warm_map_is_refitted_from_scratch():
+    pts, ids, rng = _world(3)
+    X = _histories(pts, "visibility", 300, rng)
+    om = OnlineMapper(ids, pts[ids], sensor="visibility", fold_check_every=1)
+    om.update(X[:, :200])
+    _fold(om, ids)
+    result = om.update(X[:, 200:300])  # 300 >= 1.5 x 200 steps: refitted at once
+    assert om.n_fold_refits == 1 and om.n_full_fits == 2 and om._last_full == 300
+    offline = build_map(X, ids, pts[ids], sensor="visibility")
+    assert np.allclose(result.positions, offline.positions, atol=1e-6)
+
+
+def test_folded_warm_map_waits_for_growth_before_a_refit():
+    pts, ids, rng = _world(3)
+    X = _histories(pts, "visibility", 400, rng)
+    om = OnlineMapper(ids, pts[ids], sensor="visibility", fold_check_every=1)
+    om.update(X[:, :300])
+    _fold(om, ids)
+    result = om.update(X[:, 300:320])  # 320 < 1.5 x 300 steps: kept, with a note
+    assert om.n_fold_refits == 0 and om.n_full_fits == 1
+    assert any("looks folded" in w and "450 steps" in w for w in result.warnings)
+
+
 def test_early_updates_map_nothing_and_say_why():
     pts, ids, _ = _world(4)
     om = OnlineMapper(ids, pts[ids], sensor="visibility")
@@ -104,8 +188,9 @@ def test_masked_histories_refit_with_their_method():
     mask = rng.random(X.shape) < 0.7
     om = OnlineMapper(ids, pts[ids], sensor="visibility", refit_growth=1.5)
     maps = [om.update(X[:, s:s + 50], mask[:, s:s + 50]) for s in range(0, 400, 50)]
-    assert not om.incremental and maps[-1].method == "covis-nonmetric"
     offline = build_map(X, ids, pts[ids], sensor="visibility", mask=mask)
+    # build_map's default for masked visibility (dropout-blend since it replaced covis-nonmetric)
+    assert not om.incremental and maps[-1].method == offline.method != "CAL-SMA"
     assert om.n_full_fits >= 3 and om._last_full == om.n_steps == 400
     assert np.allclose(maps[-1].positions, offline.positions, equal_nan=True)
     stale = [m for m in maps if any("online map of the first" in w for w in m.warnings)]
@@ -133,6 +218,12 @@ def test_bad_arguments_refused():
         OnlineMapper(ids, pts[ids], refit_growth=1.0)
     with pytest.raises(ValueError, match="warm_rounds"):
         OnlineMapper(ids, pts[ids], warm_rounds=0)
+    for bad in (-1e-4, 1.0, float("nan"), "1e-4", True):
+        with pytest.raises(ValueError, match="warm_tol"):
+            OnlineMapper(ids, pts[ids], warm_tol=bad)
+    for bad in (0, -2, 2.5, True, "5"):
+        with pytest.raises(ValueError, match="fold_check_every"):
+            OnlineMapper(ids, pts[ids], fold_check_every=bad)
     with pytest.raises(ValueError, match="anchor_positions"):
         OnlineMapper(ids, pts[ids][:2])
     om = OnlineMapper(ids, pts[ids], sensor="visibility")
