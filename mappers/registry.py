@@ -174,12 +174,13 @@ def _load_builtins() -> None:
         range_bearing,
         scalable,
         unfolding,
+        visibility_adjustment,
         visibility_bearing,
     )
 
     for spec in (*methods.SPECS, calibrated.SPEC, unfolding.SPEC, scalable.SPEC, *masked.SPECS,
                  ensemble.SPEC, *covis_calibrated.SPECS, covis_sparse.SPEC, dropout_blend.SPEC,
-                 range_bearing.SPEC, visibility_bearing.SPEC):
+                 range_bearing.SPEC, visibility_bearing.SPEC, visibility_adjustment.SPEC):
         _METHODS.setdefault(spec.label, spec)
 
 
