@@ -13,6 +13,7 @@ the mean and the largest MPE over the runs [m] and the median CPU time per map.
 from __future__ import annotations
 
 import argparse
+import csv
 
 import numpy as np
 from bench_masked_goals import episode, score
@@ -37,7 +38,7 @@ def main(argv=None) -> None:
     chosen = range(len(SETTINGS)) if args.settings is None else args.settings
     print(f"{args.runs} runs from seed {args.seed}, N = {args.steps}; MPE [m] mean / max run; "
           "CPU s per map (median, one BLAS thread)")
-    lines = ["setting,seed,method,mpe,cpu_s"]
+    lines = [("setting", "seed", "method", "mpe", "cpu_s")]
     with threadpool_limits(limits=1):
         for k in chosen:
             name, kw = SETTINGS[k]
@@ -46,8 +47,8 @@ def main(argv=None) -> None:
                 h = episode("visibility", args.seed + r, args.steps, **kw)
                 for label, method in (("default (start)", None), ("VIS-BA", "VIS-BA")):
                     rows[label].append(score(h, method))
-                    lines.append(f"{name},{args.seed + r},{label},{rows[label][-1][0]:.6f},"
-                                 f"{rows[label][-1][1]:.4f}")
+                    mpe, cpu = rows[label][-1]
+                    lines.append((name, args.seed + r, label, f"{mpe:.6f}", f"{cpu:.4f}"))
             print(f"\n{name}")
             for label, vals in rows.items():
                 a = np.array(vals)
@@ -56,8 +57,8 @@ def main(argv=None) -> None:
             a, b = np.array(rows["default (start)"]), np.array(rows["VIS-BA"])
             print(f"  VIS-BA better in {int(np.sum(b[:, 0] < a[:, 0]))} of {len(a)} runs")
     if args.csv:
-        with open(args.csv, "w") as f:
-            f.write("\n".join(lines) + "\n")
+        with open(args.csv, "w", newline="") as f:
+            csv.writer(f).writerows(lines)
 
 
 if __name__ == "__main__":
