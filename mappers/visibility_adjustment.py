@@ -54,7 +54,6 @@ from numbers import Integral, Real
 import numpy as np
 from scipy.ndimage import gaussian_filter
 from scipy.optimize import minimize
-from scipy.sparse import csr_array
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval
 
@@ -206,10 +205,9 @@ def _update_prior(post, cells, shape, blur) -> np.ndarray:
 
 def _expected_counts(S, Obs, post) -> tuple[np.ndarray, np.ndarray]:
     """(M, G) expected counts of the bits seen and not seen of each object from each cell under
-    the steps' posteriors (entries below 1e-6 of a step's largest dropped: a sparse product)."""
-    sparse = csr_array(np.where(post >= 1e-6 * post.max(axis=1, keepdims=True), post, 0.0))
-    seen = np.asarray((sparse.T @ S).T)
-    return seen, np.asarray((sparse.T @ Obs).T) - seen
+    the steps' posteriors (float32 products, float64 results)."""
+    seen = (S.T @ post).astype(np.float64)
+    return seen, np.maximum((Obs.T @ post).astype(np.float64) - seen, 0.0)
 
 
 def _fit_model(P, G, Sg, Ng, theta, s_min, occlusion=True) -> tuple:
@@ -252,12 +250,12 @@ def _fit_model(P, G, Sg, Ng, theta, s_min, occlusion=True) -> tuple:
         def nll3(z):
             return nll(np.concatenate([z, full[3:]]))
         res = minimize(nll3, z0, method="Nelder-Mead",
-                       options={"xatol": 1e-6, "fatol": 1e-10, "maxiter": 600})
+                       options={"xatol": 1e-4, "fatol": 1e-8, "maxiter": 200})
         z = np.concatenate([res.x if np.isfinite(res.fun) and res.fun <= nll3(z0) else z0,
                             full[3:]])
         return tuple(float(v) for v in unpack(z))
     res = minimize(nll, z0, method="Nelder-Mead",
-                   options={"xatol": 1e-6, "fatol": 1e-10, "maxiter": 1000})
+                   options={"xatol": 1e-4, "fatol": 1e-8, "maxiter": 300})
     z = res.x if np.isfinite(res.fun) and res.fun <= nll(z0) else z0
     return tuple(float(v) for v in unpack(z))
 
