@@ -54,6 +54,7 @@ from numbers import Integral, Real
 import numpy as np
 from scipy.ndimage import gaussian_filter
 from scipy.optimize import minimize
+from scipy.special import expit
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval
 
@@ -229,10 +230,10 @@ def _fit_model(P, G, Sg, Ng, theta, s_min, occlusion=True) -> tuple:
     scale = 1.0 / (yes.sum() + no.sum())
 
     def unpack(z):
-        k = 1.0 + 5.0 / (1.0 + np.exp(-z[4]))  # in (1, 6)
-        return (z[0], s_min + np.exp(z[1]),
-                _EPS_FLOOR + (1 - 2 * _EPS_FLOOR) / (1 + np.exp(-z[2])),
-                (1 - _EPS_FLOOR) / (1 + np.exp(-z[3])) / _CAP**k, k)
+        k = 1.0 + 5.0 * expit(z[4])  # in (1, 6)
+        return (z[0], s_min + np.exp(min(z[1], 50.0)),
+                _EPS_FLOOR + (1 - 2 * _EPS_FLOOR) * expit(z[2]),
+                (1 - _EPS_FLOOR) * expit(z[3]) / _CAP**k, k)
 
     def nll(z):
         return -scale * float(np.sum(_loglik(dv, yes, no, unpack(z))))
