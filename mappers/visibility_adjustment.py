@@ -66,6 +66,9 @@ __all__ = ["VisibilityAdjustment", "VisibilityAdjustmentWarning", "visibility_bi
 _EPS_FLOOR = 1e-4
 """Smallest miss rate of the model (a perfect sensor's bits would otherwise make log(0))."""
 
+_MAX_POSTERIOR = 2e8
+"""Largest steps x cells the E-step holds (float32: 800 MB)."""
+
 _MIN_DISTANCE = 1e-6
 """Distance [m] below which a viewpoint is taken to sit on an object (direction undefined)."""
 
@@ -321,7 +324,6 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
         min_step_objects: a step that saw fewer objects is left out (its viewpoint is free).
         min_views: an object seen from fewer usable steps keeps its start position.
         grid_cells: candidate viewpoints per visibility radius (grid spacing ``R / grid_cells``).
-        min_softness: the softness ``s`` is at least this many grid spacings.
         prior_iters: E-steps on the start map before the refinement (model and prior).
         occlusion: fit the distance-dependent miss rate (gamma, k); False: gamma = 0.
         prior_blur: width [cells] of the Gaussian blur of the learnt viewpoint prior.
@@ -342,7 +344,6 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
         "min_step_objects": [Interval(Integral, 1, None, closed="left")],
         "min_views": [Interval(Integral, 1, None, closed="left")],
         "grid_cells": [Interval(Integral, 2, None, closed="left")],
-        "min_softness": [Interval(Real, 0, None, closed="neither")],
         "prior_iters": [Interval(Integral, 1, None, closed="left")],
         "occlusion": ["boolean"],
         "prior_blur": [Interval(Real, 0, None, closed="left")],
@@ -351,7 +352,7 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
 
     def __init__(self, *, start: str | None = None, max_rounds: int = 5, inner_iters: int = 3,
                  tol: float = 1e-4, min_step_objects: int = 1, min_views: int = 5,
-                 grid_cells: int = 6, min_softness: float = 0.25, prior_iters: int = 2,
+                 grid_cells: int = 6, prior_iters: int = 2,
                  occlusion: bool = True, prior_blur: float = 2.0, random_state=0) -> None:
         self.start = start
         self.max_rounds = max_rounds
@@ -360,7 +361,6 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
         self.min_step_objects = min_step_objects
         self.min_views = min_views
         self.grid_cells = grid_cells
-        self.min_softness = min_softness
         self.prior_iters = prior_iters
         self.occlusion = occlusion
         self.prior_blur = prior_blur
@@ -427,9 +427,14 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
         theta = _guess_model(P, S)
         G, shape = _grid(P[use], theta[0], self.grid_cells)
         cells = np.arange(len(G))
-        h = float(G[1, 0] - G[0, 0]) if len(G) > 1 else theta[0]
-        s_min = self.min_softness * h
-        theta = (theta[0], max(theta[1], s_min), *theta[2:])
+        if len(G) * len(S) > _MAX_POSTERIOR:
+            raise ValueError(
+                f"VIS-BA's E-step holds {len(S)} steps x {len(G)} candidate viewpoints "
+                f"(more than {_MAX_POSTERIOR:.0e}): the objects span {np.ptp(P[use], axis=0)} "
+                f"m against a visibility radius of about {theta[0]:.3g} m; lower grid_cells, or "
+                "map fewer steps"
+            )
+        s_min = 0.0  # the softness is free (the grid's spacing does not bound it)
         log_prior = None
         for _ in range(self.prior_iters):  # the start map's model and viewpoints' distribution
             post, _ = _posterior(P, G, S, Obs, theta, log_prior)
@@ -479,11 +484,11 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
 
 
 def _vis_ba(*, start=None, max_rounds=5, inner_iters=3, tol=1e-4, min_step_objects=1,
-            min_views=5, grid_cells=6, min_softness=0.25, prior_iters=2, occlusion=True,
+            min_views=5, grid_cells=6, prior_iters=2, occlusion=True,
             prior_blur=2.0, random_state=0) -> VisibilityAdjustment:
     return VisibilityAdjustment(start=start, max_rounds=max_rounds, inner_iters=inner_iters,
                                 tol=tol, min_step_objects=min_step_objects, min_views=min_views,
-                                grid_cells=grid_cells, min_softness=min_softness,
+                                grid_cells=grid_cells,
                                 prior_iters=prior_iters, occlusion=occlusion,
                                 prior_blur=prior_blur, random_state=random_state)
 

@@ -114,8 +114,8 @@ def test_bad_input_is_a_clear_value_error():
         VisibilityAdjustment().fit(X, start_positions=P)
     with pytest.raises(ValueError, match="max_rounds"):
         VisibilityAdjustment(max_rounds=0).fit(X, **kw)
-    with pytest.raises(ValueError, match="min_softness"):
-        VisibilityAdjustment(min_softness=-1.0).fit(X, **kw)
+    with pytest.raises(ValueError, match="grid_cells"):
+        VisibilityAdjustment(grid_cells=1).fit(X, **kw)
     with pytest.raises(ValueError, match="another method"):
         VisibilityAdjustment(start="vis-ba").fit(X, anchor_ids=ids, anchor_positions=P[ids])
     with pytest.raises(ValueError, match="visibility"):
