@@ -420,6 +420,17 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
                           VisibilityAdjustmentWarning, stacklevel=3)
         free &= ~weak
         use = placed & ~weak  # objects whose bits take part
+        if step_ok.sum() < 3 or not free.any():
+            warnings.warn(f"{int(step_ok.sum())} step(s) saw at least {self.min_step_objects} "
+                          f"placed object(s), and {int(free.sum())} object(s) may move: nothing "
+                          "to refine, the start map is kept", VisibilityAdjustmentWarning,
+                          stacklevel=3)
+            self.refined_, self.n_rounds_ = False, 0
+            self.loglik_ = self.start_loglik_ = float("nan")
+            (self.radius_, self.softness_, self.miss_rate_, self.occlusion_gain_,
+             self.occlusion_power_) = (float("nan"),) * 5
+            self.viewpoints_ = np.full((n, 2), np.nan)
+            return P0.copy()
         S = (seen & step_ok[:, None] & use).astype(float)  # (N, M) seen, in the likelihood
         Obs = (observed & step_ok[:, None] & use).astype(float)  # observed, in the likelihood
         S, Obs = S[step_ok].astype(np.float32), Obs[step_ok].astype(np.float32)

@@ -73,6 +73,20 @@ def test_objects_seen_from_few_steps_keep_their_start():
     np.testing.assert_array_equal(Y[-1], start[-1])
 
 
+def test_nothing_seen_keeps_the_start():
+    P, X, ids, _ = _threshold(n_steps=50)
+    start = P + 0.01
+    start[ids] = P[ids]
+    est = VisibilityAdjustment()
+    with pytest.warns(VisibilityAdjustmentWarning) as caught:
+        Y = est.fit_transform(np.zeros_like(X), anchor_ids=ids, anchor_positions=P[ids],
+                              start_positions=start)
+    messages = " ".join(str(w.message) for w in caught)
+    assert "fewer than 5 usable steps" in messages and "nothing to refine" in messages
+    assert not est.refined_
+    np.testing.assert_array_equal(Y, start)
+
+
 def test_masked_entries_do_not_count():
     """An entry the mask calls unobserved is unknown: flipping it changes nothing."""
     P, X, ids, _ = _threshold(n_steps=300)
