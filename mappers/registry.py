@@ -4,8 +4,9 @@ Every method — the paper's ten (:mod:`mappers.methods`), CAL-SMA (:mod:`mapper
 UNFOLD (:mod:`mappers.unfolding`), the methods for masked histories (:mod:`mappers.masked`,
 :mod:`mappers.ensemble`, :mod:`mappers.covis_calibrated`), VIS-BA
 (:mod:`mappers.visibility_adjustment`: a visibility map refined by estimating the viewpoints; a
-choice, not a default) and any a user registers — is a :class:`MethodSpec` in :data:`METHODS`. A spec says what the method accepts (which sensors or
-fused sets of sensors, complete and/or masked histories); the pipeline, the protocol and the
+choice, not a default) and any a user registers — is a :class:`MethodSpec` in :data:`METHODS`.
+A spec says what the method accepts (which sensors or fused sets of sensors, complete and/or
+masked histories); the pipeline, the protocol and the
 command line choose and check methods by the spec alone (:func:`resolve_method`). Fused methods
 — LOC-SMA (:mod:`mappers.range_bearing`) for range + bearing, VB-SMA
 (:mod:`mappers.visibility_bearing`) for visibility + bearing — are registered like the others,
