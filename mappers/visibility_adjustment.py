@@ -367,11 +367,16 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
         self.random_state = random_state
 
     def _start_map(self, X, mask, ids, pos, timeline) -> np.ndarray:
-        from mappers.pipeline import build_map  # the pipeline imports the registry of methods
+        from mappers.pipeline import build_map, default_method  # (imports the registry)
 
         if self.start is not None and self.start.strip().upper() == "VIS-BA":
             raise ValueError("start must name another method than 'VIS-BA'")
-        m = build_map(X, ids, pos, self.start, sensor="visibility", mask=mask, timeline=timeline,
+        label = self.start
+        if label is None:  # the default's choice; were VIS-BA the default, the one it refines
+            label = default_method(X, sensor="visibility", mask=mask, timeline=timeline)
+            if label == "VIS-BA":
+                label = "CAL-SMA" if mask is None else "dropout-blend"
+        m = build_map(X, ids, pos, label, sensor="visibility", mask=mask, timeline=timeline,
                       random_state=self.random_state)
         for note in m.warnings:
             warnings.warn(f"start map ({m.method}): {note}", VisibilityAdjustmentWarning,

@@ -106,6 +106,16 @@ def test_build_map_with_vis_ba():
     assert _error(m.positions, P, ids) < _error(start.positions, P, ids)
 
 
+def test_as_the_default_it_refines_the_former_default(monkeypatch):
+    """Were VIS-BA the complete visibility default, its start map would not recurse into it."""
+    from mappers.registry import DEFAULT_METHODS
+
+    P, X, ids, _ = _threshold(n_steps=400)
+    monkeypatch.setitem(DEFAULT_METHODS, ("visibility", False), "VIS-BA")
+    m = build_map(X, ids, P[ids], sensor="visibility")
+    assert m.method == "VIS-BA" and np.all(np.isfinite(m.positions))
+
+
 def test_bad_input_is_a_clear_value_error():
     P, X, ids, _ = _threshold(n_steps=200)
     kw = dict(anchor_ids=ids, anchor_positions=P[ids], start_positions=P)
