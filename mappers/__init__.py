@@ -49,6 +49,7 @@ _LAZY: dict[str, str] = {
     "DROPOUT_DEFAULTS": "mappers.registry",
     "flicker_rate": "mappers.flicker",
     "DropoutBlend": "mappers.dropout_blend",
+    "VisibilityAdjustment": "mappers.visibility_adjustment",
     "OnlineMapper": "mappers.online",
     "BearingAdjustment": "mappers.bearing_adjustment",
 }

@@ -3,9 +3,10 @@
 Every method — the paper's ten (:mod:`mappers.methods`), CAL-SMA (:mod:`mappers.calibrated`),
 UNFOLD (:mod:`mappers.unfolding`), the methods for masked histories (:mod:`mappers.masked`,
 :mod:`mappers.ensemble`, :mod:`mappers.covis_calibrated`), the bearing default BEARING-BA
-(:mod:`mappers.bearing_adjustment`) and any a user registers — is a
-:class:`MethodSpec` in :data:`METHODS`. A spec says what the method accepts (which sensors or
-fused sets of sensors, complete and/or masked histories); the pipeline, the protocol and the
+(:mod:`mappers.bearing_adjustment`), VIS-BA (:mod:`mappers.visibility_adjustment`: a visibility
+map refined by estimating the viewpoints; a choice, not a default) and any a user registers —
+is a :class:`MethodSpec` in :data:`METHODS`. A spec says what the method accepts (which sensors
+or fused sets of sensors, complete and/or masked histories); the pipeline, the protocol and the
 command line choose and check methods by the spec alone (:func:`resolve_method`). Fused methods
 — LOC-SMA (:mod:`mappers.range_bearing`) for range + bearing, VB-SMA
 (:mod:`mappers.visibility_bearing`) for visibility + bearing — are registered like the others,
@@ -176,12 +177,14 @@ def _load_builtins() -> None:
         range_bearing,
         scalable,
         unfolding,
+        visibility_adjustment,
         visibility_bearing,
     )
 
     for spec in (*methods.SPECS, calibrated.SPEC, unfolding.SPEC, scalable.SPEC, *masked.SPECS,
                  ensemble.SPEC, *covis_calibrated.SPECS, covis_sparse.SPEC, dropout_blend.SPEC,
-                 range_bearing.SPEC, visibility_bearing.SPEC, bearing_adjustment.SPEC):
+                 range_bearing.SPEC, visibility_bearing.SPEC, bearing_adjustment.SPEC,
+                 visibility_adjustment.SPEC):
         _METHODS.setdefault(spec.label, spec)
 
 
