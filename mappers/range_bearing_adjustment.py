@@ -239,7 +239,8 @@ class RangeBearingAdjustment(TransformerMixin, BaseEstimator):
         n_free = int(free.sum())
         lam, rounds = 1e-4, 0
         current = self._cost(P, C, phi, obs, wb, scales)
-        for rounds in range(1, self.max_rounds + 1):
+        while rounds < self.max_rounds:
+            rounds += 1
             blocks = self._blocks(P, C, phi, obs, wb, scales, free_index, n_free)
             for _ in range(12):
                 dc, dp = _joint_step(*blocks, lam)
