@@ -15,6 +15,14 @@ with two, distances leave a mirror image about the anchors' line, which the fram
 decides (:func:`mappers.law_of_cosines.handedness_votes`); with fewer it is not placed. Objects
 that the pairs and anchors do not pin down (:func:`mappers.rigidity.flexible_objects`) are not
 placed either: each such case is a :class:`RigidityWarning` and NaN rows, never a guess.
+
+The map is then refined (``refine="range-bearing"``, the default) by a bundle adjustment that
+estimates each step's viewpoint and fits the readings' ranges and angles
+(:mod:`mappers.range_bearing_adjustment`): on fresh simulated walks 0.0064 -> 0.0053 m with a
+60-degree 1 m camera, 0.0027 -> 0.0018 m at 360 degrees, 0.0136 -> 0.0011 m on
+``LFMDR-Camera-v0``, and on MRCLAM 0.08 -> 0.04 m (docs/fused-sensing.md). ``refine=None`` is
+the law-of-cosines map alone, ``refine="bearing"`` the bearing-only adjustment
+(:mod:`mappers.bearing_adjustment`, which loses the ranges: worse at 60 degrees).
 """
 
 from __future__ import annotations
@@ -272,7 +280,8 @@ SPEC = MethodSpec(
     _loc_sma,
     {},
     {"min_count": [1, 3, 10], "trim": [None, 3.0]},
-    "anchored weighted SMACOF of law-of-cosines distances (fused range + bearing)",
+    "anchored weighted SMACOF of law-of-cosines distances, refined by range-and-bearing bundle "
+    "adjustment (fused range + bearing; refine=None: the law-of-cosines map alone)",
     uses_anchors=True,
     sensors=(frozenset({"range", "bearing"}),),
     normalize=False,

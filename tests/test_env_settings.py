@@ -101,7 +101,7 @@ def test_cli_run_and_collect_pass_env_keywords(tmp_path, capsys):
                  "max_range=1.5", "--steps", "300", "--every", "300", "--out", str(tmp_path / "r")])
     assert code == 0
     out = capsys.readouterr().out
-    assert "covis" in out  # the masked default
+    assert "BEARING-BA" in out  # the masked default (it starts from covis-auto's map)
     history = History.load(tmp_path / "r" / "history.npz")
     assert history.mask is not None and history.meta["env_kwargs"]["max_range"] == 1.5
     code = main(["collect", "--env", "LFMDR-Visibility-v0", "--env-kw", "fov_deg=60", "--steps", "50",
