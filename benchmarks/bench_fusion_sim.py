@@ -9,17 +9,27 @@ walk's true poses and layout:
 
 * ``camera60``: a camera with a 60-degree field of view and a 1 m range limit, bearing noise
   2 deg and range noise 2 cm (Gaussian), mapped fused (``LOC-SMA``) and by range alone
-  (``range-quantile``, masked) — the conditions of a real robot's camera;
+  (``range-quantile``, masked) and by bearing alone (``BEARING-BA``, masked) — the conditions
+  of a real robot's camera;
 * ``camera360``: a 360-degree view without range limit, 5 deg / 5 cm noise, fused vs range
-  alone (``UNFOLD``) and bearing alone (``CAL-SMA``);
+  alone (``UNFOLD``) and bearing alone (``BEARING-BA``);
 * ``camera-env``: a walk of ``LFMDR-Camera-v0`` itself (the MRCLAM camera's field of view,
   range limit and noise, line of sight on; :data:`lfmdr_gym.camera.CAMERA_PRESET`), its fused
   history mapped as collected (``LOC-SMA``) and each of its parts alone (masked defaults:
-  ``range-quantile`` for range, ``covis-auto`` for bearing);
+  ``range-quantile`` for range, ``BEARING-BA`` for bearing);
 * ``vis-bearing``: the walk's own bearing history and the visibility bits of the same poses
-  (:func:`lfmdr_gym.sensors.visibility`, the env's defaults), each alone (``CAL-SMA``) and fused
+  (:func:`lfmdr_gym.sensors.visibility`, the env's defaults), each alone (its default: ``CAL-SMA``
+  for visibility, ``BEARING-BA`` for bearing) and fused
   (``VB-SMA``, and VB-SMA without its blend with the bearing-only map, ``bearing_share=0``);
-  the ratio fused / better-alone per run, for both.
+  the ratio fused / better-alone per run, for both; ``vis-bearing paper`` is VB-SMA without
+  its bundle adjustment (``refine=False``, the blend alone);
+* ``vis-bearing-noisy`` (not in the default sections): the same with 10 degrees of Gaussian
+  noise on the bearings, where the better single sensor is not exact.
+
+In the range-bearing sections the fused column is the default, ``LOC-SMA`` refined by a
+bundle adjustment with range and angle residuals (``refine="range-bearing"``); ``LOC-SMA alone``
+is the law-of-cosines map without it (``refine=None``, the default before), ``LOC-SMA+BA`` the
+map refined by the bearing-only adjustment (``refine="bearing"``).
 
 Prints mean / median / max MPE [m] per column and the median wall-clock and CPU time per map
 [s] (on a busy machine the CPU time is the fairer figure: the mappers run on one thread).
@@ -98,11 +108,17 @@ def run_one(seed: int, steps: int, sections: list[str]) -> dict[str, tuple[float
         fused, masks = simulate_camera(history, 60.0, 1.0, 2.0, 0.02, rng)
         out["cam60 range-bearing"] = _score(history, fused, mask=masks)
         out["cam60 range"] = _score(history, fused["range"], mask=masks["range"], sensor="range")
+        out["cam60 bearing"] = _score(history, fused["bearing"], mask=masks["bearing"],
+                                      sensor="bearing")
+        out["cam60 LOC-SMA+BA"] = _score(history, fused, mask=masks, refine="bearing")
+        out["cam60 LOC-SMA alone"] = _score(history, fused, mask=masks, refine=None)
     if "camera360" in sections:
         fused, masks = simulate_camera(history, 360.0, None, 5.0, 0.05, rng)
         out["cam360 range-bearing"] = _score(history, fused)
         out["cam360 range"] = _score(history, fused["range"], sensor="range")
         out["cam360 bearing"] = _score(history, fused["bearing"], sensor="bearing")
+        out["cam360 LOC-SMA+BA"] = _score(history, fused, refine="bearing")
+        out["cam360 LOC-SMA alone"] = _score(history, fused, refine=None)
     if "camera-env" in sections:
         env = gym.make("LFMDR-Camera-v0", max_episode_steps=steps)
         cam = collect(env, RandomWalkPolicy.for_env(env, seed=seed), steps, seed=seed)
@@ -110,6 +126,8 @@ def run_one(seed: int, steps: int, sections: list[str]) -> dict[str, tuple[float
         out["camera-env range-bearing"] = _score(cam, cam)
         out["camera-env range"] = _score(cam, cam.parts["range"])
         out["camera-env bearing"] = _score(cam, cam.parts["bearing"])
+        out["camera-env LOC-SMA+BA"] = _score(cam, cam, refine="bearing")
+        out["camera-env LOC-SMA alone"] = _score(cam, cam, refine=None)
     if "vis-bearing" in sections:
         vis = visibility_history(history, radius, visual_angle)
         out["visibility"] = _score(history, vis, sensor="visibility")
@@ -117,7 +135,31 @@ def run_one(seed: int, steps: int, sections: list[str]) -> dict[str, tuple[float
         both = {"visibility": vis, "bearing": history.matrix}
         out["visibility-bearing"] = _score(history, both)
         out["vis-bearing unblended"] = _score(history, both, bearing_share=0.0)
+        out["vis-bearing paper"] = _score(history, both, refine=False)
+    if "vis-bearing-noisy" in sections:  # the same, bearings with 10 degrees of noise
+        vis = visibility_history(history, radius, visual_angle)
+        B = np.asarray(history.matrix, dtype=float)
+        noise = np.random.default_rng([seed, 10])  # whatever the other sections drew
+        theta = np.arctan2(B[:, 1::2], B[:, 0::2]) + noise.normal(0.0, math.radians(10.0),
+                                                                  (B.shape[0], B.shape[1] // 2))
+        noisy = np.empty_like(B)
+        noisy[:, 0::2], noisy[:, 1::2] = np.cos(theta), np.sin(theta)
+        out["noisy visibility"] = _score(history, vis, sensor="visibility")
+        out["noisy bearing"] = _score(history, noisy, sensor="bearing")
+        both = {"visibility": vis, "bearing": noisy}
+        out["noisy vis-bearing"] = _score(history, both)
+        out["noisy vis-bearing paper"] = _score(history, both, refine=False)
     return out
+
+
+def _ratios(rows, fused_col, a, b, label):
+    """The fused map's MPE over the better single sensor's: of the means, and per run."""
+    better = np.array([min(r[a][0], r[b][0]) for r in rows])
+    fused = np.array([r[fused_col][0] for r in rows])
+    ratio = fused / better
+    print(f"{label} / better alone: mean of MPEs {fused.mean() / better.mean():.3f}, per run "
+          f"mean {ratio.mean():.3f}, median {np.median(ratio):.3f}, max {ratio.max():.3f}; "
+          f"fused - better: mean {np.mean(fused - better):+.2e} m, max {np.max(fused - better):+.2e} m")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -136,16 +178,11 @@ def main(argv: list[str] | None = None) -> None:
         print(f"{col:<24}{e.mean():>10.4f}{np.median(e):>10.4f}{e.max():>10.4f}"
               f"{np.median(t):>9.3f}s{np.median(cpu):>9.3f}s")
     if "vis-bearing" in sections:
-        ratio = np.array([r["visibility-bearing"][0] / min(r["visibility"][0], r["bearing"][0])
-                          for r in rows])
-        better = np.array([min(r["visibility"][0], r["bearing"][0]) for r in rows])
-        fused = np.array([r["visibility-bearing"][0] for r in rows])
-        print(f"visibility-bearing / better alone: mean of MPEs {fused.mean() / better.mean():.3f}, "
-              f"per run median {np.median(ratio):.3f}, max {ratio.max():.3f}")
-        plain = np.array([r["vis-bearing unblended"][0] for r in rows])
-        print(f"unblended / better alone: mean of MPEs {plain.mean() / better.mean():.3f}, "
-              f"per run median {np.median(plain / better):.3f}, max {(plain / better).max():.3f}")
-
+        for col in ("visibility-bearing", "vis-bearing unblended", "vis-bearing paper"):
+            _ratios(rows, col, "visibility", "bearing", col)
+    if "vis-bearing-noisy" in sections:
+        for col in ("noisy vis-bearing", "noisy vis-bearing paper"):
+            _ratios(rows, col, "noisy visibility", "noisy bearing", col)
 
 if __name__ == "__main__":
     main()

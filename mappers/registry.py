@@ -226,7 +226,10 @@ sensors is keyed by its frozenset. The measured figures behind each choice are i
 and ``benchmarks/``. Bearing histories, complete or masked, go to BEARING-BA, which refines the
 map of the bearing default before it (CAL-SMA complete, ``covis-auto`` masked) by estimating the
 viewpoints; :class:`mappers.online.OnlineMapper` keeps CAL-SMA for complete bearing histories,
-which it updates incrementally."""
+which it updates incrementally. The fused defaults end with a bundle adjustment too, as a
+parameter of the same labels: LOC-SMA ``refine="range-bearing"`` (range and angle residuals,
+:mod:`mappers.range_bearing_adjustment`), VB-SMA ``refine=True`` (BEARING-BA on the bearing
+part); ``refine=None`` / ``refine=False`` give the maps before."""
 
 DROPOUT_DEFAULTS: dict[str, str] = {
     "visibility": "dropout-blend",

@@ -166,13 +166,16 @@ def test_vb_sma_blends_the_fused_map_with_the_bearing_only_map():
     alone = CalibratedSMACOF(random_state=0).fit_transform(
         B / np.linalg.norm(B, axis=1, keepdims=True), **fix)
     np.testing.assert_allclose(est.bearing_embedding_, alone)
-    np.testing.assert_allclose(est.embedding_, 0.7 * est.fused_embedding_ + 0.3 * alone)
+    np.testing.assert_allclose(est.blend_embedding_, 0.7 * est.fused_embedding_ + 0.3 * alone)
     plain = VisibilityBearingSMACOF(bearing_share=0.0, random_state=0).fit(X, **fix)
     assert plain.bearing_embedding_ is None
-    np.testing.assert_array_equal(plain.embedding_, est.fused_embedding_)
-    np.testing.assert_allclose(est.embedding_[anchors], P[anchors], atol=1e-9)  # both held fixed
+    np.testing.assert_array_equal(plain.blend_embedding_, est.fused_embedding_)
+    np.testing.assert_allclose(est.blend_embedding_[anchors], P[anchors], atol=1e-9)  # both fixed
+    np.testing.assert_allclose(est.embedding_[anchors], P[anchors], atol=1e-9)  # and refined
+    paper = VisibilityBearingSMACOF(bearing_share=0.3, refine=False, random_state=0).fit(X, **fix)
+    np.testing.assert_array_equal(paper.embedding_, est.blend_embedding_)  # the blend alone
     m = build_map(X, anchors, P[anchors])
-    assert m.params["bearing_share"] == 0.3
+    assert m.params["bearing_share"] == 0.3 and m.params["refine"] is True
     np.testing.assert_allclose(m.positions, est.embedding_, atol=1e-9)
     for bad in (1.0, -0.1):
         with pytest.raises(ValueError, match="bearing_share"):
