@@ -414,7 +414,7 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
     def _alternate(self, P, C, phi, obs, wb, free, scale):
         """Resection and intersection in turn (see the module docstring)."""
         rounds, ok, t = 0, wb > 0, obs[0]
-        for rounds in range(1, self.max_rounds + 1):
+        for rounds in range(1, self.max_rounds + 1):  # noqa: B007 - the count is returned
             res, _ = _residuals(P, C, phi, obs)
             w = wb * _robust(res, scale, self.loss)
             Q = _intersect(P, C, phi, obs, w)
@@ -437,7 +437,7 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         free_index = np.full(len(P), -1)
         free_index[free] = np.arange(free.sum())
         lam, current, rounds = 1e-4, cost(P, C, phi), 0
-        for rounds in range(1, self.max_rounds + 1):
+        for rounds in range(1, self.max_rounds + 1):  # noqa: B007 - the count is returned
             res, _ = _residuals(P, C, phi, obs)
             blocks = _normal_blocks(P, C, phi, obs, wb * _robust(res, scale, self.loss),
                                     free_index, int(free.sum()))
