@@ -5,9 +5,9 @@ The paper calls LFMDR "basically an off-line process" and leaves an online algor
 current :class:`~mappers.pipeline.Map`, the same kind of map :func:`~mappers.pipeline.build_map`
 returns for the whole history.
 
-For the default method of complete visibility and bearing histories, CAL-SMA
-(:mod:`mappers.calibrated`; ``build_map``'s complete bearing default is BEARING-BA, which the
-online mapper does not use unless named), the update is incremental:
+For CAL-SMA (:mod:`mappers.calibrated`, the default of complete visibility histories, and the
+start of BEARING-BA, the default of bearing histories) on complete histories, the update is
+incremental:
 
 - Statistics: CAL-SMA needs only the dissimilarities of the L2-normalised rows (paper eq. 7),
   and both its cosine (visibility) and RMS Euclidean (bearing) dissimilarities are functions of
@@ -43,6 +43,13 @@ whose maps converge slowly; with ``refit_growth = g`` there are about ``log_g(N 
 them over a run of N steps, N_0 the steps of the first map, plus the few a fold check asks for.
 ``benchmarks/bench_online.py`` measures both against rebuilding the map (figures in the README
 and in ``docs/online-and-exploration.md``).
+
+BEARING-BA on complete bearing histories (the default) is updated incrementally from that
+CAL-SMA map by :class:`mappers.online_bearing.OnlineBundle`: each new step's pose resected
+against the current objects, a warm Levenberg-Marquardt round of the joint problem every
+``bundle_every`` updates (or once the steps have grown by 5 %), and a full BEARING-BA fit, from
+the CAL-SMA map, whenever CAL-SMA is refitted or objects join its map; a refit that is not kept
+(BEARING-BA's guards) leaves the CAL-SMA map until the next one.
 
 Other methods (and masked histories, whose methods need the steps' co-observation patterns)
 keep the columns and refit with :func:`~mappers.pipeline.build_map` on the same geometric
@@ -259,9 +266,9 @@ class OnlineMapper:
         sensor: ``"visibility"``, ``"bearing"`` or ``"range"``; None = inferred from the first
             update that senses anything (pass it when you know it).
         method: a label of :data:`mappers.METHODS`; None = ``build_map``'s default for the
-            sensor and the kind of history, except CAL-SMA for complete bearing histories
-            (``build_map``'s BEARING-BA needs the whole history at every refit): CAL-SMA, for
-            complete visibility and bearing, is updated incrementally.
+            sensor and the kind of history. CAL-SMA on complete visibility and bearing
+            histories, and BEARING-BA (started from CAL-SMA) on complete bearing ones, are
+            updated incrementally; other methods are refitted on the schedule.
         refit_growth: a full refit whenever the steps have grown by this factor (> 1) since the
             last one.
         warm_rounds: CAL-SMA rounds of the warm-started update between full refits.
@@ -272,6 +279,10 @@ class OnlineMapper:
             1 = every update) once the map is past its second scheduled refit (``refit_growth``
             squared times the steps of the first map); before that, and whenever objects join
             the map, on every warm update.
+        bundle_every: BEARING-BA (complete bearing): a warm joint round of the bundle
+            adjustment every this many updates (integer >= 1), sooner once the steps have grown
+            by 5 % since the last.
+        bundle_rounds: Levenberg-Marquardt rounds per warm joint round (integer >= 1).
         random_state: seed handed to the method, as ``build_map``'s.
         **params: the method's parameters, as for ``build_map``.
 
@@ -281,13 +292,17 @@ class OnlineMapper:
         last map (None before the first update).
 
     Cost per update (``benchmarks/bench_online.py``: M = 50 objects, updates of 10 steps,
-    N = 2,000, CPU time, one BLAS thread; 25 fresh layouts per sensor): the median update is
-    about 2 ms, 58x (visibility) / 56x (bearing) cheaper than rebuilding the map at N = 2,000
-    with ``build_map``; the mean, the full refits included (5-6 / 4-5 per run: the amortised
-    cost), 23x / 28x. Before issue 14's changes (the offline estimator with its input checks and a
-    pseudo-inverse per round, tolerance 1e-6 and the fold check on every update, random
-    restarts in full fits) they were 20x / 22x and 10x / 13x, at the same accuracy. See
-    ``docs/online-and-exploration.md`` for what each change bought.
+    N = 2,000, CPU time, one BLAS thread; 25 fresh layouts per sensor): visibility (CAL-SMA),
+    median about 1.5 ms, 59x cheaper than rebuilding the map at N = 2,000 with ``build_map``;
+    the mean, the full refits included (5-6 per run: the amortised cost), 22x. Bearing
+    (BEARING-BA): the CAL-SMA update, plus the new steps' resection (O(k M)), plus every
+    ``bundle_every`` updates a joint round over all steps (O(N M) for the normal blocks and
+    O(N F^2 + F^3) for the Schur system, F the free objects: about 70 ms at N = 2,000, a seventh
+    of a rebuild), plus a full BEARING-BA fit at each CAL-SMA refit: median about 4 ms, 108x
+    cheaper than rebuilding the BEARING-BA map (about 460 ms), mean 14 ms, 33x; its map is
+    within 1 % of the offline BEARING-BA map's MPE on average (2 degrees of bearing noise), and
+    as exact (~5e-10 m) on perfect bearings. See ``docs/online-and-exploration.md`` for what
+    each change bought.
     """
 
     def __init__(self, anchor_ids, anchor_positions, *, sensor: str | None = None,

@@ -222,8 +222,8 @@ DEFAULT_METHODS: dict[tuple[str | frozenset[str], bool], str] = {
 sensors is keyed by its frozenset. The measured figures behind each choice are in the README
 and ``benchmarks/``. Bearing histories, complete or masked, go to BEARING-BA, which refines the
 map of the bearing default before it (CAL-SMA complete, ``covis-auto`` masked) by estimating the
-viewpoints; :class:`mappers.online.OnlineMapper` keeps CAL-SMA for complete bearing histories,
-which it updates incrementally."""
+viewpoints; :class:`mappers.online.OnlineMapper` updates it incrementally on complete bearing
+histories (:mod:`mappers.online_bearing`)."""
 
 DROPOUT_DEFAULTS: dict[str, str] = {
     "visibility": "dropout-blend",
