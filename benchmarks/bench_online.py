@@ -1,18 +1,25 @@
 """The online map against rebuilding it: cost per update and accuracy as the run grows.
 
 For each sensor (visibility, bearing) it collects fresh layouts (seeds never used to tune
-anything) with the random walk, feeds :class:`mappers.OnlineMapper` (default method, CAL-SMA)
-the columns of 10 new steps at a time and prints, over the runs:
+anything) with the random walk, feeds :class:`mappers.OnlineMapper` (default method: CAL-SMA
+for visibility, BEARING-BA for bearing, both updated incrementally) the columns of 10 new steps
+at a time and prints, over the runs:
 
 - the CPU time of one update, median and mean (the mean includes the occasional full refits),
   against ``build_map`` on the whole history at N steps (one BLAS thread), and their ratio;
 - the MPE of the online map at 500, 1,000, 1,500 and N steps over the offline map's of the
   same steps (mean and max of the ratio), and both mean MPEs [m].
 
+The offline map is ``build_map``'s default for bearing (BEARING-BA), and the online map's own
+method for visibility (CAL-SMA, the default for perfect visibility). ``--env`` passes env
+keywords (imperfect sensing, e.g. ``bearing_noise_deg=2``; masked histories are fed with their
+masks, an all-True mask, as noise alone gives, as a complete history).
+
     PYTHONPATH=. python benchmarks/bench_online.py                  # 25 layouts per sensor
     PYTHONPATH=. python benchmarks/bench_online.py --runs 5 --sensors bearing
     PYTHONPATH=. python benchmarks/bench_online.py --runs 8 --seed 777 --warm-rounds 2   # variants
     PYTHONPATH=. python benchmarks/bench_online.py --runs 8 --seed 777 --warm-tol 1e-6 --fold-check-every 1
+    PYTHONPATH=. python benchmarks/bench_online.py --runs 8 --sensors bearing --env bearing_noise_deg=2
 """
 
 from __future__ import annotations
@@ -40,18 +47,30 @@ def one_run(hist, steps: int, batch: int, checkpoints: tuple[int, ...], **online
     c = COLUMNS_PER_STEP[hist.sensor]
     om = mappers.OnlineMapper(hist.anchor_ids, hist.anchor_positions, sensor=hist.sensor, **online)
     times, ratios, online, offline = [], [], [], []
+    reference = None  # bearing: build_map's default (BEARING-BA); visibility: the online method
+    X = hist.matrix
+    # an env with noise only reports an all-True mask: a complete history
+    mask = hist.mask if hist.masked and not hist.mask.all() else None
+
+    def offline_map(n: int, method):
+        cols = n * c
+        return mappers.build_map(X[:, :cols], hist.anchor_ids, hist.anchor_positions, method,
+                                 sensor=hist.sensor, mask=None if mask is None else mask[:, :cols])
+
     for s in range(0, steps, batch):
+        cols = slice(s * c, (s + batch) * c)
         t0 = time.process_time()
-        current = om.update(hist.matrix[:, s * c:(s + batch) * c])
+        current = om.update(X[:, cols], None if mask is None else mask[:, cols])
         times.append(time.process_time() - t0)
+        if hist.sensor != "bearing":
+            reference = current.method
         if s + batch in checkpoints:
-            ref = mappers.build_map(hist.head(s + batch), hist.anchor_ids, hist.anchor_positions,
-                                    current.method)  # the online map's method (CAL-SMA)
+            ref = offline_map(s + batch, reference)
             online.append(_mpe(current, hist))
             offline.append(_mpe(ref, hist))
             ratios.append(online[-1] / offline[-1])
     t0 = time.process_time()
-    mappers.build_map(hist.head(steps), hist.anchor_ids, hist.anchor_positions, current.method)
+    offline_map(steps, reference)
     rebuild = time.process_time() - t0
     return {"median": np.median(times), "mean": np.mean(times), "rebuild": rebuild,
             "ratios": ratios, "online": online, "offline": offline, "refits": om.n_full_fits,
@@ -70,15 +89,22 @@ def main() -> None:
     ap.add_argument("--warm-tol", type=float, default=1e-4, help="OnlineMapper's warm_tol")
     ap.add_argument("--fold-check-every", type=int, default=5,
                     help="OnlineMapper's fold_check_every")
+    ap.add_argument("--bundle-every", type=int, default=5, help="OnlineMapper's bundle_every")
+    ap.add_argument("--bundle-rounds", type=int, default=1, help="OnlineMapper's bundle_rounds")
+    ap.add_argument("--env", action="append", default=[], metavar="KEY=VALUE",
+                    help="env keyword (repeatable), e.g. bearing_noise_deg=2")
     args = ap.parse_args()
+    env = {k: float(v) for k, v in (kv.split("=", 1) for kv in args.env)} or None
     checkpoints = tuple(n for n in (500, 1000, 1500) if n < args.steps) + (args.steps,)
     for sensor in args.sensors:
         cfg = ProtocolConfig(sensor=sensor, layouts=args.runs, poses=1, steps=args.steps,
-                             seed=args.seed, methods=("LPCA",))
+                             seed=args.seed, methods=("BEARING-BA",) if sensor == "bearing"
+                            else ("CAL-SMA",), env_kwargs=env)
         with threadpool_limits(limits=1):
             rows = [one_run(collect_episode(ep), args.steps, args.batch, checkpoints,
                             warm_rounds=args.warm_rounds, refit_growth=args.refit_growth,
-                            warm_tol=args.warm_tol, fold_check_every=args.fold_check_every)
+                            warm_tol=args.warm_tol, fold_check_every=args.fold_check_every,
+                            bundle_every=args.bundle_every, bundle_rounds=args.bundle_rounds)
                     for ep in cfg.episodes()]
         med = np.median([r["median"] for r in rows])
         mean = np.mean([r["mean"] for r in rows])
@@ -87,7 +113,8 @@ def main() -> None:
         print(f"\n{sensor}: {len(rows)} fresh layouts (seed {args.seed}), updates of {args.batch} "
               f"steps, N = {args.steps}, warm_rounds {args.warm_rounds}, refit_growth "
               f"{args.refit_growth:g}, warm_tol {args.warm_tol:g}, fold_check_every "
-              f"{args.fold_check_every}")
+              f"{args.fold_check_every}, bundle_every {args.bundle_every}, bundle_rounds "
+              f"{args.bundle_rounds}{f', env {env}' if env else ''}")
         print(f"  rebuild at N: {rebuild * 1e3:.1f} ms;  update: median {med * 1e3:.2f} ms "
               f"({rebuild / med:.1f}x cheaper), mean incl. refits {mean * 1e3:.2f} ms "
               f"({rebuild / mean:.1f}x); full refits per run {np.mean([r['refits'] for r in rows]):.1f} "
@@ -97,7 +124,7 @@ def main() -> None:
         for j, n in enumerate(checkpoints):
             on = np.mean([r["online"][j] for r in rows])
             off = np.mean([r["offline"][j] for r in rows])
-            print(f"  {n:6d} {on:10.4f} {off:11.4f} {on / off:10.3f} {R[:, j].max():9.3f}")
+            print(f"  {n:6d} {on:10.4g} {off:11.4g} {on / off:10.3f} {R[:, j].max():9.3f}")
         final = np.mean([r["online"][-1] for r in rows]) / np.mean([r["offline"][-1] for r in rows])
         mid = max(np.mean([r["online"][j] for r in rows]) / np.mean([r["offline"][j] for r in rows])
                   for j in range(len(checkpoints) - 1))

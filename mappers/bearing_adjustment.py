@@ -279,7 +279,8 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         embedding_ (M, 2) in world coordinates; start_ the start map; poses_ (N, 3) the
         estimated viewpoints (NaN rows: steps left out); kept_ indices of non-anchor objects
         that kept their start; n_rounds_, cost_, start_cost_ (robust angle cost, start's scale);
-        refined_ whether the refinement was kept.
+        refined_ whether the refinement was kept; scale_ the robust loss's scale [rad] (read from
+        the start's residuals).
     """
 
     _parameter_constraints: dict = {
@@ -373,6 +374,7 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         scale = self.robust_scale * 1.4826 * max(
             float(np.median(np.abs(res[used]))) if used.any() else 0.0, 1e-9)
         start_rho = _rho(res, scale, self.loss)
+        self.scale_ = scale
         # objects the usable steps do not pin down keep their start
         views = _sum(i, wb, m)
         weak = free & ((views < self.min_views) | (_spread(phi, obs, wb, m) < self.min_spread))

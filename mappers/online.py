@@ -5,9 +5,9 @@ The paper calls LFMDR "basically an off-line process" and leaves an online algor
 current :class:`~mappers.pipeline.Map`, the same kind of map :func:`~mappers.pipeline.build_map`
 returns for the whole history.
 
-For the default method of complete visibility and bearing histories, CAL-SMA
-(:mod:`mappers.calibrated`; ``build_map``'s complete bearing default is BEARING-BA, which the
-online mapper does not use unless named), the update is incremental:
+For CAL-SMA (:mod:`mappers.calibrated`, the default of complete visibility histories, and the
+start of BEARING-BA, the default of bearing histories) on complete histories, the update is
+incremental:
 
 - Statistics: CAL-SMA needs only the dissimilarities of the L2-normalised rows (paper eq. 7),
   and both its cosine (visibility) and RMS Euclidean (bearing) dissimilarities are functions of
@@ -44,6 +44,13 @@ them over a run of N steps, N_0 the steps of the first map, plus the few a fold 
 ``benchmarks/bench_online.py`` measures both against rebuilding the map (figures in the README
 and in ``docs/online-and-exploration.md``).
 
+BEARING-BA on complete bearing histories (the default) is updated incrementally from that
+CAL-SMA map by :class:`mappers.online_bearing.OnlineBundle`: each new step's pose resected
+against the current objects, a warm Levenberg-Marquardt round of the joint problem every
+``bundle_every`` updates (or once the steps have grown by 5 %), and a full BEARING-BA fit, from
+the CAL-SMA map, whenever CAL-SMA is refitted or objects join its map; a refit that is not kept
+(BEARING-BA's guards) leaves the CAL-SMA map until the next one.
+
 Other methods (and masked histories, whose methods need the steps' co-observation patterns)
 keep the columns and refit with :func:`~mappers.pipeline.build_map` on the same geometric
 schedule; between refits the last map is returned with a note in ``Map.warnings`` saying which
@@ -65,6 +72,7 @@ import numpy as np
 from mappers.align import apply_affine, check_anchor_ids, check_anchors
 from mappers.calibrated import CalibratedSMACOF, _log_floor, fit_calibration, fold_score
 from mappers.graph import informative_pairs, knn_mask
+from mappers.online_bearing import OnlineBundle
 from mappers.pipeline import Map, _thread_limit, build_map
 from mappers.registry import MappingError, resolve_method
 from mappers.sensors import COLUMNS_PER_STEP, check_sensor, infer_sensor
@@ -73,6 +81,7 @@ from mappers.smacof import euclidean_distance_matrix
 __all__ = ["OnlineMapper", "gram_dissimilarity", "online_default"]
 
 _INCREMENTAL = "CAL-SMA"
+_BUNDLE = "BEARING-BA"  # updated incrementally from the incremental CAL-SMA map (online_bearing)
 # a warm map that looks folded is refitted from scratch once the steps have grown by this factor
 # since the last full fit (at most refit_growth), not at every update while it still looks folded
 _FOLD_REFIT_GROWTH = 1.5
@@ -80,9 +89,9 @@ _FOLD_REFIT_GROWTH = 1.5
 
 def online_default(sensor: str, masked: bool) -> str | None:
     """The label :class:`OnlineMapper` uses when none is given, None where it is ``build_map``'s
-    default: CAL-SMA (updated incrementally) for complete bearing histories, whose ``build_map``
-    default BEARING-BA refits from the whole history."""
-    return _INCREMENTAL if sensor == "bearing" and not masked else None
+    default. It is ``build_map``'s default everywhere: BEARING-BA for bearing histories (updated
+    incrementally on complete ones, :mod:`mappers.online_bearing`)."""
+    return None
 
 
 def gram_dissimilarity(gram: np.ndarray, n_columns: int, kind: str) -> np.ndarray:
@@ -257,9 +266,9 @@ class OnlineMapper:
         sensor: ``"visibility"``, ``"bearing"`` or ``"range"``; None = inferred from the first
             update that senses anything (pass it when you know it).
         method: a label of :data:`mappers.METHODS`; None = ``build_map``'s default for the
-            sensor and the kind of history, except CAL-SMA for complete bearing histories
-            (``build_map``'s BEARING-BA needs the whole history at every refit): CAL-SMA, for
-            complete visibility and bearing, is updated incrementally.
+            sensor and the kind of history. CAL-SMA on complete visibility and bearing
+            histories, and BEARING-BA (started from CAL-SMA) on complete bearing ones, are
+            updated incrementally; other methods are refitted on the schedule.
         refit_growth: a full refit whenever the steps have grown by this factor (> 1) since the
             last one.
         warm_rounds: CAL-SMA rounds of the warm-started update between full refits.
@@ -270,6 +279,10 @@ class OnlineMapper:
             1 = every update) once the map is past its second scheduled refit (``refit_growth``
             squared times the steps of the first map); before that, and whenever objects join
             the map, on every warm update.
+        bundle_every: BEARING-BA (complete bearing): a warm joint round of the bundle
+            adjustment every this many updates (integer >= 1), sooner once the steps have grown
+            by 5 % since the last.
+        bundle_rounds: Levenberg-Marquardt rounds per warm joint round (integer >= 1).
         random_state: seed handed to the method, as ``build_map``'s.
         **params: the method's parameters, as for ``build_map``.
 
@@ -279,19 +292,23 @@ class OnlineMapper:
         last map (None before the first update).
 
     Cost per update (``benchmarks/bench_online.py``: M = 50 objects, updates of 10 steps,
-    N = 2,000, CPU time, one BLAS thread; 25 fresh layouts per sensor): the median update is
-    about 2 ms, 58x (visibility) / 56x (bearing) cheaper than rebuilding the map at N = 2,000
-    with ``build_map``; the mean, the full refits included (5-6 / 4-5 per run: the amortised
-    cost), 23x / 28x. Before issue 14's changes (the offline estimator with its input checks and a
-    pseudo-inverse per round, tolerance 1e-6 and the fold check on every update, random
-    restarts in full fits) they were 20x / 22x and 10x / 13x, at the same accuracy. See
-    ``docs/online-and-exploration.md`` for what each change bought.
+    N = 2,000, CPU time, one BLAS thread; 25 fresh layouts per sensor): visibility (CAL-SMA),
+    median about 1.5 ms, 59x cheaper than rebuilding the map at N = 2,000 with ``build_map``;
+    the mean, the full refits included (5-6 per run: the amortised cost), 22x. Bearing
+    (BEARING-BA): the CAL-SMA update, plus the new steps' resection (O(k M)), plus every
+    ``bundle_every`` updates a joint round over all steps (O(N M) for the normal blocks and
+    O(N F^2 + F^3) for the Schur system, F the free objects: about 70 ms at N = 2,000, a seventh
+    of a rebuild), plus a full BEARING-BA fit at each CAL-SMA refit: median about 4 ms, 108x
+    cheaper than rebuilding the BEARING-BA map (about 460 ms), mean 14 ms, 33x; its map is
+    within 1 % of the offline BEARING-BA map's MPE on average (2 degrees of bearing noise), and
+    as exact (~5e-10 m) on perfect bearings. See ``docs/online-and-exploration.md`` for what
+    each change bought.
     """
 
     def __init__(self, anchor_ids, anchor_positions, *, sensor: str | None = None,
                  method: str | None = None, refit_growth: float = 4.0, warm_rounds: int = 1,
-                 warm_tol: float = 1e-4, fold_check_every: int = 5,
-                 random_state: int | None = 0, **params: Any) -> None:
+                 warm_tol: float = 1e-4, fold_check_every: int = 5, bundle_every: int = 5,
+                 bundle_rounds: int = 1, random_state: int | None = 0, **params: Any) -> None:
         pos = np.asarray(anchor_positions, dtype=float)
         ids = check_anchor_ids(anchor_ids, np.iinfo(np.int64).max)
         check_anchors(ids, pos, int(ids.max()) + 1)  # shapes, finiteness, collinearity
@@ -304,11 +321,15 @@ class OnlineMapper:
         if (isinstance(fold_check_every, bool) or not isinstance(fold_check_every, Integral)
                 or fold_check_every < 1):
             raise ValueError(f"fold_check_every must be an integer >= 1, got {fold_check_every!r}")
+        for name, value in (("bundle_every", bundle_every), ("bundle_rounds", bundle_rounds)):
+            if isinstance(value, bool) or not isinstance(value, Integral) or value < 1:
+                raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
         self.anchor_ids, self.anchor_positions = ids, pos
         self.sensor = check_sensor(sensor, allow_none=True)
         self.method, self.params = method, dict(params)
         self.refit_growth, self.warm_rounds = float(refit_growth), int(warm_rounds)
         self.warm_tol, self.fold_check_every = float(warm_tol), int(fold_check_every)
+        self.bundle_every, self.bundle_rounds = int(bundle_every), int(bundle_rounds)
         self.random_state = random_state
         self.n_steps, self.n_full_fits, self.map = 0, 0, None
         self._m: int | None = None
@@ -325,6 +346,8 @@ class OnlineMapper:
         self._warm_est: _OnlineCalSMA | None = None  # keeps the last Guttman pseudo-inverse
         self._since_check, self._m_checked = 0, 0  # warm updates since the last fold check
         self.n_fold_refits = 0
+        self._bundle: OnlineBundle | None = None  # BEARING-BA's state (complete bearing)
+        self._cal: dict = {}  # CAL-SMA's parameters (the method's, or BEARING-BA's start's)
 
     # ------------------------------------------------------------------ inputs
     def _check_batch(self, columns, mask):
@@ -375,6 +398,16 @@ class OnlineMapper:
         if "random_state" in spec.parameters and "random_state" not in self.params:
             self._merged["random_state"] = self.random_state
         self._spec = spec
+        self._cal = self._merged
+        start = self._merged.get("start")
+        if (spec.label == _BUNDLE and self.sensor == "bearing" and not self._masked
+                and (start is None or start.strip().upper() == _INCREMENTAL)):
+            cal = resolve_method(_INCREMENTAL, self.sensor)
+            self._cal = cal.resolved_params({})
+            if "random_state" in cal.parameters:
+                self._cal["random_state"] = self._merged.get("random_state", self.random_state)
+            self._bundle = OnlineBundle(self._merged, self.anchor_ids, self.anchor_positions,
+                                        every=self.bundle_every, rounds=self.bundle_rounds)
         blocks, self._blocks = self._blocks, []
         self.n_steps = 0
         for C, mask in blocks:
@@ -385,11 +418,16 @@ class OnlineMapper:
 
     @property
     def incremental(self) -> bool:
-        """Whether updates are incremental (CAL-SMA on complete histories) rather than refits."""
-        return self._spec is not None and self._spec.label == _INCREMENTAL and not self._masked
+        """Whether updates are incremental (CAL-SMA on complete histories, and BEARING-BA from it
+        on complete bearing ones) rather than refits."""
+        return self._spec is not None and not self._masked and (
+            self._spec.label == _INCREMENTAL or self._bundle is not None)
 
     def _add(self, C, mask) -> None:
         if self.incremental:
+            if self._bundle is not None:  # checked before anything is kept
+                theta, seen = self._bundle.angles(C)
+                self._bundle.add(C, theta, seen)
             G = C @ C.T
             self._gram = G if self._gram is None else self._gram + G
             self._n_columns += C.shape[1]
@@ -422,7 +460,10 @@ class OnlineMapper:
         else:
             self._add(C, mask)
         full = self._Y is None or self.n_steps >= self.refit_growth * self._last_scheduled
+        fits = self.n_full_fits
         self.map = self._update_incremental(full) if self.incremental else self._update_refit(full)
+        if self._bundle is not None:
+            self.map = self._update_bundle(self.map, self.n_full_fits > fits)
         return self.map
 
     def _empty(self, why: str) -> Map:
@@ -447,7 +488,7 @@ class OnlineMapper:
         """CAL-SMA with the method's parameters: a full fit (no random restarts: a map that
         still looks folded is refitted later, with more steps), or ``warm_rounds`` rounds whose
         Guttman updates stop at ``warm_tol``."""
-        kw = dict(self._merged)
+        kw = dict(self._cal)
         kw.pop("n_neighbors", None)
         if warm:
             kw.update(n_rounds=self.warm_rounds, tol=self.warm_tol)
@@ -480,7 +521,7 @@ class OnlineMapper:
         is_anchor = np.isin(self.anchor_ids, mapped)
         local = np.searchsorted(mapped, self.anchor_ids[is_anchor])
         pos = self.anchor_positions[is_anchor]
-        k = self._merged.get("n_neighbors")
+        k = self._cal.get("n_neighbors")
         k = (12 if kind == "cosine" else 10) if k is None else k
         notes = []
         with _thread_limit(m):
@@ -510,7 +551,33 @@ class OnlineMapper:
             notes.append(f"n_neighbors {k} > {m - 1} objects mapped so far: used {m - 1}")
         self._Y = np.full((self._m, 2), np.nan)
         self._Y[mapped] = Y
-        return self._map(Y, mapped, local, pos, {**self._merged, "n_neighbors": k}, notes)
+        return self._map(Y, mapped, local, pos, {**self._cal, "n_neighbors": k}, notes)
+
+    def _update_bundle(self, start: Map, refitted: bool) -> Map:
+        """BEARING-BA from the CAL-SMA map ``start``: a full fit when CAL-SMA was refitted (or
+        objects joined its map), else the new steps' poses (resected in :meth:`_add`) and, when
+        due, a warm joint round; the CAL-SMA map, with the refit's warning, where the refinement
+        was not kept."""
+        bundle = self._bundle
+        placed = np.isfinite(start.positions[:, 0])
+        if not placed.any():
+            return start
+        cal_notes = [f"start map ({_INCREMENTAL}): {w}" for w in start.warnings]
+        joined = bundle.start_placed is None or np.any(placed & ~bundle.start_placed)
+        with _thread_limit(self._m):
+            if refitted or joined:
+                bundle.refit(start.positions)
+            elif bundle.due():
+                bundle.joint_round()
+        if bundle.state is None:  # the refinement was not kept: the CAL-SMA map
+            return dataclasses.replace(start, method=self._spec.label, params=dict(self._merged),
+                                       warnings=(*cal_notes, *bundle.notes))
+        mapped = np.flatnonzero(placed)
+        is_anchor = np.isin(self.anchor_ids, mapped)
+        local = np.searchsorted(mapped, self.anchor_ids[is_anchor])
+        Y = bundle.positions()[mapped]
+        return self._map(Y, mapped, local, self.anchor_positions[is_anchor], dict(self._merged),
+                         [*cal_notes, *bundle.notes])
 
     def _warm(self, D, valid, mapped, local, pos, kind, k) -> tuple[np.ndarray, float | None]:
         """``warm_rounds`` CAL-SMA rounds from the last map, and its fold score if CAL-SMA's

@@ -225,11 +225,11 @@ DEFAULT_METHODS: dict[tuple[str | frozenset[str], bool], str] = {
 sensors is keyed by its frozenset. The measured figures behind each choice are in the README
 and ``benchmarks/``. Bearing histories, complete or masked, go to BEARING-BA, which refines the
 map of the bearing default before it (CAL-SMA complete, ``covis-auto`` masked) by estimating the
-viewpoints; :class:`mappers.online.OnlineMapper` keeps CAL-SMA for complete bearing histories,
-which it updates incrementally. The fused defaults end with a bundle adjustment too, as a
-parameter of the same labels: LOC-SMA ``refine="range-bearing"`` (range and angle residuals,
-:mod:`mappers.range_bearing_adjustment`), VB-SMA ``refine=True`` (BEARING-BA on the bearing
-part); ``refine=None`` / ``refine=False`` give the maps before."""
+viewpoints; :class:`mappers.online.OnlineMapper` updates it incrementally on complete bearing
+histories (:mod:`mappers.online_bearing`). The fused defaults end with a bundle adjustment too,
+as a parameter of the same labels: LOC-SMA ``refine="range-bearing"`` (range and angle
+residuals, :mod:`mappers.range_bearing_adjustment`), VB-SMA ``refine=True`` (BEARING-BA on the
+bearing part); ``refine=None`` / ``refine=False`` give the maps before."""
 
 DROPOUT_DEFAULTS: dict[str, str] = {
     "visibility": "dropout-blend",

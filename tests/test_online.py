@@ -55,9 +55,9 @@ def test_one_update_is_build_map(sensor):
     pts, ids, rng = _world(2)
     X = _histories(pts, sensor, 400, rng)
     online = OnlineMapper(ids, pts[ids], sensor=sensor).update(X)
-    # the online default is CAL-SMA (incremental); build_map's complete bearing one is BEARING-BA
-    offline = build_map(X, ids, pts[ids], "CAL-SMA", sensor=sensor)
-    assert online.method == offline.method == "CAL-SMA"
+    # the online default is build_map's: CAL-SMA, and BEARING-BA from it for bearing
+    offline = build_map(X, ids, pts[ids], sensor=sensor)
+    assert online.method == offline.method == ("CAL-SMA" if sensor == "visibility" else "BEARING-BA")
     assert online.unmapped == offline.unmapped
     assert np.allclose(online.positions, offline.positions, atol=1e-8, equal_nan=True)
 
@@ -67,7 +67,7 @@ def test_batches_track_build_map(sensor):
     pts, ids, rng = _world(3)
     X = _histories(pts, sensor, 600, rng)
     cols = 1 if sensor == "visibility" else 2
-    om = OnlineMapper(ids, pts[ids], sensor=sensor)
+    om = OnlineMapper(ids, pts[ids], sensor=sensor, method="CAL-SMA")
     for s in range(0, 600, 20):
         current = om.update(X[:, s * cols:(s + 20) * cols])
     assert om.n_steps == 600 and om.n_full_fits >= 1
@@ -77,6 +77,60 @@ def test_batches_track_build_map(sensor):
     err_off = mean_position_error(offline.positions[keep], pts[keep])
     assert err_on <= 1.25 * err_off + 0.01
     assert np.allclose(current.positions[ids], pts[ids])
+
+
+@pytest.mark.parametrize("noise_deg", [0.0, 2.0])
+def test_online_bearing_tracks_bearing_ba(noise_deg):
+    """The online bearing default (BEARING-BA updated incrementally: new poses resected, a joint
+    round every few updates, refits with CAL-SMA's) tracks build_map's BEARING-BA of the same
+    steps: on perfect bearings both are exact to numerical precision (1e-6 m leaves room for
+    LM's stopping rule); with 2 degrees of noise the online map's error stays within 10% of the
+    offline one's (the goal's checkpoint margin) at every tenth update."""
+    pts, ids, rng = _world(10)
+    X = _histories(pts, "bearing", 400, rng)
+    if noise_deg:
+        ang = np.arctan2(X[:, 1::2], X[:, 0::2]) + np.radians(noise_deg) * rng.standard_normal((30, 400))
+        X[:, 0::2], X[:, 1::2] = np.cos(ang), np.sin(ang)
+    keep = np.setdiff1d(np.arange(len(pts)), ids)
+    om = OnlineMapper(ids, pts[ids], sensor="bearing")
+    for s in range(0, 400, 10):
+        current = om.update(X[:, 2 * s:2 * s + 20])
+        if (s + 10) % 100:
+            continue
+        offline = build_map(X[:, :2 * s + 20], ids, pts[ids], sensor="bearing")
+        assert current.method == offline.method == "BEARING-BA"
+        assert np.allclose(current.positions[ids], pts[ids])
+        err_on = mean_position_error(current.positions[keep], pts[keep])
+        err_off = mean_position_error(offline.positions[keep], pts[keep])
+        if noise_deg:
+            assert err_on <= 1.1 * err_off
+        else:
+            assert np.abs(current.positions - offline.positions).max() < 1e-6
+    bundle = om._bundle
+    assert bundle.n_refits >= 2 and bundle.n_rounds >= 5 and bundle.state is not None
+
+
+def test_online_bearing_keeps_cal_sma_when_refinement_fails(monkeypatch):
+    """BEARING-BA's guard: a refit that is not kept leaves the CAL-SMA map, with the warning."""
+    from mappers.bearing_adjustment import BearingAdjustment
+
+    real = BearingAdjustment._refine
+
+    def refuse(self, theta, seen, P0, ids):
+        real(self, theta, seen, P0, ids)
+        self.refined_ = False
+        return P0
+
+    monkeypatch.setattr(BearingAdjustment, "_refine", refuse)
+    pts, ids, rng = _world(10)
+    X = _histories(pts, "bearing", 200, rng)
+    om = OnlineMapper(ids, pts[ids], sensor="bearing")
+    first = om.update(X[:, :200])
+    cal = OnlineMapper(ids, pts[ids], sensor="bearing", method="CAL-SMA").update(X[:, :200])
+    assert first.method == "BEARING-BA" and om._bundle.state is None
+    assert np.array_equal(first.positions, cal.positions)
+    later = om.update(X[:, 200:400])  # no state: no joint round, the CAL-SMA map again
+    assert om._bundle.n_rounds == 0 and np.all(np.isfinite(later.positions))
 
 
 @pytest.mark.parametrize("sensor", ["visibility", "bearing"])
@@ -224,6 +278,15 @@ def test_bad_arguments_refused():
     for bad in (0, -2, 2.5, True, "5"):
         with pytest.raises(ValueError, match="fold_check_every"):
             OnlineMapper(ids, pts[ids], fold_check_every=bad)
+        with pytest.raises(ValueError, match="bundle_every"):
+            OnlineMapper(ids, pts[ids], bundle_every=bad)
+        with pytest.raises(ValueError, match="bundle_rounds"):
+            OnlineMapper(ids, pts[ids], bundle_rounds=bad)
+    om = OnlineMapper(ids, pts[ids], sensor="bearing")
+    om.update(_histories(pts, "bearing", 20, rng))
+    with pytest.raises(ValueError, match="unit"):  # a visibility history fed as bearing
+        om.update(np.ones((len(pts), 4)))
+    assert om.n_steps == 20
     with pytest.raises(ValueError, match="anchor_positions"):
         OnlineMapper(ids, pts[ids][:2])
     om = OnlineMapper(ids, pts[ids], sensor="visibility")
@@ -252,7 +315,7 @@ def test_online_episode_frames_and_gif(tmp_path):
     assert frames[0][1].shape == (96, 192, 3) and frames[0][1].dtype == np.uint8
     assert [r["n_steps"] for r in rows] == [10, 20, 30, 40, 50, 60]
     assert rows[-1]["mapped"] == 50 and 0 < rows[-1]["mpe"] < 1.0
-    assert final.method == "CAL-SMA"
+    assert final.method == "BEARING-BA"  # the online bearing default, as build_map's
     path = save_gif(frames, rows, tmp_path / "live.gif")
     with Image.open(path) as im:
         assert im.n_frames == 3
@@ -269,4 +332,4 @@ def test_cli_run_online(tmp_path, capsys):
     assert main(["run", "--online", "--env", "LFMDR-Bearing-v0", "--steps", "40", "--every",
                  "20", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert "online CAL-SMA" in out and (tmp_path / "live.gif").exists()
+    assert "online BEARING-BA" in out and (tmp_path / "live.gif").exists()
