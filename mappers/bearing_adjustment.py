@@ -48,7 +48,7 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval, StrOptions
 
-from mappers.align import check_anchors
+from mappers.adjustment import anchored_start, keep_if_better
 from mappers.registry import MethodSpec
 
 __all__ = ["BearingAdjustment", "BearingAdjustmentWarning", "bearing_angles"]
@@ -336,17 +336,10 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
             raise ValueError(f"BEARING-BA maps bearing histories, got a {sensor} history")
         theta, seen = bearing_angles(X, mask)
         m = theta.shape[1]
-        if anchor_ids is None or anchor_positions is None:
-            raise ValueError("BEARING-BA needs anchor_ids and anchor_positions (they fix the map's "
-                             "frame)")
-        ids, pos = check_anchors(anchor_ids, anchor_positions, m)
-        if start_positions is None:
-            P0 = self._start_map(X, mask, ids, pos)
-        else:
-            P0 = np.array(start_positions, dtype=float)
-            if P0.shape != (m, 2):
-                raise ValueError(f"start_positions must have shape ({m}, 2), got {P0.shape}")
-        P0[ids] = pos
+        ids, pos, P0 = anchored_start(
+            "BEARING-BA", anchor_ids, anchor_positions, m, start_positions,
+            lambda ids, pos: self._start_map(X, mask, ids, pos),
+        )
         self.start_ = P0.copy()
         self.embedding_ = self._refine(theta, seen, P0, ids)
         return self
@@ -398,15 +391,9 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         self.start_cost_ = float(np.sum(wb * start_rho))  # the same readings, start's poses
         self.n_rounds_ = rounds
         self.poses_ = np.where(ok[:, None], np.column_stack([C, phi]), np.nan)
-        finite = bool(np.all(np.isfinite(P[placed])))
-        self.refined_ = finite and self.cost_ <= self.start_cost_
-        if not self.refined_:
-            warnings.warn(f"the refined map explains the bearings no better than the start "
-                          f"(robust angle cost {self.cost_:.4g} against {self.start_cost_:.4g}"
-                          f"{'' if finite else ', not finite'}): the start map is kept",
-                          BearingAdjustmentWarning, stacklevel=3)
-            return P0
-        return np.where(placed[:, None], P, np.nan)
+        self.refined_, out = keep_if_better(P, P0, placed, self.cost_, self.start_cost_,
+                                            "bearings", BearingAdjustmentWarning)
+        return out
 
     def _inside(self, C):
         """Viewpoints within the map's bounding box widened by its size on every side: a pose

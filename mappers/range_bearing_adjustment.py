@@ -34,7 +34,7 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval, StrOptions
 
-from mappers.align import check_anchors
+from mappers.adjustment import anchored_start, keep_if_better
 from mappers.bearing_adjustment import (
     BearingAdjustmentWarning,
     _joint_step,
@@ -129,14 +129,8 @@ class RangeBearingAdjustment(TransformerMixin, BaseEstimator):
             seen &= np.asarray(masks["range"], dtype=bool).T
         seen &= np.isfinite(R) & (R > 0)
         m = theta.shape[1]
-        if anchor_ids is None or anchor_positions is None or start_positions is None:
-            raise ValueError("the range-bearing adjustment needs anchor_ids, anchor_positions "
-                             "and start_positions")
-        ids, pos = check_anchors(anchor_ids, anchor_positions, m)
-        P0 = np.array(start_positions, dtype=float)
-        if P0.shape != (m, 2):
-            raise ValueError(f"start_positions must have shape ({m}, 2), got {P0.shape}")
-        P0[ids] = pos
+        ids, pos, P0 = anchored_start("the range-bearing adjustment", anchor_ids,
+                                      anchor_positions, m, start_positions)
         self.start_ = P0.copy()
         self.embedding_ = self._refine(theta, R, seen, P0, ids)
         return self
@@ -177,15 +171,9 @@ class RangeBearingAdjustment(TransformerMixin, BaseEstimator):
         used = np.zeros(n, dtype=bool)
         used[t[wb > 0]] = True
         self.poses_ = np.where(used[:, None], np.column_stack([C, phi]), np.nan)
-        finite = bool(np.all(np.isfinite(P[placed])))
-        self.refined_ = finite and self.cost_ <= self.start_cost_
-        if not self.refined_:
-            warnings.warn(f"the adjusted map explains the readings no better than the start "
-                          f"(robust cost {self.cost_:.4g} against {self.start_cost_:.4g}"
-                          f"{'' if finite else ', not finite'}): the start map is kept",
-                          BearingAdjustmentWarning, stacklevel=3)
-            return P0
-        return np.where(placed[:, None], P, np.nan)
+        self.refined_, out = keep_if_better(P, P0, placed, self.cost_, self.start_cost_,
+                                            "readings", BearingAdjustmentWarning)
+        return out
 
     def _scales(self, P, C, phi, obs, wb):
         """The robust standard deviation of the angle and of the range residuals."""

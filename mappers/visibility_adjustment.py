@@ -58,7 +58,7 @@ from scipy.special import expit
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval
 
-from mappers.align import check_anchors
+from mappers.adjustment import anchored_start
 from mappers.registry import MethodSpec
 
 __all__ = ["VisibilityAdjustment", "VisibilityAdjustmentWarning", "visibility_bits"]
@@ -394,18 +394,11 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
             raise ValueError(f"VIS-BA maps visibility histories, got sensor {sensor!r}")
         seen, observed = visibility_bits(X, mask)
         m = seen.shape[1]
-        if anchor_ids is None or anchor_positions is None:
-            raise ValueError("VIS-BA needs anchor_ids and anchor_positions (they fix the gauge)")
-        ids, pos = check_anchors(anchor_ids, anchor_positions, m)
-        if start_positions is None:
-            self.start_method_ = None
-            P0 = self._start_map(np.asarray(X, dtype=float), mask, ids, pos, timeline)
-        else:
-            self.start_method_ = "given"
-            P0 = np.array(start_positions, dtype=float)
-            if P0.shape != (m, 2):
-                raise ValueError(f"start_positions must have shape ({m}, 2), got {P0.shape}")
-        P0[ids] = pos
+        self.start_method_ = None if start_positions is None else "given"
+        ids, pos, P0 = anchored_start(
+            "VIS-BA", anchor_ids, anchor_positions, m, start_positions,
+            lambda ids, pos: self._start_map(np.asarray(X, dtype=float), mask, ids, pos, timeline),
+        )
         self.start_ = P0.copy()
         self.embedding_ = self._refine(seen, observed, P0, ids)
         return self
