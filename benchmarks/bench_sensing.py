@@ -60,12 +60,15 @@ FIELDS = ("panel", "sensor", "setting", "value", "env_kwargs", "run", "method", 
 
 def _methods(sensor: str, masked: bool, chosen: list[str] | None) -> list[str]:
     """The methods that map this history: every masked-capable one (they take complete
-    histories too) and, for a complete history, the sensor's default for complete ones."""
+    histories too) and, for a complete history, CAL-SMA (the localisation-free pipeline for
+    complete histories) and the sensor's default for complete ones, if another."""
     from mappers import DEFAULT_METHODS, methods_for
 
     fits = list(methods_for(sensor, True))
     if not masked:
-        fits.insert(0, DEFAULT_METHODS[(sensor, False)])
+        for label in dict.fromkeys(("CAL-SMA", DEFAULT_METHODS[(sensor, False)])):
+            if label not in fits:
+                fits.insert(0, label)
     if chosen is None:
         return [m for m in fits if m not in SLOW]
     return [m for m in fits if m.lower() in {c.lower() for c in chosen}]
@@ -133,7 +136,8 @@ def _plot(rows: list[dict[str, Any]], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, grid = plt.subplots(2, 3, figsize=(13.5, 7.6), sharey=True)
+    # each row its own scale: bearing maps reach 1e-9 m (BEARING-BA), visibility maps 0.03 m
+    fig, grid = plt.subplots(2, 3, figsize=(13.5, 7.6), sharey="row")
     axes = grid.ravel()
     axes[-1].set_axis_off()
     for ax, (panel, (_, _, values, _)) in zip(axes, PANELS.items(), strict=False):
