@@ -29,13 +29,14 @@ from lfmdr_gym.experiments.episodes import derived_seed, make_env
 STEPS = (250, 500, 1000, 2000)
 
 
-def _mpe(hist, n: int) -> float:
-    """MPE of the map of the first n steps; NaN when no map can be made (fewer than 3 anchors
-    sensed yet: a policy that has not been near three corners has no map to score)."""
+def _mpe(hist, n: int, method: str | None = None) -> float:
+    """MPE of the map of the first n steps (``method``: None for the default); NaN when no map
+    can be made (fewer than 3 anchors sensed yet: a policy that has not been near three corners
+    has no map to score)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
-            m = mappers.build_map(hist.head(n), hist.anchor_ids, hist.anchor_positions)
+            m = mappers.build_map(hist.head(n), hist.anchor_ids, hist.anchor_positions, method)
         except ValueError as exc:
             if "anchors remain" not in str(exc):
                 raise
@@ -46,9 +47,10 @@ def _mpe(hist, n: int) -> float:
 
 
 def run(sensor: str, runs: int, seed: int, policies: list[str] | None = None,
-        kwargs: dict[str, dict] | None = None) -> dict[str, np.ndarray]:
+        kwargs: dict[str, dict] | None = None, method: str | None = None) -> dict[str, np.ndarray]:
     """Per policy, an array (runs, len(STEPS)) of MPEs. ``kwargs``: per policy, factory keywords
-    (e.g. ``{"rl": {"model": "m.npz"}}`` to score a model of one's own)."""
+    (e.g. ``{"rl": {"model": "m.npz"}}`` to score a model of one's own); ``method``: map with
+    this method instead of the default."""
     names = list(POLICIES) if policies is None else policies
     unknown = [n for n in names if n not in POLICIES]
     if unknown:
@@ -64,7 +66,7 @@ def run(sensor: str, runs: int, seed: int, policies: list[str] | None = None,
             finally:
                 env.close()
             with threadpool_limits(limits=1):
-                out[name].append([_mpe(hist, n) for n in STEPS])
+                out[name].append([_mpe(hist, n, method) for n in STEPS])
     return {name: np.array(rows) for name, rows in out.items()}
 
 
@@ -130,6 +132,8 @@ def main() -> None:
     ap.add_argument("--policies", nargs="+", default=None, help="default: every registered one")
     ap.add_argument("--rl-model", default=None, metavar="FILE.npz",
                     help="score this model as the 'rl' policy (default: the shipped one)")
+    ap.add_argument("--method", default=None,
+                    help="map with this method (a label of mappers.METHODS) instead of the default")
     ap.add_argument("--plot", default=None, metavar="FILE.png")
     ap.add_argument("--csv", default=None, metavar="FILE.csv", help="write the per-run MPEs")
     ap.add_argument("--load", nargs="+", default=None, metavar="FILE.csv",
@@ -139,7 +143,7 @@ def main() -> None:
     if args.load:
         results = load_csv(args.load)
     else:
-        results = {sensor: run(sensor, args.runs, args.seed, args.policies, kwargs)
+        results = {sensor: run(sensor, args.runs, args.seed, args.policies, kwargs, args.method)
                    for sensor in args.sensors}
     if args.csv:
         save_csv(results, args.csv, args.seed)
