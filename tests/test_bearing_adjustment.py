@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from synthetic_camera import camera_bearings
 from threadpoolctl import threadpool_limits
 
 import mappers.bearing_adjustment as ba
@@ -27,13 +28,7 @@ def _camera(fov_deg=360.0, max_range=None, n_obj=24, n_steps=600, noise_deg=0.0,
     corners = np.array([(-1.25, -1.25), (1.25, -1.25), (1.25, 1.25), (-1.25, 1.25)])
     P[:4] = corners
     poses = np.column_stack([rng.uniform(-1.1, 1.1, (n_steps, 2)), rng.uniform(-np.pi, np.pi, n_steps)])
-    d = P[:, None, :] - poses[None, :, :2]
-    b = np.angle(np.exp(1j * (np.arctan2(d[..., 1], d[..., 0]) - poses[None, :, 2])))
-    seen = np.abs(b) <= np.radians(fov_deg) / 2
-    if max_range is not None:
-        seen &= np.hypot(d[..., 0], d[..., 1]) <= max_range
-    b = b + np.radians(noise_deg) * rng.standard_normal(b.shape)
-    X = (np.stack([np.cos(b), np.sin(b)], -1) * seen[..., None]).reshape(n_obj, -1)
+    X, seen = camera_bearings(P, poses, fov_deg, max_range, noise_deg, rng)
     mask = None if seen.all() else np.repeat(seen, 2, axis=1)
     return P, X, mask, np.arange(4)
 

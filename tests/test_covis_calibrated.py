@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from synthetic_camera import camera_bearings
 from threadpoolctl import threadpool_limits
 
 from mappers import build_map
@@ -28,13 +29,7 @@ def _camera(fov_deg, max_range=None, n_obj=30, n_steps=3000, noise_deg=1.0, seed
     P = rng.uniform(-1.2, 1.2, size=(n_obj, 2))
     poses = np.column_stack([rng.uniform(-1.25, 1.25, (n_steps, 2)),
                              rng.uniform(-np.pi, np.pi, n_steps)])
-    d = P[:, None, :] - poses[None, :, :2]
-    b = np.angle(np.exp(1j * (np.arctan2(d[..., 1], d[..., 0]) - poses[None, :, 2])))
-    seen = np.abs(b) <= np.radians(fov_deg) / 2
-    if max_range is not None:
-        seen &= np.hypot(d[..., 0], d[..., 1]) <= max_range
-    b = b + np.radians(noise_deg) * rng.standard_normal(b.shape)
-    X = (np.stack([np.cos(b), np.sin(b)], -1) * seen[..., None]).reshape(n_obj, -1)
+    X, seen = camera_bearings(P, poses, fov_deg, max_range, noise_deg, rng)
     anchors = np.array([int(np.argmin(np.linalg.norm(P - c, axis=1)))
                         for c in [(-1.2, -1.2), (1.2, -1.2), (1.2, 1.2), (-1.2, 1.2)]])
     return P, X, np.repeat(seen, 2, axis=1), anchors
