@@ -344,13 +344,12 @@ def _cmd_run_online(args: argparse.Namespace) -> int:
     from lfmdr_gym.experiments.params import user_params
     from lfmdr_gym.experiments.store import ensure_writable_dir
     from mappers import resolve_method
-    from mappers.online import online_default
 
     sensor = _sensor_of(args.env)
     points = set(checkpoints_for(args.steps, args.every, sensor))
     out = ensure_writable_dir(args.out)
     env_kwargs, masked = check_env_kwargs(sensor, parse_env_kwargs(args.env_kwargs))
-    label = resolve_method(args.method or online_default(sensor, masked), sensor, masked=masked).label
+    label = resolve_method(args.method, sensor, masked=masked).label
     frames, rows, _ = online_episode(args.env, args.steps, seed=args.seed, policy=args.policy,
                                      method=args.method, params=user_params(label, args.param),
                                      frame_every=max(args.steps // 50, 1), env_kwargs=env_kwargs)

@@ -78,20 +78,13 @@ from mappers.registry import MappingError, resolve_method
 from mappers.sensors import COLUMNS_PER_STEP, check_sensor, infer_sensor
 from mappers.smacof import euclidean_distance_matrix
 
-__all__ = ["OnlineMapper", "gram_dissimilarity", "online_default"]
+__all__ = ["OnlineMapper", "gram_dissimilarity"]
 
 _INCREMENTAL = "CAL-SMA"
 _BUNDLE = "BEARING-BA"  # updated incrementally from the incremental CAL-SMA map (online_bearing)
 # a warm map that looks folded is refitted from scratch once the steps have grown by this factor
 # since the last full fit (at most refit_growth), not at every update while it still looks folded
 _FOLD_REFIT_GROWTH = 1.5
-
-
-def online_default(sensor: str, masked: bool) -> str | None:
-    """The label :class:`OnlineMapper` uses when none is given, None where it is ``build_map``'s
-    default. It is ``build_map``'s default everywhere: BEARING-BA for bearing histories (updated
-    incrementally on complete ones, :mod:`mappers.online_bearing`)."""
-    return None
 
 
 def gram_dissimilarity(gram: np.ndarray, n_columns: int, kind: str) -> np.ndarray:
@@ -392,8 +385,7 @@ class OnlineMapper:
 
     def _resolve(self) -> None:
         """Choose the method once the sensor is known; replay the batches held until then."""
-        spec = resolve_method(self.method or online_default(self.sensor, bool(self._masked)),
-                              self.sensor, masked=self._masked)
+        spec = resolve_method(self.method, self.sensor, masked=self._masked)
         self._merged = spec.resolved_params(self.params)
         if "random_state" in spec.parameters and "random_state" not in self.params:
             self._merged["random_state"] = self.random_state
