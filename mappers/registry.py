@@ -177,6 +177,7 @@ def _load_builtins() -> None:
         range_bearing,
         scalable,
         unfolding,
+        view_adjustment,
         visibility_adjustment,
         visibility_bearing,
     )
@@ -184,7 +185,7 @@ def _load_builtins() -> None:
     for spec in (*methods.SPECS, calibrated.SPEC, unfolding.SPEC, scalable.SPEC, *masked.SPECS,
                  ensemble.SPEC, *covis_calibrated.SPECS, covis_sparse.SPEC, dropout_blend.SPEC,
                  range_bearing.SPEC, visibility_bearing.SPEC, bearing_adjustment.SPEC,
-                 visibility_adjustment.SPEC):
+                 visibility_adjustment.SPEC, view_adjustment.SPEC):
         _METHODS.setdefault(spec.label, spec)
 
 

@@ -1,0 +1,201 @@
+"""VIEW-BA, the view-cone adjustment of masked visibility maps (mappers/view_adjustment.py and
+its compiled loops, mappers/view_kernels.py)."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from threadpoolctl import threadpool_limits
+
+import lfmdr_gym  # noqa: F401 - registers the envs
+from lfmdr_gym.policies import RandomWalkPolicy
+from lfmdr_gym.recording import collect
+from mappers import build_map, mean_position_error, view_kernels
+from mappers.view_adjustment import (
+    ViewAdjustment,
+    ViewAdjustmentWarning,
+    estimate_fov,
+    view_cone_score,
+)
+
+ANCHORS = np.array([0, 1, 2, 3])
+
+
+@pytest.fixture(autouse=True)
+def _one_blas_thread():
+    with threadpool_limits(limits=1):
+        yield
+
+
+def _camera(fov_deg: float, n_steps: int = 600, m: int = 30, seed: int = 0, radius: float = 0.6):
+    """Objects in a 2.5 m square (the anchors at its corners) seen from random poses inside it:
+    ``(objects (M, 2), poses (N, 3), X (M, N) visibility bits, mask (M, N))``; observed =
+    inside the view cone at any distance, visible = observed and nearer than ``radius``."""
+    rng = np.random.default_rng(seed)
+    P = rng.uniform(-1.25, 1.25, (m, 2))
+    P[:4] = [[-1.2, -1.2], [1.2, -1.2], [1.2, 1.2], [-1.2, 1.2]]
+    C = np.column_stack([rng.uniform(-1.1, 1.1, (n_steps, 2)),
+                         rng.uniform(-math.pi, math.pi, n_steps)])
+    rel = P[None] - C[:, None, :2]
+    off = np.angle(np.exp(1j * (np.arctan2(rel[..., 1], rel[..., 0]) - C[:, 2:3])))
+    mask = np.abs(off) <= math.radians(fov_deg) / 2
+    X = (mask & (np.hypot(rel[..., 0], rel[..., 1]) < radius)).astype(float)
+    return P, C, X.T, mask.T
+
+
+def _mpe(Q, P):
+    keep = np.setdiff1d(np.arange(len(P)), ANCHORS)
+    return mean_position_error(Q[keep], P[keep])
+
+
+def test_the_compiled_blocks_hold_the_gradient_of_the_compiled_loss():
+    P, C, X, mask = _camera(90, n_steps=40, m=8, seed=1)
+    rng = np.random.default_rng(2)
+    P = P + rng.normal(0, 0.05, P.shape)
+    C = C + rng.normal(0, 0.05, C.shape)
+    obs, seen = np.ascontiguousarray(mask.T), np.ascontiguousarray((X.T > 0.5) & mask.T)
+    free = np.array([-1, -1, -1, -1, 0, 1, 2, 3], dtype=np.int64)
+    args = (math.cos(math.radians(45)), 0.6, 0.2, 0.1, 0.1)  # soft, for the differences
+
+    def cost(P, C):
+        return view_kernels.cone_cost(P, C, obs, seen, *args)
+
+    U, g, V, h, W = (np.zeros((40, 3, 3)), np.zeros((40, 3)), np.zeros((4, 2, 2)),
+                     np.zeros((4, 2)), np.zeros((40, 3, 8)))
+    loss, _ = view_kernels.cone_blocks(P, C, obs, seen, free, *args, U, V, W, g, h)
+    assert loss == pytest.approx(cost(P, C))
+    eps = 1e-6
+    for t, k in [(0, 0), (5, 1), (17, 2), (39, 2)]:
+        dC = np.zeros_like(C)
+        dC[t, k] = eps
+        assert g[t, k] == pytest.approx((cost(P, C + dC) - cost(P, C - dC)) / (2 * eps),
+                                        rel=1e-4, abs=1e-6)
+    for f, j in enumerate(range(4, 8)):
+        for k in range(2):
+            dP = np.zeros_like(P)
+            dP[j, k] = eps
+            assert h[f, k] == pytest.approx((cost(P + dP, C) - cost(P - dP, C)) / (2 * eps),
+                                            rel=1e-4, abs=1e-6)
+    assert np.allclose(U, U.transpose(0, 2, 1))
+    assert np.all(np.linalg.eigvalsh(U) > -1e-9) and np.all(np.linalg.eigvalsh(V) > -1e-9)
+
+
+def test_the_true_map_explains_the_view_better_than_wrong_ones():
+    P, _, _, mask = _camera(90, m=40)
+    obs, half = mask.T, math.radians(45)
+    swapped = P.copy()
+    swapped[[4, 5, 6, 7]] = P[[8, 9, 10, 11]]
+    swapped[[8, 9, 10, 11]] = P[[4, 5, 6, 7]]
+    true = view_cone_score(P, obs, half)
+    assert true > view_cone_score(swapped, obs, half)
+    folded = P.copy()  # the right half mirrored onto itself (a mirror of all of it would tie)
+    folded[P[:, 0] > 0, 1] *= -1.0
+    assert true > view_cone_score(folded, obs, half)
+    assert true > view_cone_score(P + np.random.default_rng(1).normal(0, 0.1, P.shape), obs,
+                                  half)
+    halves = np.radians([20.0, 45.0, 70.0])
+    assert np.allclose(view_cone_score(P, obs, halves),
+                       [view_cone_score(P, obs, a) for a in halves])
+
+
+@pytest.mark.parametrize("fov", [60.0, 90.0, 150.0])
+def test_the_view_width_is_read_from_the_observed_sets(fov):
+    P, _, _, mask = _camera(fov, n_steps=1600, m=40)
+    assert abs(estimate_fov(P, mask.T) - fov) <= 15.0
+
+
+def test_view_ba_moves_a_perturbed_map_towards_the_truth_and_finds_the_viewpoints():
+    P, C, X, mask = _camera(90, n_steps=800, m=30, seed=3)
+    start = P + np.random.default_rng(4).normal(0, 0.08, P.shape)
+    va = ViewAdjustment(fov_deg=90)
+    Q = va.fit_transform(X, mask=mask, anchor_ids=ANCHORS, anchor_positions=P[ANCHORS],
+                         start_positions=start)
+    assert va.refined_ and va.loss_ < va.start_loss_ and va.start_method_ == "given"
+    assert np.array_equal(Q[ANCHORS], P[ANCHORS])
+    assert _mpe(Q, P) < 0.5 * _mpe(start, P)
+    err = np.hypot(*(va.poses_[:, :2] - C[:, :2]).T)
+    assert np.nanmedian(err) < 0.3  # 30 objects pin a viewpoint loosely (random: ~1 m)
+    assert 0.4 < va.radius_ < 0.8  # the bits' radius, 0.6
+
+
+def test_a_wide_view_keeps_the_start_map():
+    P, _, X, mask = _camera(90, n_steps=200, seed=5)
+    start = P + 0.01
+    va = ViewAdjustment(fov_deg=200)
+    with pytest.warns(ViewAdjustmentWarning, match="200-degree view"):
+        Q = va.fit_transform(X, mask=mask, anchor_ids=ANCHORS, anchor_positions=P[ANCHORS],
+                             start_positions=start)
+    start[ANCHORS] = P[ANCHORS]
+    assert not va.refined_ and np.array_equal(Q, start)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(mask=None), "needs the mask of a limited view"),
+    (dict(all_true=True), "needs the mask of a limited view"),
+    (dict(sensor="bearing"), "maps visibility histories"),
+    (dict(short_mask=True), "mask must have the history's shape"),
+    (dict(fov_deg=0), "fov_deg"),
+    (dict(fov_deg=360), "fov_deg"),
+    (dict(start="view-ba"), "another method than 'VIEW-BA'"),
+    (dict(no_anchors=True), "needs anchor_ids"),
+])
+def test_bad_input_is_refused_with_its_name(kwargs, match):
+    P, _, X, mask = _camera(90, n_steps=50)
+    if kwargs.pop("all_true", False):
+        kwargs["mask"] = np.ones_like(mask)
+    if kwargs.pop("short_mask", False):
+        kwargs["mask"] = mask[:, :-1]
+    fit = dict(mask=mask, sensor="visibility", anchor_ids=ANCHORS, anchor_positions=P[ANCHORS])
+    if kwargs.pop("no_anchors", False):
+        fit.update(anchor_ids=None, anchor_positions=None)
+    init = {k: kwargs.pop(k) for k in ("fov_deg", "start") if k in kwargs}
+    fit.update(kwargs)
+    with pytest.raises(ValueError, match=match):
+        ViewAdjustment(**init).fit(X, **fit)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(positions=np.zeros((4, 3))), r"positions must have shape \(M, 2\)"),
+    (dict(observed=np.zeros((10, 5), bool)), r"observed must have shape \(N, 4\)"),
+    (dict(half_angle=0.0), "half_angle must be in"),
+    (dict(half_angle=4.0), "half_angle must be in"),
+    (dict(grid=1), "need grid >= 2"),
+    (dict(positions=np.full((4, 2), np.nan)), "at least 2 placed objects"),
+])
+def test_bad_input_to_the_score_is_refused(kwargs, match):
+    args = dict(positions=np.eye(4, 2), observed=np.ones((10, 4), bool), half_angle=0.5)
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=match):
+        view_cone_score(**args)
+
+
+def test_view_ba_maps_an_env_history_through_build_map():
+    env = gym.make("LFMDR-Visibility-v0", max_episode_steps=1000, fov_deg=90)
+    h = collect(env, RandomWalkPolicy.for_env(env), 1000, seed=5)
+    m = build_map(h, h.anchor_ids, h.anchor_positions, "VIEW-BA")
+    assert m.method == "VIEW-BA"
+    keep = np.setdiff1d(np.arange(h.n_objects), h.anchor_ids)
+    start = build_map(h, h.anchor_ids, h.anchor_positions, "dropout-blend")
+    err = mean_position_error(m.positions[keep], h.object_positions[keep])
+    before = mean_position_error(start.positions[keep], h.object_positions[keep])
+    assert err < 0.8 * before and err < 0.07  # 0.053 against dropout-blend's 0.090
+
+
+def test_a_mask_that_is_not_a_view_cone_keeps_the_start_map():
+    """A 360-degree view with a range limit: the mask is a disc around the viewpoint, which no
+    cone explains; the adjustment says so and keeps its start."""
+    P, C, X, _ = _camera(90, n_steps=400, seed=6)
+    rel = P[None] - C[:, None, :2]
+    mask = (np.hypot(rel[..., 0], rel[..., 1]) < 1.0).T
+    X = X * 0 + (mask & (np.hypot(rel[..., 0], rel[..., 1]) < 0.6).T)
+    start = P + np.random.default_rng(7).normal(0, 0.03, P.shape)
+    va = ViewAdjustment(fov_deg=90)
+    with pytest.warns(ViewAdjustmentWarning, match="do not look like a view cone"):
+        Q = va.fit_transform(X, mask=mask, anchor_ids=ANCHORS, anchor_positions=P[ANCHORS],
+                             start_positions=start)
+    assert not va.refined_ and va.start_loss_ > va.max_start_loss
+    start[ANCHORS] = P[ANCHORS]
+    assert np.array_equal(Q, start)
