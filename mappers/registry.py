@@ -184,7 +184,7 @@ def _load_builtins() -> None:
     for spec in (*methods.SPECS, calibrated.SPEC, unfolding.SPEC, scalable.SPEC, *masked.SPECS,
                  ensemble.SPEC, *covis_calibrated.SPECS, covis_sparse.SPEC, dropout_blend.SPEC,
                  range_bearing.SPEC, visibility_bearing.SPEC, bearing_adjustment.SPEC,
-                 visibility_adjustment.SPEC):
+                 *visibility_adjustment.SPECS):
         _METHODS.setdefault(spec.label, spec)
 
 
