@@ -241,7 +241,7 @@ and the complete history's flicker rate (:func:`mappers.flicker.flicker_rate`) i
 perfect sensing does not produce. Perfect histories stay on :data:`DEFAULT_METHODS`. Visibility:
 VIS-BA-WALK (:mod:`mappers.visibility_adjustment` with the walk's continuity prior, started from
 CAL-SMA; it replaced ``dropout-blend``: at ``miss_rate = 0.5`` on the 25 fresh layouts 0.049 m
-against 0.069, 0.75 s per map against 0.46). It assumes the steps are ordered like a walk's,
+against 0.069, 0.70 s per map against 0.43). It assumes the steps are ordered like a walk's,
 which the routing checks (:func:`mappers.flicker.persistence`)."""
 
 SCALABLE_DEFAULTS: dict[tuple[str, bool], str] = {

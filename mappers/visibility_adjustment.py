@@ -2,7 +2,8 @@
 
 The paper's methods, and the other visibility mappers here, never estimate where the robot was.
 This one does: it starts from the map the visibility default draws (``start``: CAL-SMA for a
-complete history, ``dropout-blend`` for a flickering or masked one, as ``build_map`` picks it)
+complete history, ``dropout-blend`` for a masked one; for a flickering one, whose default is
+VIS-BA-WALK, the complete default CAL-SMA, and so for any history whose default is a VIS-BA)
 and refines it by treating each step's viewpoint as a latent position. A visibility bit is read
 as a noisy range threshold: at distance ``d`` between viewpoint and object
 
@@ -50,7 +51,7 @@ round's move of the objects by that factor (over-relaxed EM, from the second rou
 ``model_rounds`` refits the sensor model and the walk's width in the first rounds only. At
 ``miss_rate = 0.5`` (N = 2000, tuning layouts 100..119) the start CAL-SMA's 0.075 m becomes
 0.045 (independent steps: 0.057; continuity alone 0.051, alignment alone 0.052), on the 25
-fresh layouts 0.049 (largest run 0.068) against ``dropout-blend``'s 0.069, in 0.75 s per map
+fresh layouts 0.049 (largest run 0.068) against ``dropout-blend``'s 0.069, in 0.70 s per map
 (``docs/imperfect-sensing.md``).
 
 Guards: an object seen from fewer than ``min_views`` usable steps keeps its start position (its
@@ -364,7 +365,8 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
 
     Parameters:
         start: label of the method that draws the start map (None: the visibility default
-            ``build_map`` picks for the history).
+            ``build_map`` picks for the history; when that is a VIS-BA, CAL-SMA for a complete
+            history and ``dropout-blend`` for a masked one).
         max_rounds: EM rounds (E-step, objects, model).
         inner_iters: Fisher-scoring iterations of the objects per round.
         tol: stop when no object moves more than this [m] in a round.
@@ -445,7 +447,7 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
         if label is None:  # the default's choice; were it a VIS-BA, the default it replaced
             label = default_method(X, sensor="visibility", mask=mask, timeline=timeline)
             if label in ("VIS-BA", "VIS-BA-WALK"):
-                label = "CAL-SMA" if mask is None and label == "VIS-BA" else "dropout-blend"
+                label = "CAL-SMA" if mask is None else "dropout-blend"
         m = build_map(X, ids, pos, label, sensor="visibility", mask=mask, timeline=timeline,
                       random_state=self.random_state)
         for note in m.warnings:
@@ -641,15 +643,15 @@ SPEC = MethodSpec(
 WALK_SPEC = MethodSpec(
     "VIS-BA-WALK",
     _vis_ba,
-    {"start": "CAL-SMA", "continuity": True, "align": True, "overrelax": 1.0, "grid_cells": 4,
-     "prior_iters": 1, "model_rounds": 2},
+    {"continuity": True, "align": True, "overrelax": 1.0, "grid_cells": 4, "prior_iters": 1,
+     "model_rounds": 2},
     {"max_rounds": [3, 5, 8], "grid_cells": [4, 6]},
     "VIS-BA with the walk's continuity prior (the steps' viewpoints an HMM: consecutive steps "
-    "close together), started from CAL-SMA: the default for flickering visibility histories",
+    "close together): the default for flickering visibility histories",
     uses_anchors=True,
     sensors=("visibility",),
     normalize=False,
-    histories=("complete",),
+    histories=("complete", "masked"),
     uses_timeline=True,
 )
 

@@ -159,3 +159,17 @@ def test_bad_continuity_parameters_are_refused():
         VisibilityAdjustment(continuity="yes").fit(X, **kw)
     with pytest.raises(ValueError, match="align"):
         VisibilityAdjustment(align=1.0).fit(X, **kw)
+
+
+def test_vis_ba_walk_is_registered_and_maps_a_walk():
+    from mappers import build_map
+    from mappers.registry import methods_for
+
+    assert "VIS-BA-WALK" in methods_for("visibility", masked=False)
+    assert "VIS-BA-WALK" in methods_for("visibility", masked=True)
+    assert "VIS-BA-WALK" not in methods_for("bearing")
+    P, X, ids, _ = _walk(n_steps=800)
+    m = build_map(X, ids, P[ids], "VIS-BA-WALK", sensor="visibility")
+    cal = build_map(X, ids, P[ids], "CAL-SMA", sensor="visibility")
+    assert m.method == "VIS-BA-WALK" and m.params["continuity"] and np.all(np.isfinite(m.positions))
+    assert _error(m.positions, P, ids) < _error(cal.positions, P, ids)
