@@ -370,7 +370,8 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
         max_rounds: EM rounds (E-step, objects, model).
         inner_iters: Fisher-scoring iterations of the objects per round.
         tol: stop when no object moves more than this [m] in a round.
-        min_step_objects: a step that saw fewer objects is left out (its viewpoint is free).
+        min_step_objects: a step that saw fewer objects is left out (its viewpoint is free);
+            with ``continuity`` every step takes part (it is linked to its neighbours).
         min_views: an object seen from fewer usable steps keeps its start position.
         grid_cells: candidate viewpoints per visibility radius (grid spacing ``R / grid_cells``).
         prior_iters: E-steps on the start map before the refinement (model and prior).
@@ -378,7 +379,8 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
         prior_blur: width [cells] of the Gaussian blur of the learnt viewpoint prior.
         continuity: the steps' viewpoints are a walk (a hidden Markov model over the cells,
             consecutive steps linked by the timeline) instead of independent.
-        step_sigma: with ``continuity``, the walk's width per axis [m]; None: fitted by EM.
+        step_sigma: with ``continuity``, the walk's width per axis [m]; None: fitted by EM
+            (given without ``continuity``: ValueError).
         align: each round, move the free objects by the mean offset between the anchors' known
             positions and their positions fitted to the current viewpoints (anchors seen from at
             least ``min_views`` steps, two or more).
@@ -462,6 +464,9 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
         the anchors (rows of X) held at their positions. ``start_positions`` ((M, 2), NaN rows:
         not placed) replaces the start method's map."""
         self._validate_params()
+        if self.step_sigma is not None and not self.continuity:
+            raise ValueError(f"step_sigma={self.step_sigma!r} is the width of the walk's steps, "
+                             "which only continuity=True models")
         if sensor != "visibility":
             raise ValueError(f"VIS-BA maps visibility histories, got sensor {sensor!r}")
         seen, observed = visibility_bits(X, mask)

@@ -153,6 +153,8 @@ def test_bad_continuity_parameters_are_refused():
         VisibilityAdjustment(continuity=True, step_sigma=0.0).fit(X, **kw)
     with pytest.raises(ValueError, match="step_sigma"):
         VisibilityAdjustment(continuity=True, step_sigma="wide").fit(X, **kw)
+    with pytest.raises(ValueError, match="only continuity=True"):
+        VisibilityAdjustment(step_sigma=0.2).fit(X, **kw)
     with pytest.raises(ValueError, match="overrelax"):
         VisibilityAdjustment(overrelax=1.5).fit(X, **kw)
     with pytest.raises(ValueError, match="continuity"):
