@@ -394,7 +394,8 @@ def _dropout_default(X, mask, sensor, timeline, notes: list[str]) -> str | None:
         return None
     notes.append(f"the history flickers (visible at the steps before and after, not at the step: "
                  f"{rate:.0%} of such steps, above {FLICKER_THRESHOLD:.0%}): a sensor with "
-                 f"dropouts, mapped with {label!r}")
+                 f"dropouts, mapped with {label!r} (which assumes the steps are ordered like a "
+                 "walk's, consecutive viewpoints close together)")
     return label
 
 

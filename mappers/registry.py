@@ -4,7 +4,8 @@ Every method — the paper's ten (:mod:`mappers.methods`), CAL-SMA (:mod:`mapper
 UNFOLD (:mod:`mappers.unfolding`), the methods for masked histories (:mod:`mappers.masked`,
 :mod:`mappers.ensemble`, :mod:`mappers.covis_calibrated`), the bearing default BEARING-BA
 (:mod:`mappers.bearing_adjustment`), VIS-BA (:mod:`mappers.visibility_adjustment`: a visibility
-map refined by estimating the viewpoints; a choice, not a default) and any a user registers —
+map refined by estimating the viewpoints; with the walk's continuity prior, VIS-BA-WALK, the
+default for flickering visibility histories) and any a user registers —
 is a :class:`MethodSpec` in :data:`METHODS`. A spec says what the method accepts (which sensors
 or fused sets of sensors, complete and/or masked histories); the pipeline, the protocol and the
 command line choose and check methods by the spec alone (:func:`resolve_method`). Fused methods
@@ -185,7 +186,7 @@ def _load_builtins() -> None:
     for spec in (*methods.SPECS, calibrated.SPEC, unfolding.SPEC, scalable.SPEC, *masked.SPECS,
                  ensemble.SPEC, *covis_calibrated.SPECS, covis_sparse.SPEC, dropout_blend.SPEC,
                  range_bearing.SPEC, visibility_bearing.SPEC, bearing_adjustment.SPEC,
-                 visibility_adjustment.SPEC, view_adjustment.SPEC):
+                 *visibility_adjustment.SPECS, view_adjustment.SPEC):
         _METHODS.setdefault(spec.label, spec)
 
 
@@ -233,12 +234,16 @@ residuals, :mod:`mappers.range_bearing_adjustment`), VB-SMA ``refine=True`` (BEA
 bearing part); ``refine=None`` / ``refine=False`` give the maps before."""
 
 DROPOUT_DEFAULTS: dict[str, str] = {
-    "visibility": "dropout-blend",
+    "visibility": "VIS-BA-WALK",
 }
 """sensor -> the label ``build_map`` uses instead of the complete default when no method is given
 and the complete history's flicker rate (:func:`mappers.flicker.flicker_rate`) is above
 :data:`mappers.flicker.FLICKER_THRESHOLD`: the history has dropouts (a camera's misses), which
-perfect sensing does not produce. Perfect histories stay on :data:`DEFAULT_METHODS`."""
+perfect sensing does not produce. Perfect histories stay on :data:`DEFAULT_METHODS`. Visibility:
+VIS-BA-WALK (:mod:`mappers.visibility_adjustment` with the walk's continuity prior, started from
+CAL-SMA; it replaced ``dropout-blend``: at ``miss_rate = 0.5`` on the 25 fresh layouts 0.049 m
+against 0.069, 0.70 s per map against 0.43). It assumes the steps are ordered like a walk's,
+which the routing checks (:func:`mappers.flicker.persistence`)."""
 
 SCALABLE_DEFAULTS: dict[tuple[str, bool], str] = {
     ("visibility", False): "CAL-SMA-SPARSE",
