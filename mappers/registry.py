@@ -5,7 +5,9 @@ UNFOLD (:mod:`mappers.unfolding`), the methods for masked histories (:mod:`mappe
 :mod:`mappers.ensemble`, :mod:`mappers.covis_calibrated`), the bearing default BEARING-BA
 (:mod:`mappers.bearing_adjustment`), VIS-BA (:mod:`mappers.visibility_adjustment`: a visibility
 map refined by estimating the viewpoints; with the walk's continuity prior, VIS-BA-WALK, the
-default for flickering visibility histories) and any a user registers —
+default for flickering visibility histories), the masked visibility default VIEW-BA
+(:mod:`mappers.view_adjustment`: the viewpoints and headings of a limited view) and any a user
+registers —
 is a :class:`MethodSpec` in :data:`METHODS`. A spec says what the method accepts (which sensors
 or fused sets of sensors, complete and/or masked histories); the pipeline, the protocol and the
 command line choose and check methods by the spec alone (:func:`resolve_method`). Fused methods
@@ -216,7 +218,7 @@ DEFAULT_METHODS: dict[tuple[str | frozenset[str], bool], str] = {
     ("visibility", False): "CAL-SMA",
     ("bearing", False): "BEARING-BA",
     ("range", False): "UNFOLD",
-    ("visibility", True): "dropout-blend",
+    ("visibility", True): "VIEW-BA",
     ("bearing", True): "BEARING-BA",
     ("range", True): "range-quantile",
     (frozenset({"range", "bearing"}), False): "LOC-SMA",
@@ -228,7 +230,10 @@ sensors is keyed by its frozenset. The measured figures behind each choice are i
 and ``benchmarks/``. Bearing histories, complete or masked, go to BEARING-BA, which refines the
 map of the bearing default before it (CAL-SMA complete, ``covis-auto`` masked) by estimating the
 viewpoints; :class:`mappers.online.OnlineMapper` updates it incrementally on complete bearing
-histories (:mod:`mappers.online_bearing`). The fused defaults end with a bundle adjustment too,
+histories (:mod:`mappers.online_bearing`). Masked visibility histories go to VIEW-BA
+(:mod:`mappers.view_adjustment`), which refines ``dropout-blend``'s map by estimating each step's
+viewpoint and heading from the observed sets of a limited view, and keeps that map when the mask
+is not a view cone or the view is wider than 150 degrees. The fused defaults end with a bundle adjustment too,
 as a parameter of the same labels: LOC-SMA ``refine="range-bearing"`` (range and angle
 residuals, :mod:`mappers.range_bearing_adjustment`), VB-SMA ``refine=True`` (BEARING-BA on the
 bearing part); ``refine=None`` / ``refine=False`` give the maps before."""

@@ -446,9 +446,9 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
         if self.start is not None and self.start.strip().upper() in ("VIS-BA", "VIS-BA-WALK"):
             raise ValueError(f"start must name another method than VIS-BA, got {self.start!r}")
         label = self.start
-        if label is None:  # the default's choice; were it a VIS-BA, the default it replaced
+        if label is None:  # the default's choice; were it an adjustment, the default before
             label = default_method(X, sensor="visibility", mask=mask, timeline=timeline)
-            if label in ("VIS-BA", "VIS-BA-WALK"):
+            if label in ("VIS-BA", "VIS-BA-WALK", "VIEW-BA"):
                 label = "CAL-SMA" if mask is None else "dropout-blend"
         m = build_map(X, ids, pos, label, sensor="visibility", mask=mask, timeline=timeline,
                       random_state=self.random_state)

@@ -112,7 +112,7 @@ def test_perfect_histories_keep_the_complete_default_exactly():
 def test_default_method_names_what_build_map_picks():
     assert default_method(_episode(4, 300)) == "CAL-SMA"
     assert default_method(_episode(4, 300, miss_rate=0.5)) == "VIS-BA-WALK"
-    assert default_method(_episode(4, 300, fov_deg=90)) == "dropout-blend"  # masked
+    assert default_method(_episode(4, 300, fov_deg=90)) == "VIEW-BA"  # masked
 
 
 def test_a_flickering_history_is_mapped_by_vis_ba_walk_and_better():

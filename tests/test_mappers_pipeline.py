@@ -199,7 +199,7 @@ def test_masked_default_per_sensor_and_a_method_registered_by_a_user_works_with_
     H, P, a = world()
     mask = H > 0
     m = build_map(H, a, P[a], mask=mask)
-    assert m.method == DEFAULT_METHODS[("visibility", True)] == "dropout-blend"
+    assert m.method == DEFAULT_METHODS[("visibility", True)] == "VIEW-BA"
     assert mean_position_error(m.positions, P, exclude=a) < 0.3
 
 
