@@ -59,7 +59,7 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval
 
 from mappers import view_kernels
-from mappers.adjustment import anchored_start
+from mappers.adjustment import anchored_start, keep_if_better
 from mappers.bearing_adjustment import _joint_step
 from mappers.registry import MethodSpec
 
@@ -239,7 +239,7 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
             anchor_positions=None, timeline=None, start_positions=None):
         """Map the masked visibility history ``X`` ((M, N) of 0/1, ``mask`` True where
         observed) with the anchors (rows of X) held at their positions. ``start_positions``
-        ((M, 2), NaN rows: not placed) replaces the start maps."""
+        ((M, 2), NaN rows: not placed) replaces the start map."""
         self._validate_params()
         if sensor != "visibility":
             raise ValueError(f"VIEW-BA maps visibility histories, got sensor {sensor!r}")
@@ -263,6 +263,10 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
                          else estimate_fov(P0, obs))
         self.radius_ = float("nan")
         self.poses_ = np.full((obs.shape[0], 3), np.nan)
+        free = placed.copy()
+        free[ids] = False
+        if not free.any():
+            raise ValueError("VIEW-BA has nothing to refine: every placed object is an anchor")
         if self.fov_deg_ > MAX_FOV_DEG:
             warnings.warn(f"a {self.fov_deg_:.0f}-degree view says little about a heading "
                           f"(above {MAX_FOV_DEG:.0f}): the start map is kept",
@@ -280,18 +284,12 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
                           "kept", ViewAdjustmentWarning, stacklevel=2)
             self.embedding_, self.refined_ = P0.copy(), False
             return self
-        finite = bool(np.all(np.isfinite(P[placed]))) and np.isfinite(loss)
-        self.refined_ = finite and loss < start_loss
-        if not self.refined_:
-            warnings.warn(f"the refined map explains the observed sets no better than the start "
-                          f"(loss per pair {self.loss_:.5g} against "
-                          f"{self.start_loss_:.5g}{'' if finite else ', not finite'}): the start "
-                          "map is kept", ViewAdjustmentWarning, stacklevel=2)
-            self.embedding_ = self.start_.copy()
-            return self
-        self.radius_ = R
-        self.poses_[steps] = C
-        self.embedding_ = np.where(placed[:, None], P, np.nan)
+        self.refined_, self.embedding_ = keep_if_better(
+            P, self.start_.copy(), placed, self.loss_ if np.isfinite(loss) else np.inf,
+            self.start_loss_, "observed sets and bits", ViewAdjustmentWarning)
+        if self.refined_:
+            self.radius_ = R
+            self.poses_[steps] = C
         return self
 
     # -- the adjustment ------------------------------------------------------------------------

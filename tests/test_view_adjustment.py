@@ -141,6 +141,7 @@ def test_a_wide_view_keeps_the_start_map():
     (dict(fov_deg=360), "fov_deg"),
     (dict(start="view-ba"), "another method than 'VIEW-BA'"),
     (dict(no_anchors=True), "needs anchor_ids"),
+    (dict(all_anchors=True), "every placed object is an anchor"),
 ])
 def test_bad_input_is_refused_with_its_name(kwargs, match):
     P, _, X, mask = _camera(90, n_steps=50)
@@ -151,6 +152,8 @@ def test_bad_input_is_refused_with_its_name(kwargs, match):
     fit = dict(mask=mask, sensor="visibility", anchor_ids=ANCHORS, anchor_positions=P[ANCHORS])
     if kwargs.pop("no_anchors", False):
         fit.update(anchor_ids=None, anchor_positions=None)
+    if kwargs.pop("all_anchors", False):
+        fit.update(anchor_ids=np.arange(len(P)), anchor_positions=P, start_positions=P)
     init = {k: kwargs.pop(k) for k in ("fov_deg", "start") if k in kwargs}
     fit.update(kwargs)
     with pytest.raises(ValueError, match=match):
