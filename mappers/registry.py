@@ -254,8 +254,11 @@ SCALABLE_DEFAULTS: dict[tuple[str, bool], str] = {
     ("visibility", False): "CAL-SMA-SPARSE",
     ("bearing", False): "CAL-SMA-SPARSE",
     ("bearing", True): "covis-sparse",
+    ("visibility", True): "dropout-blend",
 }
-"""(sensor, masked) -> the default above :data:`SCALABLE_ABOVE_OBJECTS` objects."""
+"""(sensor, masked) -> the default above :data:`SCALABLE_ABOVE_OBJECTS` objects. Masked visibility
+keeps VIEW-BA's start there (``dropout-blend``, dense, up to its 5,000 objects): VIEW-BA's joint
+step solves a (2F, 2F) system of the F free objects and sums N x M pairs per round."""
 
 
 def check_size(spec: MethodSpec, n_objects: int) -> None:

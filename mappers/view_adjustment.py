@@ -65,13 +65,17 @@ from mappers.adjustment import anchored_start, keep_if_better
 from mappers.bearing_adjustment import _joint_step
 from mappers.registry import MethodSpec
 
-__all__ = ["MAX_FOV_DEG", "ViewAdjustment", "ViewAdjustmentWarning", "estimate_fov",
-           "view_cone_score"]
+__all__ = ["MAX_FOV_DEG", "MAX_FREE_OBJECTS", "ViewAdjustment", "ViewAdjustmentWarning",
+           "estimate_fov", "view_cone_score"]
 
 MAX_FOV_DEG = 150.0
 """Widest view [deg] the adjustment reads: a wider cone says little about the heading (with a
 180-degree camera the views are estimated 165 or 195 degrees wide, and the adjustment moved
 the map both ways)."""
+
+MAX_FREE_OBJECTS = 2000
+"""Most free (non-anchor) objects VIEW-BA takes: its joint step holds an (N, 3, 2F) block and
+solves a (2F, 2F) system per round (at F = 2,000 and N = 2,000: 96 MB and 24 GFLOP a round)."""
 
 _MAX_SCORE_ENTRIES = 5e8
 """Largest steps x candidate viewpoints the grid search holds (float64: 4 GB)."""
@@ -269,6 +273,10 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         free[ids] = False
         if not free.any():
             raise ValueError("VIEW-BA has nothing to refine: every placed object is an anchor")
+        if free.sum() > MAX_FREE_OBJECTS:
+            raise ValueError(f"VIEW-BA solves a (2F, 2F) system of its F free objects each round "
+                             f"and F = {int(free.sum())} is above {MAX_FREE_OBJECTS}: map this "
+                             "history with dropout-blend (build_map's default above 500 objects)")
         if self.fov_deg_ > MAX_FOV_DEG:
             warnings.warn(f"a {self.fov_deg_:.0f}-degree view says little about a heading "
                           f"(above {MAX_FOV_DEG:.0f}): the start map is kept",

@@ -209,3 +209,17 @@ def test_a_mask_that_is_not_a_view_cone_keeps_the_start_map():
     assert not va.refined_ and va.start_loss_ > va.max_start_loss
     start[ANCHORS] = P[ANCHORS]
     assert np.array_equal(Q, start)
+
+
+def test_many_objects_go_to_dropout_blend_and_view_ba_refuses_too_many(monkeypatch):
+    from mappers import view_adjustment
+    from mappers.registry import SCALABLE_ABOVE_OBJECTS, resolve_method
+
+    assert resolve_method(None, "visibility", masked=True).label == "VIEW-BA"
+    assert resolve_method(None, "visibility", masked=True,
+                          n_objects=SCALABLE_ABOVE_OBJECTS + 1).label == "dropout-blend"
+    P, _, X, mask = _camera(90, n_steps=100)
+    monkeypatch.setattr(view_adjustment, "MAX_FREE_OBJECTS", 10)
+    with pytest.raises(ValueError, match="26 is above 10: map this history with dropout-blend"):
+        ViewAdjustment(fov_deg=90).fit(X, mask=mask, anchor_ids=ANCHORS,
+                                       anchor_positions=P[ANCHORS], start_positions=P)
