@@ -62,12 +62,13 @@ def episode(sensor: str, seed: int, steps: int, **sensing) -> History:
     return collect(env, RandomWalkPolicy.for_env(env), steps, seed=seed)
 
 
-def score(hist: History, method: str | None) -> tuple[float, float]:
-    """(MPE over mapped non-anchor objects [m], CPU seconds) of one map."""
+def score(hist: History, method: str | None, **params) -> tuple[float, float]:
+    """(MPE over mapped non-anchor objects [m], CPU seconds) of one map (``params``: the
+    method's)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         t0 = time.process_time()
-        m = mappers.build_map(hist, hist.anchor_ids, hist.anchor_positions, method)
+        m = mappers.build_map(hist, hist.anchor_ids, hist.anchor_positions, method, **params)
         cpu = time.process_time() - t0
     keep = np.setdiff1d(np.arange(hist.n_objects), [*hist.anchor_ids, *m.unmapped])
     return mappers.mean_position_error(m.positions[keep], hist.object_positions[keep]), cpu

@@ -18,14 +18,12 @@ from __future__ import annotations
 
 import argparse
 import csv
-import time
-import warnings
 
 import numpy as np
-from bench_masked_goals import episode
+from bench_masked_goals import episode, score
 from threadpoolctl import threadpool_limits
 
-import mappers
+from lfmdr_gym.atomic import atomic_write
 from mappers.visibility_adjustment import WALK_SPEC
 
 SETTINGS = (
@@ -33,17 +31,6 @@ SETTINGS = (
     ("visibility, miss rate 0.5", dict(miss_rate=0.5)),
     ("visibility, 90 deg view", dict(fov_deg=90)),
 )
-
-
-def score(hist, method, **params) -> tuple[float, float]:
-    """(MPE over mapped non-anchor objects [m], CPU seconds) of one map."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        t0 = time.process_time()
-        m = mappers.build_map(hist, hist.anchor_ids, hist.anchor_positions, method, **params)
-        cpu = time.process_time() - t0
-    keep = np.setdiff1d(np.arange(hist.n_objects), [*hist.anchor_ids, *m.unmapped])
-    return mappers.mean_position_error(m.positions[keep], hist.object_positions[keep]), cpu
 
 
 def main(argv=None) -> None:
@@ -61,6 +48,9 @@ def main(argv=None) -> None:
     print(f"{args.runs} runs from seed {args.seed}, N = {args.steps}; MPE [m] mean / max run; "
           "CPU s per map (median, one BLAS thread)")
     lines = [("setting", "seed", "method", "mpe", "cpu_s")]
+    walk = {**WALK_SPEC.defaults, "start": None}
+    runs = {"default (start)": (None, {}), "VIS-BA": ("VIS-BA", {}),
+            "VIS-BA + walk": ("VIS-BA", walk)}  # label -> (method, its parameters)
     with threadpool_limits(limits=1):
         for k in chosen:
             name, kw = SETTINGS[k]
@@ -69,10 +59,8 @@ def main(argv=None) -> None:
                 rows["VIS-BA + walk"] = []
             for r in range(args.runs):
                 h = episode("visibility", args.seed + r, args.steps, **kw)
-                walk = {**WALK_SPEC.defaults, "start": None}
                 for label in rows:
-                    method, params = {"default (start)": (None, {}), "VIS-BA": ("VIS-BA", {}),
-                                      "VIS-BA + walk": ("VIS-BA", walk)}[label]
+                    method, params = runs[label]
                     rows[label].append(score(h, method, **params))
                     mpe, cpu = rows[label][-1]
                     lines.append((name, args.seed + r, label, f"{mpe:.6f}", f"{cpu:.4f}"))
@@ -84,7 +72,7 @@ def main(argv=None) -> None:
             a, b = np.array(rows["default (start)"]), np.array(rows["VIS-BA"])
             print(f"  VIS-BA better in {int(np.sum(b[:, 0] < a[:, 0]))} of {len(a)} runs")
     if args.csv:
-        with open(args.csv, "w", newline="") as f:
+        with atomic_write(args.csv) as f:
             csv.writer(f).writerows(lines)
 
 
