@@ -145,14 +145,22 @@ def view_cone_score(positions, observed, half_angle, *, grid: int = 10, headings
     if not np.all((halves > 0.0) & (halves < math.pi)):
         raise ValueError(f"half_angle must be in (0, pi) radians, got {half_angle}")
     placed = np.all(np.isfinite(P), axis=1)
-    P, Ob = P[placed], Ob[:, placed].astype(float)
+    P = P[placed]
     cos_off, _ = _cos_off(P, _cells(P, grid), headings)
-    scores = np.empty(halves.size)
-    for k, half in enumerate(halves.ravel()):
+    scores = _profile(cos_off, Ob[:, placed], halves.ravel(), softness)
+    return float(scores[0]) if halves.ndim == 0 else scores.reshape(halves.shape)
+
+
+def _profile(cos_off, observed, halves, softness: float) -> np.ndarray:
+    """:func:`view_cone_score` of each half-angle in ``halves`` from the candidates' ``cos_off``
+    ((G * H, M), placed objects only) and ``observed`` ((N, M) of those objects)."""
+    Ob = np.asarray(observed, dtype=float)
+    scores = np.empty(len(halves))
+    for k, half in enumerate(halves):
         log_in, log_out = _cone_log_terms(cos_off, float(half), softness)
         ll = Ob @ (log_in - log_out).T + log_out.sum(axis=1)[None, :]  # (N, G * H)
         scores[k] = ll.max(axis=1).mean()
-    return float(scores[0]) if halves.ndim == 0 else scores.reshape(halves.shape)
+    return scores
 
 
 def estimate_fov(positions, observed, *, step_stride: int = 16, softness: float = 0.03) -> float:
@@ -161,10 +169,13 @@ def estimate_fov(positions, observed, *, step_stride: int = 16, softness: float 
     ``softness``) over 7.5-degree steps from 15 to 127.5 degrees, doubled."""
     if not (isinstance(step_stride, Integral) and step_stride >= 1):
         raise ValueError(f"step_stride must be an integer >= 1, got {step_stride!r}")
-    halves = np.arange(15.0, 130.0, 7.5)
     scores = view_cone_score(positions, np.asarray(observed, dtype=bool)[::step_stride],
-                             np.radians(halves), softness=softness)
-    return 2.0 * float(halves[int(np.argmax(scores))])
+                             np.radians(_FOV_HALVES), softness=softness)
+    return 2.0 * float(_FOV_HALVES[int(np.argmax(scores))])
+
+
+_FOV_HALVES = np.arange(15.0, 130.0, 7.5)
+"""The half-angles [deg] :func:`estimate_fov` tries."""
 
 
 class ViewAdjustment(TransformerMixin, BaseEstimator):
@@ -265,8 +276,15 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         self.start_ = P0.copy()
         obs, seen = mask.T, (X.T > 0.5) & mask.T
         placed = np.all(np.isfinite(P0), axis=1)
-        self.fov_deg_ = (float(self.fov_deg) if self.fov_deg is not None
-                         else estimate_fov(P0, obs))
+        _check_score_input(P0, obs, self.grid, self.headings, self.softness)
+        # the candidate viewpoints, shared by the view's width and the viewpoints' search
+        cells = _cells(P0[placed], self.grid)
+        cos_off, poses = _cos_off(P0[placed], cells, self.headings)
+        if self.fov_deg is not None:
+            self.fov_deg_ = float(self.fov_deg)
+        else:  # estimate_fov's profile on the candidates already drawn
+            widths = _profile(cos_off, obs[::16, placed], np.radians(_FOV_HALVES), 0.03)
+            self.fov_deg_ = 2.0 * float(_FOV_HALVES[int(np.argmax(widths))])
         self.radius_ = float("nan")
         self.poses_ = np.full((obs.shape[0], 3), np.nan)
         free = placed.copy()
@@ -284,10 +302,11 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
             self.embedding_, self.refined_ = P0.copy(), False
             self.loss_ = self.start_loss_ = float("nan")
             return self
-        P, loss, start_loss, C, R, steps = self._refine(P0, ids, obs, seen, placed)
+        P, loss, start_loss, C, R, steps = self._refine(P0, ids, obs, seen, placed,
+                                                         (cells, cos_off, poses))
         n_pairs = max(int(steps.sum()) * int(placed.sum()), 1)
         self.loss_, self.start_loss_ = loss / n_pairs, start_loss / n_pairs
-        if self.start_loss_ > self.max_start_loss:
+        if not np.isfinite(R):  # _refine's verdict: not a view cone
             warnings.warn(f"the observed sets do not look like a view cone: from the best "
                           f"viewpoints the cone's loss is {self.start_loss_:.3g} per pair "
                           f"(above max_start_loss = {self.max_start_loss:g}); the start map is "
@@ -303,8 +322,10 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         return self
 
     # -- the adjustment ------------------------------------------------------------------------
-    def _refine(self, P0, ids, obs, seen, placed):
-        """``(P, loss, start_loss, poses, R, steps)`` from one start map."""
+    def _refine(self, P0, ids, obs, seen, placed, candidates):
+        """``(P, loss, start_loss, poses, R, steps)`` from one start map; ``R`` is NaN when the
+        start's loss per pair is above ``max_start_loss`` (not a view cone: no rounds).
+        ``candidates``: the grid's ``(cells, cos_off, poses)`` over the placed objects."""
         m = len(P0)
         free = placed.copy()
         free[ids] = False
@@ -341,14 +362,15 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
             return float(res.x) if res.fun < cost(P, C, R) else R
 
         R = 0.2 * float(np.ptp(P, axis=0).max())
-        C = self._search(P, o, s, half, R)
+        C = self._search(P, o, s, half, R, *candidates)
         none = np.full(len(use), -1, dtype=np.int64)
+        loss = cost(P, C, R)
         for _ in range(self.pose_iters):  # each viewpoint alone (the objects held)
-            C = self._pose_step(P, C, R, blocks, cost, none)
+            C, loss = self._pose_step(P, C, R, loss, blocks, cost, none)
         R = fit_radius(P, C, R)
         start_loss = loss = cost(P, C, R)
         if start_loss / max(o.size, 1) > self.max_start_loss:  # not a view cone: no rounds
-            return P0.copy(), start_loss, start_loss, C, R, steps
+            return P0.copy(), start_loss, start_loss, C, float("nan"), steps
         lam = 1e-2
         for r in range(self.rounds):
             _, U, V, W, g, h = blocks(P, C, R, free_index, n_free)
@@ -371,11 +393,9 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         out[ids] = P0[ids]
         return out, loss, start_loss, C, R, steps
 
-    def _search(self, P, o, s, half, R):
-        """Each step's best viewpoint on the grid (positions x headings), the objects held."""
-        _check_score_input(P, o, self.grid, self.headings, self.softness)
-        cells = _cells(P, self.grid)
-        cos_off, poses = _cos_off(P, cells, self.headings)
+    def _search(self, P, o, s, half, R, cells, cos_off, poses):
+        """Each step's best viewpoint among the candidates (positions x headings), the objects
+        held."""
         log_in, log_out = _cone_log_terms(cos_off, half, 0.1)
         d = np.linalg.norm(P[None, :, :] - cells[:, None, :], axis=2)
         q = 1.0 / (1.0 + np.exp(-(R - d) / self.range_softness))
@@ -387,14 +407,15 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         return poses[score.argmax(axis=1)].copy()
 
     @staticmethod
-    def _pose_step(P, C, R, blocks, cost, none):
-        """One damped Newton step of every viewpoint alone, kept per step only where it
-        lowers the total loss (the steps' terms are independent once the objects are held)."""
+    def _pose_step(P, C, R, loss, blocks, cost, none):
+        """``(C, loss)`` after one damped Newton step of every viewpoint alone (the objects
+        held), kept only if it lowers the total loss ``loss`` of ``C``."""
         _, U, _, _, g, _ = blocks(P, C, R, none, 0)
         U[:, [0, 1, 2], [0, 1, 2]] *= 1.1
         U[:, [0, 1, 2], [0, 1, 2]] += 1e-9
         C2 = C - np.linalg.solve(U, g[..., None])[..., 0]
-        return C2 if cost(P, C2, R) < cost(P, C, R) else C
+        trial = cost(P, C2, R)
+        return (C2, trial) if trial < loss else (C, loss)
 
     def fit_transform(self, X, y=None, *, mask=None, sensor: str = "visibility", anchor_ids=None,
                       anchor_positions=None, timeline=None, start_positions=None):

@@ -74,6 +74,7 @@ shuffled or unordered steps break it (``build_map`` picks VIS-BA-WALK only for h
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from numbers import Integral, Real
 
@@ -645,19 +646,15 @@ SPEC = MethodSpec(
 )
 
 
-WALK_SPEC = MethodSpec(
-    "VIS-BA-WALK",
-    _vis_ba,
-    {"continuity": True, "align": True, "overrelax": 1.0, "grid_cells": 4, "prior_iters": 1,
-     "model_rounds": 2},
-    {"max_rounds": [3, 5, 8], "grid_cells": [4, 6]},
-    "VIS-BA with the walk's continuity prior (the steps' viewpoints an HMM: consecutive steps "
-    "close together): the default for flickering visibility histories",
-    uses_anchors=True,
-    sensors=("visibility",),
-    normalize=False,
-    histories=("complete", "masked"),
-    uses_timeline=True,
+WALK_SPEC = dataclasses.replace(
+    SPEC,
+    label="VIS-BA-WALK",
+    defaults={"continuity": True, "align": True, "overrelax": 1.0, "grid_cells": 4,
+              "prior_iters": 1, "model_rounds": 2},
+    grid={"max_rounds": [3, 5, 8], "grid_cells": [4, 6]},
+    description="VIS-BA with the walk's continuity prior (the steps' viewpoints an HMM: "
+                "consecutive steps close together): the default for flickering visibility "
+                "histories",
 )
 
 SPECS = (SPEC, WALK_SPEC)
