@@ -88,11 +88,14 @@ class DropoutBlend:
             raise ValueError("dropout-blend: an object is never visible (empty history row)")
         cal = CalibratedSMACOF(n_neighbors=self.n_neighbors, random_state=self.random_state)
         order = MaskedMapper("covis-nonmetric", min_co=self.min_co, max_iter=self.max_iter)
+        # covis-nonmetric first: it is the one that fails on sparse data (its pairs fall apart),
+        # and it finds that out before its solve, CAL-SMA only after a whole fit
+        ordinal = order.fit_transform(X, mask, sensor=sensor, anchor_ids=anchor_ids,
+                                      anchor_positions=anchor_positions)
         self.maps_ = {
             "CAL-SMA": cal.fit_transform(S / norms, anchor_ids=anchor_ids,
                                          anchor_positions=anchor_positions),
-            "covis-nonmetric": order.fit_transform(X, mask, sensor=sensor, anchor_ids=anchor_ids,
-                                                   anchor_positions=anchor_positions),
+            "covis-nonmetric": ordinal,
         }
         a, b = self.maps_.values()
         Y = np.where(np.isnan(a), b, np.where(np.isnan(b), a, 0.5 * (a + b)))

@@ -333,6 +333,14 @@ def build_map(
     if isinstance(histories, Mapping):
         return _build_fused_map(histories, anchor_ids, anchor_positions, method, sensor, mask,
                                 timeline, normalize, random_state, params)
+    return _fit_map(histories, anchor_ids, anchor_positions, method, sensor, mask, timeline,
+                    normalize, random_state, params)[0]
+
+
+def _fit_map(histories, anchor_ids, anchor_positions, method, sensor, mask, timeline, normalize,
+             random_state, params) -> tuple[Map, Any, np.ndarray]:
+    """``build_map`` of a single sensor's histories: the map, the fitted estimator and the rows
+    it was fitted on (the objects with data; an online update keeps the estimator's state)."""
     X, mask, sensor, timeline = _inputs(histories, sensor, mask, timeline)
     m = X.shape[0]
     notes: list[str] = []
@@ -364,7 +372,7 @@ def build_map(
     inputs = _fit_inputs(spec, mapped, ids, pos, mask, sensor, timeline)
     Y, caught = _embed(spec.label, est, Xm, inputs, allow_nan_rows=spec.takes_masks, n=mapped.size)
     notes.extend(caught)
-    return _finish(spec, merged, sensor, Y, m, mapped, ids, pos, unmapped, notes)
+    return _finish(spec, merged, sensor, Y, m, mapped, ids, pos, unmapped, notes), est, mapped
 
 
 def default_method(histories: Any, *, sensor: str | None = None, mask: np.ndarray | None = None,

@@ -65,7 +65,7 @@ from mappers.adjustment import anchored_start, keep_if_better
 from mappers.bearing_adjustment import _joint_step
 from mappers.registry import MethodSpec
 
-__all__ = ["MAX_FOV_DEG", "MAX_FREE_OBJECTS", "ViewAdjustment", "ViewAdjustmentWarning",
+__all__ = ["MAX_FOV_DEG", "MAX_FREE_OBJECTS", "ConeProblem", "ViewAdjustment", "ViewAdjustmentWarning",
            "estimate_fov", "view_cone_score"]
 
 MAX_FOV_DEG = 150.0
@@ -176,6 +176,73 @@ def estimate_fov(positions, observed, *, step_stride: int = 16, softness: float 
 
 _FOV_HALVES = np.arange(15.0, 130.0, 7.5)
 """The half-angles [deg] :func:`estimate_fov` tries."""
+
+
+class ConeProblem:
+    """The view-cone loss of fixed observations and its Gauss-Newton steps.
+
+    ``obs`` and ``seen`` ((N, U) bool): which of the U objects each of N steps observed, and
+    saw; ``free_index[j]`` is object j's row among the ``n_free`` free objects, or -1 (an
+    anchor: held). The half-angle, the softnesses and the miss rate are VIEW-BA's. Shared by
+    :class:`ViewAdjustment` and the online update of its map (:mod:`mappers.online_view`).
+    """
+
+    def __init__(self, obs, seen, free_index, n_free: int, half: float, softness: float,
+                 range_softness: float, miss_rate: float) -> None:
+        self.obs = np.ascontiguousarray(obs, dtype=bool)
+        self.seen = np.ascontiguousarray(seen, dtype=bool)
+        self.free_index, self.n_free = free_index, int(n_free)
+        self.half, self.cos_h = float(half), math.cos(half)
+        self.s_c, self.s_r, self.eps = softness, range_softness, miss_rate
+        self._none = np.full(len(free_index), -1, dtype=np.int64)
+
+    def cost(self, P, C, R) -> float:
+        """The loss of objects ``P`` (U, 2), viewpoints ``C`` (N, 3) and radius ``R``."""
+        return view_kernels.cone_cost(P, C, self.obs, self.seen, self.cos_h, R, self.s_c,
+                                      self.s_r, self.eps)
+
+    def blocks(self, P, C, R, *, objects: bool = True):
+        """``(loss, U, V, W, g, h)``: the normal equations' blocks; ``objects=False``: the
+        viewpoints' blocks only (the objects held)."""
+        fi, nf = (self.free_index, self.n_free) if objects else (self._none, 0)
+        n = len(C)
+        U, g = np.zeros((n, 3, 3)), np.zeros((n, 3))
+        V, h, W = np.zeros((nf, 2, 2)), np.zeros((nf, 2)), np.zeros((n, 3, 2 * nf))
+        loss, _ = view_kernels.cone_blocks(P, C, self.obs, self.seen, fi, self.cos_h, R,
+                                           self.s_c, self.s_r, self.eps, U, V, W, g, h)
+        return loss, U, V, W, g, h
+
+    def fit_radius(self, P, C, R) -> float:
+        """The visibility radius of least loss (a bounded 1-D search), or ``R`` if not lower."""
+        span = float(np.ptp(P, axis=0).max())
+        res = minimize_scalar(lambda r: self.cost(P, C, r), bounds=(0.02 * span, span),
+                              method="bounded", options={"xatol": 5e-3 * span})
+        return float(res.x) if res.fun < self.cost(P, C, R) else R
+
+    def pose_step(self, P, C, R, loss):
+        """``(C, loss)`` after one damped Newton step of every viewpoint alone (the objects
+        held), kept only if it lowers the total loss ``loss`` of ``C``."""
+        _, U, _, _, g, _ = self.blocks(P, C, R, objects=False)
+        U[:, [0, 1, 2], [0, 1, 2]] *= 1.1
+        U[:, [0, 1, 2], [0, 1, 2]] += 1e-9
+        C2 = C - np.linalg.solve(U, g[..., None])[..., 0]
+        trial = self.cost(P, C2, R)
+        return (C2, trial) if trial < loss else (C, loss)
+
+    def lm_round(self, P, C, R, loss, lam):
+        """``(P, C, loss, lam, moved)``: one Levenberg-Marquardt round of the viewpoints and the
+        free objects (BEARING-BA's Schur step), the damping raised until the loss falls (at
+        most 8 tries; ``moved`` False: none did, nothing changed)."""
+        _, U, V, W, g, h = self.blocks(P, C, R)
+        for _ in range(8):
+            dc, dp = _joint_step(U, V, W, g, h, lam)
+            C2, P2 = C + dc, P.copy()
+            P2[self.free_index >= 0] += dp
+            trial = self.cost(P2, C2, R)
+            if trial < loss:
+                return P2, C2, trial, max(lam / 3.0, 1e-6), True
+            lam *= 5.0
+        return P, C, loss, lam, False
 
 
 class ViewAdjustment(TransformerMixin, BaseEstimator):
@@ -322,6 +389,10 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         return self
 
     # -- the adjustment ------------------------------------------------------------------------
+    def _problem(self, obs, seen, free_index, n_free) -> ConeProblem:
+        return ConeProblem(obs, seen, free_index, n_free, math.radians(self.fov_deg_) / 2.0,
+                           self.softness, self.range_softness, self.miss_rate)
+
     def _refine(self, P0, ids, obs, seen, placed, candidates):
         """``(P, loss, start_loss, poses, R, steps)`` from one start map; ``R`` is NaN when the
         start's loss per pair is above ``max_start_loss`` (not a view cone: no rounds).
@@ -334,60 +405,28 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
             warnings.warn(f"{int((~steps).sum())} step(s) observed no placed object: they are "
                           "left out", ViewAdjustmentWarning, stacklevel=4)
         use = np.flatnonzero(placed)
-        o = np.ascontiguousarray(obs[steps][:, use])
-        s = np.ascontiguousarray(seen[steps][:, use])
         free_index = np.full(len(use), -1, dtype=np.int64)
         n_free = int(free[use].sum())
         free_index[free[use]] = np.arange(n_free)
+        prob = self._problem(obs[steps][:, use], seen[steps][:, use], free_index, n_free)
         P = np.ascontiguousarray(P0[use], dtype=float)
-        half = math.radians(self.fov_deg_) / 2.0
-        cos_h = math.cos(half)
-        s_c, s_r, eps = self.softness, self.range_softness, self.miss_rate
-
-        def cost(P, C, R):
-            return view_kernels.cone_cost(P, C, o, s, cos_h, R, s_c, s_r, eps)
-
-        def blocks(P, C, R, fi, nf):
-            n = len(C)
-            U, g = np.zeros((n, 3, 3)), np.zeros((n, 3))
-            V, h, W = np.zeros((nf, 2, 2)), np.zeros((nf, 2)), np.zeros((n, 3, 2 * nf))
-            loss, _ = view_kernels.cone_blocks(P, C, o, s, fi, cos_h, R, s_c, s_r, eps,
-                                               U, V, W, g, h)
-            return loss, U, V, W, g, h
-
-        def fit_radius(P, C, R):
-            span = float(np.ptp(P, axis=0).max())
-            res = minimize_scalar(lambda r: cost(P, C, r), bounds=(0.02 * span, span),
-                                  method="bounded", options={"xatol": 5e-3 * span})
-            return float(res.x) if res.fun < cost(P, C, R) else R
-
         R = 0.2 * float(np.ptp(P, axis=0).max())
-        C = self._search(P, o, s, half, R, *candidates)
-        none = np.full(len(use), -1, dtype=np.int64)
-        loss = cost(P, C, R)
+        C = self._search(P, prob.obs, prob.seen, prob.half, R, *candidates)
+        loss = prob.cost(P, C, R)
         for _ in range(self.pose_iters):  # each viewpoint alone (the objects held)
-            C, loss = self._pose_step(P, C, R, loss, blocks, cost, none)
-        R = fit_radius(P, C, R)
-        start_loss = loss = cost(P, C, R)
-        if start_loss / max(o.size, 1) > self.max_start_loss:  # not a view cone: no rounds
+            C, loss = prob.pose_step(P, C, R, loss)
+        R = prob.fit_radius(P, C, R)
+        start_loss = loss = prob.cost(P, C, R)
+        if start_loss / max(prob.obs.size, 1) > self.max_start_loss:  # not a view cone
             return P0.copy(), start_loss, start_loss, C, float("nan"), steps
         lam = 1e-2
         for r in range(self.rounds):
-            _, U, V, W, g, h = blocks(P, C, R, free_index, n_free)
-            for _ in range(8):
-                dc, dp = _joint_step(U, V, W, g, h, lam)
-                C2, P2 = C + dc, P.copy()
-                P2[free_index >= 0] += dp
-                trial = cost(P2, C2, R)
-                if trial < loss:
-                    C, P, loss, lam = C2, P2, trial, max(lam / 3.0, 1e-6)
-                    break
-                lam *= 5.0
-            else:
+            P, C, loss, lam, moved = prob.lm_round(P, C, R, loss, lam)
+            if not moved:
                 break
             if r == self.rounds // 2:
-                R = fit_radius(P, C, R)
-                loss = cost(P, C, R)
+                R = prob.fit_radius(P, C, R)
+                loss = prob.cost(P, C, R)
         out = np.full((m, 2), np.nan)
         out[use] = P
         out[ids] = P0[ids]
@@ -405,17 +444,6 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         Ob, S = o.astype(float), s.astype(float)
         score = Ob @ (log_in - log_out + l0).T + S @ (l1 - l0).T + log_out.sum(axis=1)[None, :]
         return poses[score.argmax(axis=1)].copy()
-
-    @staticmethod
-    def _pose_step(P, C, R, loss, blocks, cost, none):
-        """``(C, loss)`` after one damped Newton step of every viewpoint alone (the objects
-        held), kept only if it lowers the total loss ``loss`` of ``C``."""
-        _, U, _, _, g, _ = blocks(P, C, R, none, 0)
-        U[:, [0, 1, 2], [0, 1, 2]] *= 1.1
-        U[:, [0, 1, 2], [0, 1, 2]] += 1e-9
-        C2 = C - np.linalg.solve(U, g[..., None])[..., 0]
-        trial = cost(P, C2, R)
-        return (C2, trial) if trial < loss else (C, loss)
 
     def fit_transform(self, X, y=None, *, mask=None, sensor: str = "visibility", anchor_ids=None,
                       anchor_positions=None, timeline=None, start_positions=None):
