@@ -80,7 +80,7 @@ def one_run(hist, steps: int, batch: int, checkpoints: tuple[int, ...], **online
     rebuild = time.process_time() - t0
     return {"median": np.median(times), "mean": np.mean(times), "rebuild": rebuild,
             "ratios": ratios, "online": online, "offline": offline, "refits": om.n_full_fits,
-            "fold_refits": om.n_fold_refits}
+            "fold_refits": om.n_fold_refits, "growth": om.refit_growth}
 
 
 def main() -> None:
@@ -91,7 +91,8 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=2000)
     ap.add_argument("--batch", type=int, default=10, help="new steps per update")
     ap.add_argument("--warm-rounds", type=int, default=1, help="OnlineMapper's warm_rounds")
-    ap.add_argument("--refit-growth", type=float, default=4.0, help="OnlineMapper's refit_growth")
+    ap.add_argument("--refit-growth", type=float, default=None,
+                    help="OnlineMapper's refit_growth (default: its own, 4, or 2 for VIEW-BA)")
     ap.add_argument("--warm-tol", type=float, default=1e-4, help="OnlineMapper's warm_tol")
     ap.add_argument("--fold-check-every", type=int, default=5,
                     help="OnlineMapper's fold_check_every")
@@ -120,7 +121,7 @@ def main() -> None:
         R = np.array([r["ratios"] for r in rows])  # NaN where the offline map could not be made
         print(f"\n{sensor}: {len(rows)} fresh layouts (seed {args.seed}), updates of {args.batch} "
               f"steps, N = {args.steps}, warm_rounds {args.warm_rounds}, refit_growth "
-              f"{args.refit_growth:g}, warm_tol {args.warm_tol:g}, fold_check_every "
+              f"{rows[0]['growth']:g}, warm_tol {args.warm_tol:g}, fold_check_every "
               f"{args.fold_check_every}, bundle_every {args.bundle_every}, bundle_rounds "
               f"{args.bundle_rounds}{f', env {env}' if env else ''}")
         print(f"  rebuild at N: {rebuild * 1e3:.1f} ms;  update: median {med * 1e3:.2f} ms "

@@ -51,10 +51,19 @@ against the current objects, a warm Levenberg-Marquardt round of the joint probl
 the CAL-SMA map, whenever CAL-SMA is refitted or objects join its map; a refit that is not kept
 (BEARING-BA's guards) leaves the CAL-SMA map until the next one.
 
+VIEW-BA on masked visibility histories (a limited view; the default) is refitted with
+``build_map``'s own fit on a geometric schedule of its own (``refit_growth`` 2: its refits, from
+a new start map, are what move the map to a better basin) and carried on in between by
+:class:`mappers.online_view.OnlineView`: each new step's viewpoint placed against the current
+objects, a warm joint round every ``bundle_every`` updates, and VIEW-BA refined from the current
+map (no start map drawn) whenever the steps have grown by a quarter; an object seen for the
+first time is refitted into the map at once.
+
 Other methods (and masked histories, whose methods need the steps' co-observation patterns)
 keep the columns and refit with :func:`~mappers.pipeline.build_map` on the same geometric
 schedule; between refits the last map is returned with a note in ``Map.warnings`` saying which
-steps it covers.
+steps it covers. A first map that fails (too few steps: a limited view's co-observations fall
+apart) is tried again once the steps have grown by a tenth, not at every update.
 
 References: de Leeuw (1977) and Borg & Groenen, *Modern Multidimensional Scaling* (2005), on
 warm-started SMACOF (majorisation decreases stress from any start).
@@ -73,7 +82,8 @@ from mappers.align import apply_affine, check_anchor_ids, check_anchors
 from mappers.calibrated import CalibratedSMACOF, _log_floor, fit_calibration, fold_score
 from mappers.graph import informative_pairs, knn_mask
 from mappers.online_bearing import OnlineBundle
-from mappers.pipeline import Map, _thread_limit, build_map
+from mappers.online_view import OnlineView
+from mappers.pipeline import Map, _fit_map, _thread_limit, build_map
 from mappers.registry import MappingError, resolve_method
 from mappers.sensors import COLUMNS_PER_STEP, check_sensor, infer_sensor
 from mappers.smacof import euclidean_distance_matrix
@@ -82,9 +92,16 @@ __all__ = ["OnlineMapper", "gram_dissimilarity"]
 
 _INCREMENTAL = "CAL-SMA"
 _BUNDLE = "BEARING-BA"  # updated incrementally from the incremental CAL-SMA map (online_bearing)
+_VIEW = "VIEW-BA"  # masked visibility, updated incrementally between its refits (online_view)
+_REFIT_GROWTH = 4.0  # refit_growth's default
+# ... for VIEW-BA: its refits, from a new start map, are what find a better basin
+# (docs/online-and-exploration.md)
+_VIEW_REFIT_GROWTH = 2.0
 # a warm map that looks folded is refitted from scratch once the steps have grown by this factor
 # since the last full fit (at most refit_growth), not at every update while it still looks folded
 _FOLD_REFIT_GROWTH = 1.5
+# a refitted method that found nothing to map yet is tried again once the steps have grown by this
+_RETRY_GROWTH = 1.1
 
 
 def gram_dissimilarity(gram: np.ndarray, n_columns: int, kind: str) -> np.ndarray:
@@ -260,10 +277,11 @@ class OnlineMapper:
             update that senses anything (pass it when you know it).
         method: a label of :data:`mappers.METHODS`; None = ``build_map``'s default for the
             sensor and the kind of history. CAL-SMA on complete visibility and bearing
-            histories, and BEARING-BA (started from CAL-SMA) on complete bearing ones, are
-            updated incrementally; other methods are refitted on the schedule.
+            histories, BEARING-BA (started from CAL-SMA) on complete bearing ones, and VIEW-BA
+            on masked visibility ones (between its refits) are updated incrementally; other
+            methods are refitted on the schedule.
         refit_growth: a full refit whenever the steps have grown by this factor (> 1) since the
-            last one.
+            last scheduled one; None: 4, or 2 for VIEW-BA (masked visibility).
         warm_rounds: CAL-SMA rounds of the warm-started update between full refits.
         warm_tol: relative stress decrease at which a warm round's Guttman updates stop, in
             [0, 1) (CAL-SMA's own ``tol`` is 1e-6; from a nearly converged start 1e-4 halves
@@ -272,9 +290,9 @@ class OnlineMapper:
             1 = every update) once the map is past its second scheduled refit (``refit_growth``
             squared times the steps of the first map); before that, and whenever objects join
             the map, on every warm update.
-        bundle_every: BEARING-BA (complete bearing): a warm joint round of the bundle
-            adjustment every this many updates (integer >= 1), sooner once the steps have grown
-            by 5 % since the last.
+        bundle_every: BEARING-BA (complete bearing) and VIEW-BA (masked visibility): a warm
+            joint round of the bundle adjustment every this many updates (integer >= 1), sooner
+            once the steps have grown by 5 % since the last.
         bundle_rounds: Levenberg-Marquardt rounds per warm joint round (integer >= 1).
         random_state: seed handed to the method, as ``build_map``'s.
         **params: the method's parameters, as for ``build_map``.
@@ -299,14 +317,17 @@ class OnlineMapper:
     """
 
     def __init__(self, anchor_ids, anchor_positions, *, sensor: str | None = None,
-                 method: str | None = None, refit_growth: float = 4.0, warm_rounds: int = 1,
+                 method: str | None = None, refit_growth: float | None = None,
+                 warm_rounds: int = 1,
                  warm_tol: float = 1e-4, fold_check_every: int = 5, bundle_every: int = 5,
                  bundle_rounds: int = 1, random_state: int | None = 0, **params: Any) -> None:
         pos = np.asarray(anchor_positions, dtype=float)
         ids = check_anchor_ids(anchor_ids, np.iinfo(np.int64).max)
         check_anchors(ids, pos, int(ids.max()) + 1)  # shapes, finiteness, collinearity
-        if isinstance(refit_growth, bool) or not isinstance(refit_growth, Real) or not refit_growth > 1:
-            raise ValueError(f"refit_growth must be a number > 1, got {refit_growth!r}")
+        if refit_growth is not None and (isinstance(refit_growth, bool)
+                                         or not isinstance(refit_growth, Real)
+                                         or not refit_growth > 1):
+            raise ValueError(f"refit_growth must be a number > 1 or None, got {refit_growth!r}")
         if isinstance(warm_rounds, bool) or not isinstance(warm_rounds, Integral) or warm_rounds < 1:
             raise ValueError(f"warm_rounds must be an integer >= 1, got {warm_rounds!r}")
         if isinstance(warm_tol, bool) or not isinstance(warm_tol, Real) or not 0 <= warm_tol < 1:
@@ -320,7 +341,9 @@ class OnlineMapper:
         self.anchor_ids, self.anchor_positions = ids, pos
         self.sensor = check_sensor(sensor, allow_none=True)
         self.method, self.params = method, dict(params)
-        self.refit_growth, self.warm_rounds = float(refit_growth), int(warm_rounds)
+        self._refit_growth = refit_growth  # None: the method's (set when it is resolved)
+        self.refit_growth = _REFIT_GROWTH if refit_growth is None else float(refit_growth)
+        self.warm_rounds = int(warm_rounds)
         self.warm_tol, self.fold_check_every = float(warm_tol), int(fold_check_every)
         self.bundle_every, self.bundle_rounds = int(bundle_every), int(bundle_rounds)
         self.random_state = random_state
@@ -336,10 +359,12 @@ class OnlineMapper:
         self._first_map: int | None = None  # steps of the first map
         self._fit_notes: tuple[str, ...] = ()
         self._Y: np.ndarray | None = None  # last embedding (M, 2), NaN rows for unmapped
+        self._retry_at = 0  # steps at which a first map that failed is tried again
         self._warm_est: _OnlineCalSMA | None = None  # keeps the last Guttman pseudo-inverse
         self._since_check, self._m_checked = 0, 0  # warm updates since the last fold check
         self.n_fold_refits = 0
         self._bundle: OnlineBundle | None = None  # BEARING-BA's state (complete bearing)
+        self._view: OnlineView | None = None  # VIEW-BA's state (masked visibility)
         self._cal: dict = {}  # CAL-SMA's parameters (the method's, or BEARING-BA's start's)
 
     # ------------------------------------------------------------------ inputs
@@ -400,6 +425,10 @@ class OnlineMapper:
                 self._cal["random_state"] = self._merged.get("random_state", self.random_state)
             self._bundle = OnlineBundle(self._merged, self.anchor_ids, self.anchor_positions,
                                         every=self.bundle_every, rounds=self.bundle_rounds)
+        if spec.label == _VIEW and self._masked:
+            self._view = OnlineView(every=self.bundle_every, rounds=self.bundle_rounds)
+            if self._refit_growth is None:
+                self.refit_growth = _VIEW_REFIT_GROWTH
         blocks, self._blocks = self._blocks, []
         self.n_steps = 0
         for C, mask in blocks:
@@ -410,13 +439,21 @@ class OnlineMapper:
 
     @property
     def incremental(self) -> bool:
-        """Whether updates are incremental (CAL-SMA on complete histories, and BEARING-BA from it
-        on complete bearing ones) rather than refits."""
+        """Whether updates are incremental (CAL-SMA on complete histories, BEARING-BA from it on
+        complete bearing ones, VIEW-BA between its refits on masked visibility ones) rather
+        than refits."""
+        return self._gram_path or self._view is not None
+
+    @property
+    def _gram_path(self) -> bool:
+        """CAL-SMA's statistics kept as a Gram matrix (complete histories)."""
         return self._spec is not None and not self._masked and (
             self._spec.label == _INCREMENTAL or self._bundle is not None)
 
     def _add(self, C, mask) -> None:
-        if self.incremental:
+        if self._view is not None:  # new viewpoints placed against the current objects
+            self._view.add(C, np.ones(C.shape, dtype=bool) if mask is None else mask)
+        if self._gram_path:
             if self._bundle is not None:  # checked before anything is kept
                 theta, seen = self._bundle.angles(C)
                 self._bundle.add(C, theta, seen)
@@ -451,9 +488,10 @@ class OnlineMapper:
             self._resolve()
         else:
             self._add(C, mask)
-        full = self._Y is None or self.n_steps >= self.refit_growth * self._last_scheduled
+        full = (self.n_steps >= self._retry_at if self._Y is None
+                else self.n_steps >= self.refit_growth * self._last_scheduled)
         fits = self.n_full_fits
-        self.map = self._update_incremental(full) if self.incremental else self._update_refit(full)
+        self.map = self._update_incremental(full) if self._gram_path else self._update_refit(full)
         if self._bundle is not None:
             self.map = self._update_bundle(self.map, self.n_full_fits > fits)
         return self.map
@@ -617,9 +655,16 @@ class OnlineMapper:
                    anchor_ids=tuple(int(i) for i in self.anchor_ids[np.isin(self.anchor_ids, mapped)]))
 
     def _update_refit(self, full: bool) -> Map:
+        scheduled, view = full, self._view
+        if not full and view is not None and view.state is not None:
+            if not view.joined():  # VIEW-BA's state carried on: the new steps are placed
+                return self._update_view()
+            full = True  # an object seen for the first time has no place: refit
+        if not full and self._Y is None:  # the first map failed: tried again at _retry_at
+            return self.map
         if not full:
             stale = f"online map of the first {self._last_full} of {self.n_steps} steps " \
-                    f"(next refit at {int(np.ceil(self.refit_growth * self._last_full))})"
+                    f"(next refit at {int(np.ceil(self.refit_growth * self._last_scheduled))})"
             return dataclasses.replace(self.map, warnings=(*self._fit_notes, stale))
         X = np.concatenate([C for C, _ in self._blocks], axis=1)
         if len(self._blocks) > 1:  # keep one block: the next refit concatenates less
@@ -635,15 +680,58 @@ class OnlineMapper:
         if mapped is None or (isinstance(k, Integral) and k >= mapped.size):
             return self._empty(why or f"n_neighbors {k} needs more than {mapped.size} objects")
         try:
-            result = build_map(X, self.anchor_ids, self.anchor_positions, self._spec.label,
-                               sensor=self.sensor, mask=mask, **self._merged)
+            if view is None:
+                result = build_map(X, self.anchor_ids, self.anchor_positions, self._spec.label,
+                                   sensor=self.sensor, mask=mask, **self._merged)
+            else:  # build_map's own fit, whose estimator holds VIEW-BA's state
+                params = dict(self._merged)
+                seed = params.pop("random_state", self.random_state)
+                with _thread_limit(self._m):
+                    result, est, rows = _fit_map(X, self.anchor_ids, self.anchor_positions,
+                                                 self._spec.label, self.sensor, mask, None, None,
+                                                 seed, params)
+                    view.start(est, X, np.ones(X.shape, bool) if mask is None else mask, rows,
+                               np.asarray(result.anchor_ids))
         except MappingError as exc:
+            if view is not None:  # no refit, no state: the last map until the next refit
+                view.state = None
             if self.map is None or not np.isfinite(self.map.positions).any():
-                return self._empty(f"the method found nothing to map yet ({exc})")
+                # tried again once the steps have grown a little (a try may cost as much as a fit)
+                self._retry_at = int(np.ceil(_RETRY_GROWTH * self.n_steps))
+                return self._empty(f"the method found nothing to map yet ({exc}); tried again "
+                                   f"at {self._retry_at} steps")
             return dataclasses.replace(self.map, warnings=(
                 *self.map.warnings, f"refit at {self.n_steps} steps failed, map kept: {exc}"))
-        self._last_full = self._last_scheduled = self.n_steps
+        self._last_full = self.n_steps
+        if scheduled:  # a refit for objects that joined leaves the schedule where it was
+            self._last_scheduled = self.n_steps
         self.n_full_fits += 1
         self._Y = result.embedding
         self._fit_notes = result.warnings
         return result
+
+    def _update_view(self) -> Map:
+        """VIEW-BA's map carried on from its last refit: a warm joint round when due."""
+        view = self._view
+        note = None
+        if view.refine_due():
+            X = np.concatenate([C for C, _ in self._blocks], axis=1)
+            mask = np.concatenate([np.ones(C.shape, bool) if mk is None else mk
+                                   for C, mk in self._blocks], axis=1)
+            self._blocks = [(X, mask)]
+            with _thread_limit(self._m):
+                notes = view.refine(X, mask, self.anchor_ids, self.anchor_positions)
+            self._fit_notes = notes
+        elif view.due():
+            with _thread_limit(self._m):
+                note = view.joint_round()
+        if note is not None:
+            self._fit_notes = (*self._fit_notes, note)
+        if view.state is None:
+            return self._update_refit(False)
+        P = view.positions(self._m)
+        mapped = np.flatnonzero(view.placed(self._m))
+        is_anchor = np.isin(self.anchor_ids, mapped)
+        local = np.searchsorted(mapped, self.anchor_ids[is_anchor])
+        return self._map(P[mapped], mapped, local, self.anchor_positions[is_anchor],
+                         dict(self._merged), list(self._fit_notes))
