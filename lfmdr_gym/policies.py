@@ -394,6 +394,12 @@ def _coverage_scan(env: Any, **kwargs: Any) -> Any:
     return CoveragePolicy.for_env(env, **{"correct_drift": True, **kwargs})
 
 
+def _spread(env: Any, **kwargs: Any) -> Any:
+    from lfmdr_gym.spread import SpreadPolicy
+
+    return SpreadPolicy.for_env(env, **kwargs)
+
+
 def _rl(env: Any, **kwargs: Any) -> Any:
     from lfmdr_gym.rl_policy import MLPExplorationPolicy
 
@@ -405,6 +411,7 @@ POLICIES: Mapping[str, Callable[..., Any]] = MappingProxyType({
     "coverage": _coverage,
     "coverage-scan": _coverage_scan,
     "rl": _rl,
+    "spread": _spread,
 })
 """Name -> factory ``factory(env, **kwargs) -> policy``: the exploration policies ``lfmdr collect
 --policy NAME`` offers. A factory reads only the env's geometry (turn limit, step length, robot
@@ -417,6 +424,9 @@ and object radii) and spaces; the policy then sees observations only (:func:`che
   (``correct_drift=True``, :mod:`lfmdr_gym.scan_match`).
 - ``"rl"``: a PPO agent trained on the coverage reward, run in numpy from the shipped weights
   (:class:`lfmdr_gym.rl_policy.MLPExplorationPolicy`; ``examples/train_rl_policy.py``).
+- ``"spread"``: viewpoints spread evenly at the scale of the step (a kernel density of the
+  drift-corrected dead-reckoned viewpoints, three-move look-ahead, a pull toward unvisited
+  seen-free ground; :class:`lfmdr_gym.spread.SpreadPolicy`).
 """
 
 
