@@ -15,6 +15,9 @@ import textwrap
 from collections.abc import Sequence
 from typing import Any
 
+_POLICY_HELP = ("exploration policy, a name of lfmdr_gym.POLICIES (random-walk, coverage, "
+                "coverage-scan, rl, spread)")
+
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 
@@ -173,8 +176,7 @@ def _add_run(sub: Any) -> None:
                         "steps) and write the growing map beside the robot as DIR/live.gif "
                         "(needs matplotlib: pip install lfmdr[plots])")
     p.add_argument("--policy", default="random-walk", metavar="NAME",
-                   help="exploration policy, a name of lfmdr_gym.POLICIES (random-walk, coverage, "
-                   "coverage-scan, rl)")
+                   help=_POLICY_HELP)
     p.set_defaults(handler=_cmd_run)
 
 
@@ -214,8 +216,7 @@ def _add_collect(sub: Any) -> None:
     _add_env_keywords(p, "--env-kw")
     p.add_argument("--out", required=True, metavar="FILE.npz", help="history file to write")
     p.add_argument("--policy", default="random-walk", metavar="NAME",
-                   help="exploration policy, a name of lfmdr_gym.POLICIES (random-walk, coverage, "
-                   "coverage-scan, rl)")
+                   help=_POLICY_HELP)
     p.set_defaults(handler=_cmd_collect)
 
 

@@ -329,3 +329,10 @@ def test_mrclam_on_a_real_run(tmp_path, capsys):
     assert main(["mrclam", str(runs[0]), "--mode", "range", "--out", str(tmp_path)]) == 0
     assert "MPE" in capsys.readouterr().out
     assert (tmp_path / "map.csv").read_text().splitlines()[0].startswith("subject")
+
+
+def test_the_policy_help_names_every_registered_policy():
+    from lfmdr_gym import POLICIES
+    from lfmdr_gym.cli import _POLICY_HELP
+
+    assert _POLICY_HELP.endswith("(" + ", ".join(POLICIES) + ")")
