@@ -668,14 +668,7 @@ class OnlineMapper:
             stale = f"online map of the first {self._last_full} of {self.n_steps} steps " \
                     f"(next refit at {int(np.ceil(self.refit_growth * self._last_scheduled))})"
             return dataclasses.replace(self.map, warnings=(*self._fit_notes, stale))
-        X = np.concatenate([C for C, _ in self._blocks], axis=1)
-        if len(self._blocks) > 1:  # keep one block: the next refit concatenates less
-            mask = None
-            if self._masked:
-                mask = np.concatenate([np.ones(C.shape, bool) if mk is None else mk
-                                       for C, mk in self._blocks], axis=1)
-            self._blocks = [(X, mask)]
-        mask = self._blocks[0][1]
+        X, mask = self._history()
         seen = np.any((X != 0) if mask is None else (mask & (X != 0)), axis=1)
         mapped, why = self._usable(seen)
         k = self._merged.get("n_neighbors")
@@ -712,18 +705,26 @@ class OnlineMapper:
         self._fit_notes = result.warnings
         return result
 
+    def _history(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """The whole history kept so far, ``(X, mask)`` (mask None: complete), as one block (the
+        next refit concatenates less)."""
+        X = np.concatenate([C for C, _ in self._blocks], axis=1)
+        if len(self._blocks) > 1:
+            mask = None
+            if self._masked:  # a batch given without a mask observed everything
+                mask = np.concatenate([np.ones(C.shape, bool) if mk is None else mk
+                                       for C, mk in self._blocks], axis=1)
+            self._blocks = [(X, mask)]
+        return self._blocks[0]
+
     def _update_view(self) -> Map:
         """VIEW-BA's map carried on from its last refit: a warm joint round when due."""
         view = self._view
         note = None
         if view.refine_due():
-            X = np.concatenate([C for C, _ in self._blocks], axis=1)
-            mask = np.concatenate([np.ones(C.shape, bool) if mk is None else mk
-                                   for C, mk in self._blocks], axis=1)
-            self._blocks = [(X, mask)]
+            X, mask = self._history()
             with _thread_limit(self._m):
-                notes = view.refine(X, mask, self.anchor_ids, self.anchor_positions)
-            self._fit_notes = notes
+                self._fit_notes = view.refine(X, mask, self.anchor_ids, self.anchor_positions)
         elif view.due():
             with _thread_limit(self._m):
                 note = view.joint_round()
