@@ -127,21 +127,31 @@ class CoveragePolicy(RandomWalkPolicy):
 
     def __call__(self, observation: Mapping[str, Any]) -> np.ndarray:
         """The heading change for one observation, shape (1,)."""
-        if not isinstance(observation, Mapping) or "proximity" not in observation:
-            raise ValueError("CoveragePolicy needs a dict observation with a 'proximity' entry, "
-                             f"got {type(observation).__name__}")
-        prox = np.asarray(observation["proximity"], dtype=np.float64)
-        if prox.ndim != 1:
-            raise ValueError("CoveragePolicy takes one observation at a time (it keeps "
-                             f"per-episode memory), got proximity of shape {prox.shape}")
-        if self._stuck_sign is None or self._stuck_sign.shape != (1,):
-            self._stuck_sign = np.zeros(1)
+        prox = self._proximity(observation)
         if self.correct_drift and self._last is not None:
             self._correct(prox)
         self.visits[self._cells(self.odometry[None, :2])] += 1
         mt = self.max_turn
         turns = self.rng.uniform(-mt, mt, self.n_tries)
-        turns = turns[np.argsort(self._scores(prox, turns), kind="stable")]
+        return self._move(prox, turns[np.argsort(self._scores(prox, turns), kind="stable")])
+
+    def _proximity(self, observation: Mapping[str, Any]) -> np.ndarray:
+        """The proximity ring of one observation (a ValueError for anything else)."""
+        name = type(self).__name__
+        if not isinstance(observation, Mapping) or "proximity" not in observation:
+            raise ValueError(f"{name} needs a dict observation with a 'proximity' entry, "
+                             f"got {type(observation).__name__}")
+        prox = np.asarray(observation["proximity"], dtype=np.float64)
+        if prox.ndim != 1:
+            raise ValueError(f"{name} takes one observation at a time (it keeps "
+                             f"per-episode memory), got proximity of shape {prox.shape}")
+        if self._stuck_sign is None or self._stuck_sign.shape != (1,):
+            self._stuck_sign = np.zeros(1)
+        return prox
+
+    def _move(self, prox: np.ndarray, turns: np.ndarray) -> np.ndarray:
+        """Take the first of ``turns`` (best first) the collision check passes, dead-reckon the
+        move, and return the action, shape (1,)."""
         first = self._first_choice(prox, turns)
         if first < 0:
             turn = self._unstick(0, prox)

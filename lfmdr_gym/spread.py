@@ -187,15 +187,7 @@ class SpreadPolicy(CoveragePolicy):
 
     def __call__(self, observation: Mapping[str, Any]) -> np.ndarray:
         """The heading change for one observation, shape (1,)."""
-        if not isinstance(observation, Mapping) or "proximity" not in observation:
-            raise ValueError("SpreadPolicy needs a dict observation with a 'proximity' entry, "
-                             f"got {type(observation).__name__}")
-        prox = np.asarray(observation["proximity"], dtype=np.float64)
-        if prox.ndim != 1:
-            raise ValueError("SpreadPolicy takes one observation at a time (it keeps "
-                             f"per-episode memory), got proximity of shape {prox.shape}")
-        if self._stuck_sign is None or self._stuck_sign.shape != (1,):
-            self._stuck_sign = np.zeros(1)
+        prox = self._proximity(observation)
         stopped = self._last is not None and contact(prox, self.robot_radius)
         if self._last is not None:
             self._correct(prox)
@@ -207,21 +199,7 @@ class SpreadPolicy(CoveragePolicy):
             self._escape -= 1  # a random-walk move: the draws in the order drawn
         else:
             turns = turns[np.argsort(self._scores(prox, turns), kind="stable")]
-        first = self._first_choice(prox, turns)
-        if first < 0:
-            turn = self._unstick(0, prox)
-        else:
-            turn = float(turns[first])
-            self._stuck_sign[0] = 0.0
-        room = float(self.clearance(prox[None, :], np.array([[turn]]))[0, 0])
-        heading = self.odometry[2] + turn
-        advance = min(self.step_length, max(room, 0.0))
-        self._last = (self.odometry[0], self.odometry[1], heading, turn, prox)
-        self._last_advance = advance
-        self.odometry = np.array([self.odometry[0] + advance * math.cos(heading),
-                                  self.odometry[1] + advance * math.sin(heading),
-                                  math.remainder(heading, 2.0 * math.pi)])
-        return np.array([turn], np.float32)
+        return self._move(prox, turns)
 
     def __repr__(self) -> str:
         return (f"SpreadPolicy(sigma={self.sigma:g}, fan={self.fan}, discount={self.discount:g}, "
