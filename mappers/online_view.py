@@ -74,6 +74,7 @@ class OnlineView:
         self.n_refits = self.n_rounds = 0
         self.n_steps = 0
         self.state: dict | None = None
+        self.est: ViewAdjustment | None = None  # the fit the state came from
         self.has_data: np.ndarray | None = None  # (M,) objects seen so far
         self._fitted = None  # ... at the last refit
         self._updates = 0
