@@ -604,12 +604,16 @@ class OnlineMapper:
         if bundle.state is None:  # the refinement was not kept: the CAL-SMA map
             return dataclasses.replace(start, method=self._spec.label, params=dict(self._merged),
                                        warnings=(*cal_notes, *bundle.notes))
-        mapped = np.flatnonzero(placed)
+        return self._adjusted_map(bundle.positions(), np.flatnonzero(placed),
+                                  [*cal_notes, *bundle.notes])
+
+    def _adjusted_map(self, positions: np.ndarray, mapped: np.ndarray, notes: list) -> Map:
+        """The Map of a viewpoint adjustment's objects ``positions`` (M, 2) on the rows
+        ``mapped`` (the anchors held at their positions)."""
         is_anchor = np.isin(self.anchor_ids, mapped)
         local = np.searchsorted(mapped, self.anchor_ids[is_anchor])
-        Y = bundle.positions()[mapped]
-        return self._map(Y, mapped, local, self.anchor_positions[is_anchor], dict(self._merged),
-                         [*cal_notes, *bundle.notes])
+        return self._map(positions[mapped], mapped, local, self.anchor_positions[is_anchor],
+                         dict(self._merged), notes)
 
     def _warm(self, D, valid, mapped, local, pos, kind, k) -> tuple[np.ndarray, float | None]:
         """``warm_rounds`` CAL-SMA rounds from the last map, and its fold score if CAL-SMA's
@@ -733,8 +737,4 @@ class OnlineMapper:
         if view.state is None:
             return self._update_refit(False)
         P = view.positions(self._m)
-        mapped = np.flatnonzero(view.placed(self._m))
-        is_anchor = np.isin(self.anchor_ids, mapped)
-        local = np.searchsorted(mapped, self.anchor_ids[is_anchor])
-        return self._map(P[mapped], mapped, local, self.anchor_positions[is_anchor],
-                         dict(self._merged), list(self._fit_notes))
+        return self._adjusted_map(P, np.flatnonzero(np.isfinite(P[:, 0])), list(self._fit_notes))

@@ -35,12 +35,11 @@ that lower the loss; a state that is not finite is dropped likewise.
 
 from __future__ import annotations
 
-import math
 import warnings
 
 import numpy as np
 
-from mappers.view_adjustment import ConeProblem, ViewAdjustment, _cells, _cos_off
+from mappers.view_adjustment import ConeProblem, ViewAdjustment
 
 __all__ = ["OnlineView"]
 
@@ -66,7 +65,8 @@ class OnlineView:
     Attributes:
         n_refits, n_rounds: VIEW-BA fits taken and warm joint rounds so far.
         state: None, or the objects ``P`` (U, 2) of the global rows ``cols``, the viewpoints
-            ``C`` of the steps that observed any of them, and their observed / seen sets.
+            ``C`` of the steps that observed any of them, and their observed / seen sets (the view
+            width and the radius are those of ``est``, the fit the state came from).
     """
 
     def __init__(self, *, every: int = 5, rounds: int = 1) -> None:
@@ -88,7 +88,8 @@ class OnlineView:
         ``X`` / ``mask`` ((M, N)); ``anchors``: its anchors' global rows."""
         self.n_refits += 1
         self.n_steps = X.shape[1]
-        self.has_data = np.any(mask & (X != 0), axis=1)
+        self.has_data = np.zeros(X.shape[0], dtype=bool)
+        self.has_data[mapped] = True  # the fit's rows: the objects with data
         self._fitted = self.has_data.copy()
         self._updates, self._steps_at_round = 0, self.n_steps
         self._steps_at_refine = self.n_steps
@@ -107,7 +108,6 @@ class OnlineView:
         self.state = {"P": np.ascontiguousarray(est.embedding_[placed]), "cols": cols,
                       "free_index": free_index, "n_free": int(free.sum()),
                       "C": est.poses_[steps].copy(), "obs": [obs[steps]], "seen": [seen[steps]],
-                      "R": float(est.radius_), "half": math.radians(est.fov_deg_) / 2.0,
                       "lam": 1e-2, "candidates": None}
 
     def refine_due(self) -> bool:
@@ -139,9 +139,7 @@ class OnlineView:
         return tuple(dict.fromkeys(f"VIEW-BA: {w.category.__name__}: {w.message}" for w in caught))
 
     def _problem(self, obs, seen) -> ConeProblem:
-        s, est = self.state, self.est
-        return ConeProblem(obs, seen, s["free_index"], s["n_free"], s["half"], est.softness,
-                           est.range_softness, est.miss_rate)
+        return self.est._problem(obs, seen, self.state["free_index"], self.state["n_free"])
 
     # ------------------------------------------------------------------ steps
     def add(self, columns: np.ndarray, mask: np.ndarray) -> None:
@@ -160,14 +158,13 @@ class OnlineView:
             return
         obs = obs[keep]
         seen = (columns.T[keep][:, s["cols"]] > 0.5) & obs
-        prob = self._problem(obs, seen)
+        prob, R = self._problem(obs, seen), self.est.radius_
         if s["candidates"] is None:
-            cells = _cells(s["P"], self.est.grid)
-            s["candidates"] = (cells, *_cos_off(s["P"], cells, self.est.headings))
-        C = self.est._search(s["P"], prob.obs, prob.seen, s["half"], s["R"], *s["candidates"])
-        loss = prob.cost(s["P"], C, s["R"])
+            s["candidates"] = self.est._candidates(s["P"])
+        C = self.est._search(s["P"], prob.obs, prob.seen, prob.half, R, *s["candidates"])
+        loss = prob.cost(s["P"], C, R)
         for _ in range(self.est.pose_iters):
-            C, loss = prob.pose_step(s["P"], C, s["R"], loss)
+            C, loss = prob.pose_step(s["P"], C, R, loss)
         s["C"] = np.concatenate([s["C"], C])
         s["obs"].append(prob.obs)
         s["seen"].append(prob.seen)
@@ -187,7 +184,7 @@ class OnlineView:
         obs, seen = np.concatenate(s["obs"]), np.concatenate(s["seen"])
         s["obs"], s["seen"] = [obs], [seen]
         prob = self._problem(obs, seen)
-        P, C, R, lam = s["P"], s["C"], s["R"], s["lam"]
+        P, C, R, lam = s["P"], s["C"], self.est.radius_, s["lam"]
         loss = prob.cost(P, C, R)
         for _ in range(self.rounds):
             P, C, loss, lam, moved = prob.lm_round(P, C, R, loss, lam)
@@ -208,11 +205,4 @@ class OnlineView:
         """The current objects (m, 2), NaN rows unplaced."""
         out = np.full((m, 2), np.nan)
         out[self.state["cols"]] = self.state["P"]
-        return out
-
-    def placed(self, m: int) -> np.ndarray:
-        """(m,) bool: the objects the state places."""
-        out = np.zeros(m, dtype=bool)
-        if self.state is not None:
-            out[self.state["cols"]] = True
         return out

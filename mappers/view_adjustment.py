@@ -345,8 +345,7 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         placed = np.all(np.isfinite(P0), axis=1)
         _check_score_input(P0, obs, self.grid, self.headings, self.softness)
         # the candidate viewpoints, shared by the view's width and the viewpoints' search
-        cells = _cells(P0[placed], self.grid)
-        cos_off, poses = _cos_off(P0[placed], cells, self.headings)
+        cells, cos_off, poses = self._candidates(P0[placed])
         if self.fov_deg is not None:
             self.fov_deg_ = float(self.fov_deg)
         else:  # estimate_fov's profile on the candidates already drawn
@@ -389,6 +388,12 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         return self
 
     # -- the adjustment ------------------------------------------------------------------------
+    def _candidates(self, P):
+        """The grid's candidate viewpoints over the objects ``P`` (placed only): ``(cells,
+        cos_off, poses)`` (:func:`_cos_off`)."""
+        cells = _cells(P, self.grid)
+        return (cells, *_cos_off(P, cells, self.headings))
+
     def _problem(self, obs, seen, free_index, n_free) -> ConeProblem:
         return ConeProblem(obs, seen, free_index, n_free, math.radians(self.fov_deg_) / 2.0,
                            self.softness, self.range_softness, self.miss_rate)
