@@ -43,6 +43,7 @@ import numpy as np
 
 from lfmdr_gym.policies import RandomWalkPolicy
 from lfmdr_gym.scan_match import contact, matched_advance
+from lfmdr_gym.world import check_int, check_real
 
 __all__ = ["AgentView", "ViewConfig"]
 
@@ -71,15 +72,12 @@ class ViewConfig:
     presence: bool = True
 
     def __post_init__(self) -> None:
+        # checks only: the (frozen) fields keep the values given
         for name in ("n_rays", "n_objects"):
-            value = getattr(self, name)
-            if not (isinstance(value, int | np.integer) and value >= 1):
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+            check_int(name, getattr(self, name), low=1)
         for name in ("proximity_range", "max_turn", "step_length", "robot_radius",
                      "object_radius", "cell", "extent"):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+            check_real(name, getattr(self, name), low=0.0, low_open=True)
         for name in ("correct_drift", "presence"):
             if not isinstance(getattr(self, name), bool | np.bool_):
                 raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")

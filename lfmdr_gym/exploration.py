@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from lfmdr_gym.policies import RandomWalkPolicy
+from lfmdr_gym.world import check_real
 
 __all__ = ["CoveragePolicy"]
 
@@ -62,13 +63,10 @@ class CoveragePolicy(RandomWalkPolicy):
             raise ValueError(f"correct_drift must be True or False, got {correct_drift!r}")
         self.correct_drift = bool(correct_drift)
         self.proximity_range = float(proximity_range)
-        for name, value in (("cell", cell), ("extent", extent)):
-            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+        self.cell = check_real("cell", cell, low=0.0, low_open=True)
+        self.extent = check_real("extent", extent, low=0.0, low_open=True)
         if extent < cell:
             raise ValueError(f"extent must be at least one cell ({cell}), got {extent!r}")
-        self.cell = float(cell)
-        self.extent = float(extent)
         self._n = 2 * int(math.ceil(extent / cell))
         self._forget()
 

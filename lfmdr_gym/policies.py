@@ -22,6 +22,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from lfmdr_gym import kernels
+from lfmdr_gym.world import check_int, check_real
 
 __all__ = ["POLICIES", "Policy", "PredictPolicy", "RandomWalkPolicy", "as_policy", "check_policy"]
 
@@ -147,30 +148,15 @@ class RandomWalkPolicy:
         n_tries: int = 16,
         seed: int | None = None,
     ) -> None:
-        for name, value in (("max_turn", max_turn), ("step_length", step_length),
-                            ("robot_radius", robot_radius)):
-            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-        if max_turn > math.pi:
-            raise ValueError(f"max_turn must be at most pi, got {max_turn!r}")
-        if not (isinstance(margin, int | float) and math.isfinite(margin) and margin >= 0):
-            raise ValueError(f"margin must be a non-negative finite number, got {margin!r}")
-        if not (isinstance(obstacle_radius, int | float) and math.isfinite(obstacle_radius)
-                and obstacle_radius >= 0):
-            raise ValueError(
-                f"obstacle_radius must be a non-negative finite number, got {obstacle_radius!r}"
-            )
+        self.max_turn = check_real("max_turn", max_turn, low=0.0, low_open=True, high=math.pi)
+        self.step_length = check_real("step_length", step_length, low=0.0, low_open=True)
+        self.robot_radius = check_real("robot_radius", robot_radius, low=0.0, low_open=True)
+        self.margin = check_real("margin", margin, low=0.0)
+        self.obstacle_radius = check_real("obstacle_radius", obstacle_radius, low=0.0)
         if not isinstance(plan_ahead, bool | np.bool_):
             raise ValueError(f"plan_ahead must be True or False, got {plan_ahead!r}")
-        if not (isinstance(n_tries, int) and n_tries >= 1):
-            raise ValueError(f"n_tries must be a positive integer, got {n_tries!r}")
-        self.max_turn = float(max_turn)
-        self.step_length = float(step_length)
-        self.robot_radius = float(robot_radius)
-        self.margin = float(margin)
-        self.obstacle_radius = float(obstacle_radius)
         self.plan_ahead = bool(plan_ahead)
-        self.n_tries = n_tries
+        self.n_tries = check_int("n_tries", n_tries, low=1)
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         self._stuck_sign: np.ndarray | None = None  # per row: turn direction while stuck

@@ -36,15 +36,9 @@ import numpy as np
 
 from lfmdr_gym.exploration import CoveragePolicy
 from lfmdr_gym.scan_match import contact
+from lfmdr_gym.world import check_int, check_real
 
 __all__ = ["SpreadPolicy"]
-
-
-def _positive(name: str, value: Any) -> float:
-    if not (isinstance(value, int | float) and not isinstance(value, bool)
-            and math.isfinite(value) and value > 0):
-        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-    return float(value)
 
 
 class SpreadPolicy(CoveragePolicy):
@@ -74,23 +68,13 @@ class SpreadPolicy(CoveragePolicy):
         if "correct_drift" in kwargs and kwargs["correct_drift"] is not True:
             raise ValueError("SpreadPolicy always corrects its drift; correct_drift must be True")
         kwargs["correct_drift"] = True
-        self.sigma = _positive("sigma", sigma)
-        if not (isinstance(fan, int) and not isinstance(fan, bool) and fan >= 2):
-            raise ValueError(f"fan must be an integer of at least 2, got {fan!r}")
-        self.fan = fan
-        self.discount = _positive("discount", discount)
-        if self.discount > 1.0:
-            raise ValueError(f"discount must be in (0, 1], got {discount!r}")
-        if not (isinstance(pull, int | float) and not isinstance(pull, bool)
-                and math.isfinite(pull) and pull >= 0):
-            raise ValueError(f"pull must be a non-negative finite number, got {pull!r}")
-        self.pull = float(pull)
-        self.hole_radius = _positive("hole_radius", hole_radius)
-        self.free_cell = _positive("free_cell", free_cell)
-        if not (isinstance(escape_moves, int) and not isinstance(escape_moves, bool)
-                and escape_moves >= 0):
-            raise ValueError(f"escape_moves must be a non-negative integer, got {escape_moves!r}")
-        self.escape_moves = escape_moves
+        self.sigma = check_real("sigma", sigma, low=0.0, low_open=True)
+        self.fan = check_int("fan", fan, low=2)
+        self.discount = check_real("discount", discount, low=0.0, low_open=True, high=1.0)
+        self.pull = check_real("pull", pull, low=0.0)
+        self.hole_radius = check_real("hole_radius", hole_radius, low=0.0, low_open=True)
+        self.free_cell = check_real("free_cell", free_cell, low=0.0, low_open=True)
+        self.escape_moves = check_int("escape_moves", escape_moves, low=0)
         super().__init__(max_turn, step_length, robot_radius, **kwargs)
         later = np.linspace(-self.max_turn, self.max_turn, fan)
         self._later = np.array(list(itertools.product(later, repeat=2)))  # (fan^2, 2)

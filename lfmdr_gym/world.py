@@ -84,9 +84,15 @@ def check_real(name: str, value: Any, *, low: float = -math.inf, low_open: bool 
         raise ValueError(f"{name} must be a finite number, got {value!r}")
     v = float(value)
     if (v < low or (low_open and v == low)) or (v > high or (high_open and v == high)):
-        lo = ("(" if low_open else "[") + f"{low:g}"
-        hi = f"{high:g}" + (")" if high_open else "]")
-        raise ValueError(f"{name} must be in {lo}, {hi}, got {value!r}")
+        if high == math.inf:  # one-sided: "> 0" rather than "(0, inf]"
+            bound = (">" if low_open else ">=") + f" {low:g}"
+        elif low == -math.inf:
+            bound = ("<" if high_open else "<=") + f" {high:g}"
+        else:
+            lo = ("(" if low_open else "[") + f"{low:g}"
+            hi = f"{high:g}" + (")" if high_open else "]")
+            bound = f"in {lo}, {hi}"
+        raise ValueError(f"{name} must be {bound}, got {value!r}")
     return v
 
 

@@ -356,8 +356,25 @@ class CalibratedSMACOF(TransformerMixin, BaseEstimator):
         np.fill_diagonal(Dh, 0.0)
         return Dh, coef
 
+    def _weights(self, loc):
+        """SMACOF weights: 1 on neighbour pairs, ``far_weight`` on the rest, 0 on the diagonal."""
+        far = ~loc
+        np.fill_diagonal(far, False)
+        W = np.where(loc, 1.0, np.where(far, self.far_weight, 0.0))
+        if self.far_weight == 0:
+            # keep the Guttman system solvable when the neighbour graph falls apart
+            W = np.where(far, 1e-6, W)
+        np.fill_diagonal(W, 0.0)
+        return W
+
+    def _embed(self, T, X, loc, fixed):
+        """One re-embedding of targets ``T`` from ``X``, anchors ``fixed`` held: (X, updates)."""
+        X, _, it = weighted_smacof(T, self._weights(loc), X, fixed=fixed,
+                                   max_iter=self.max_iter, tol=self.tol)
+        return X, it
+
     def _refine(self, D, X, loc, fixed):
-        """Alternate calibration and anchored weighted SMACOF from start X."""
+        """Alternate calibration and anchored weighted SMACOF (:meth:`_embed`) from start X."""
         lo_delta = _log_floor(D[loc])
         far = ~loc
         np.fill_diagonal(far, False)
@@ -370,12 +387,7 @@ class CalibratedSMACOF(TransformerMixin, BaseEstimator):
             Dx = euclidean_distance_matrix(X)
             # targets: calibrated distance for neighbours, max(current, bound) for the rest
             T = np.where(loc, Dh, np.where(far, np.maximum(Dx, bound), 0.0))
-            W = np.where(loc, 1.0, np.where(far, self.far_weight, 0.0))
-            if self.far_weight == 0:
-                # keep the Guttman system solvable when the neighbour graph falls apart
-                W = np.where(far, 1e-6, W)
-            np.fill_diagonal(W, 0.0)
-            X, _, it = weighted_smacof(T, W, X, fixed=fixed, max_iter=self.max_iter, tol=self.tol)
+            X, it = self._embed(T, X, loc, fixed)
             n_iter += it
         Dx = euclidean_distance_matrix(X)
         w = loc.astype(float)

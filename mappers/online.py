@@ -86,7 +86,6 @@ from mappers.online_view import OnlineView
 from mappers.pipeline import Map, _fit_map, _thread_limit, build_map
 from mappers.registry import MappingError, resolve_method
 from mappers.sensors import COLUMNS_PER_STEP, check_sensor, infer_sensor
-from mappers.smacof import euclidean_distance_matrix
 
 __all__ = ["OnlineMapper", "gram_dissimilarity"]
 
@@ -202,6 +201,8 @@ class _OnlineCalSMA(CalibratedSMACOF):
     solved once per neighbour graph (:class:`_AnchoredGuttman`, the last one kept in
     ``solver_``, so warm updates whose graph did not change reuse it), and the calibration sums
     its terms instead of building an (M, M, features) array. The offline estimator is untouched.
+    It overrides only :meth:`_embed` and :meth:`_calibrate`: the rounds are
+    :meth:`CalibratedSMACOF._refine`'s.
     """
 
     solver_: tuple | None = None
@@ -209,13 +210,7 @@ class _OnlineCalSMA(CalibratedSMACOF):
     def _solver(self, loc: np.ndarray, fixed: np.ndarray) -> _AnchoredGuttman:
         key = (loc.tobytes(), np.asarray(fixed).tobytes(), float(self.far_weight))
         if self.solver_ is None or self.solver_[0] != key:
-            far = ~loc
-            np.fill_diagonal(far, False)
-            W = np.where(loc, 1.0, np.where(far, self.far_weight, 0.0))
-            if self.far_weight == 0:
-                W = np.where(far, 1e-6, W)
-            np.fill_diagonal(W, 0.0)
-            self.solver_ = (key, _AnchoredGuttman(W, np.asarray(fixed)))
+            self.solver_ = (key, _AnchoredGuttman(self._weights(loc), np.asarray(fixed)))
         return self.solver_[1]
 
     def _calibrate(self, D, X, pairs, lo_delta):
@@ -243,27 +238,13 @@ class _OnlineCalSMA(CalibratedSMACOF):
         np.fill_diagonal(Dh, 0.0)
         return Dh, coef
 
-    def _refine(self, D, X, loc, fixed):
-        if fixed is None:  # no anchors (never in OnlineMapper): the estimator's own loop
-            return super()._refine(D, X, loc, fixed)
-        solver = self._solver(loc, fixed)
-        lo_delta = _log_floor(D[loc])
-        far = ~loc
-        np.fill_diagonal(far, False)
-        n_iter = 0
-        Dh = None
-        for _ in range(self.n_rounds):
-            Dh, coef = self._calibrate(D, X, loc, lo_delta)
-            R = np.where(loc, Dh, 0.0).max(axis=1)
-            bound = self.far_factor * np.maximum(R[:, None], R[None, :])
-            Dx = euclidean_distance_matrix(X)
-            T = np.where(loc, Dh, np.where(far, np.maximum(Dx, bound), 0.0))
-            X, _, it = solver.run(T, X, self.max_iter, self.tol)
-            n_iter += it
-        Dx = euclidean_distance_matrix(X)
-        w = loc.astype(float)
-        stress = float(np.sum(w * (Dx - Dh) ** 2) / max(np.sum(w * Dh**2), 1e-300))
-        return X, stress, n_iter, coef, Dh
+    def _embed(self, T, X, loc, fixed):
+        # the estimator's rounds (CalibratedSMACOF._refine), each re-embedding by the cached
+        # solver of this neighbour graph instead of weighted_smacof
+        if fixed is None:  # no anchors (never in OnlineMapper): the estimator's own embedding
+            return super()._embed(T, X, loc, fixed)
+        X, _, it = self._solver(loc, fixed).run(T, X, self.max_iter, self.tol)
+        return X, it
 
 
 class OnlineMapper:

@@ -98,7 +98,8 @@ def test_coverage_dead_reckons_its_moves_and_counts_visits():
 
 
 @pytest.mark.parametrize("kwargs, name", [({"cell": 0.0}, "cell"), ({"extent": -1.0}, "extent"),
-                                          ({"cell": 1.0, "extent": 0.5}, "extent")])
+                                          ({"cell": 1.0, "extent": 0.5}, "extent"),
+                                          ({"cell": True}, "cell")])
 def test_coverage_refuses_bad_arguments(kwargs, name):
     with pytest.raises(ValueError, match=name):
         CoveragePolicy(**kwargs)

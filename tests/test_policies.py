@@ -77,7 +77,8 @@ def test_as_policy_rejects_other_objects(bad):
     [({"max_turn": 0.0}, "max_turn"), ({"max_turn": 4.0}, "max_turn"),
      ({"step_length": -0.2}, "step_length"), ({"robot_radius": float("nan")}, "robot_radius"),
      ({"margin": -1.0}, "margin"), ({"n_tries": 0}, "n_tries"),
-     ({"obstacle_radius": -0.1}, "obstacle_radius"), ({"plan_ahead": 1}, "plan_ahead")],
+     ({"obstacle_radius": -0.1}, "obstacle_radius"), ({"plan_ahead": 1}, "plan_ahead"),
+     ({"step_length": True}, "step_length"), ({"n_tries": True}, "n_tries")],
 )
 def test_random_walk_rejects_bad_arguments(kwargs, name):
     with pytest.raises(ValueError, match=name):

@@ -61,6 +61,7 @@ def test_spread_crowds_its_viewpoints_less_than_the_random_walk():
     ({"pull": -1.0}, "pull"), ({"hole_radius": -0.1}, "hole_radius"),
     ({"free_cell": 0}, "free_cell"), ({"escape_moves": -1}, "escape_moves"),
     ({"correct_drift": False}, "correct_drift"), ({"cell": -1.0}, "cell"),
+    ({"sigma": True}, "sigma"), ({"pull": True}, "pull"), ({"fan": True}, "fan"),
 ])
 def test_spread_refuses_bad_arguments(kwargs, name):
     with pytest.raises(ValueError, match=name):

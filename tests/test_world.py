@@ -99,6 +99,21 @@ def test_bad_arguments_raise_naming_them(kwargs, name):
         World(**kwargs)
 
 
+def test_check_real_states_the_bounds():
+    from lfmdr_gym.world import check_real
+
+    with pytest.raises(ValueError, match=r"x must be > 0, got 0"):
+        check_real("x", 0, low=0.0, low_open=True)
+    with pytest.raises(ValueError, match=r"x must be >= 0, got -1"):
+        check_real("x", -1, low=0.0)
+    with pytest.raises(ValueError, match=r"x must be < 2, got 2"):
+        check_real("x", 2, high=2.0, high_open=True)
+    with pytest.raises(ValueError, match=r"x must be in \(0, 1\], got 1.5"):
+        check_real("x", 1.5, low=0.0, low_open=True, high=1.0)
+    with pytest.raises(ValueError, match="x must be a finite number, got True"):
+        check_real("x", True, low=0.0)
+
+
 def test_layout_search_failure_names_n_objects(monkeypatch):
     # Allow a layout denser than random placement can reach: the search must give up clearly.
     monkeypatch.setattr(world_module, "RANDOM_COVERAGE", 0.95)

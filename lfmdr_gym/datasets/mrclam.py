@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from lfmdr_gym.history import History
+from lfmdr_gym.world import check_real
 from mappers.align import check_anchor_ids
 from mappers.coobservation import co_observation_components
 from mappers.sensors import COLUMNS_PER_STEP, check_sensor
@@ -465,8 +466,7 @@ def bin_run(
     was sensed in the bin (:func:`_bin_values` for the values).
     """
     check_sensor(sensor)
-    if not (isinstance(bin_width, (int, float)) and np.isfinite(bin_width) and bin_width > 0):
-        raise ValueError(f"bin_width must be a positive number of seconds, got {bin_width!r}")
+    check_real("bin_width", bin_width, low=0.0, low_open=True)  # [s]
     obs, robots = run.obs, list(run.report.robots)
     if len(obs) == 0:
         raise ValueError(f"{run.name}: no landmark measurements left after filtering")
