@@ -68,7 +68,7 @@ def check(history, case: str, seed: int, what: str = "") -> None:
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
-def test_histories_are_bit_identical_to_those_before_the_speed_work(case):
+def test_histories_match_those_before_the_speed_work(case):
     env_id, kwargs = CASES[case]
     for seed in SEEDS:
         history = collect(env_id, RandomWalkPolicy(seed=seed), 1000, seed=seed,
