@@ -19,6 +19,7 @@ import numpy as np
 
 from lfmdr_gym.compact import COMPACT_ABOVE_BYTES, CompactSteps
 from lfmdr_gym.history import History
+from lfmdr_gym.world import check_int
 from mappers.sensors import COLUMNS_PER_STEP, FUSED_SENSORS, SENSORS
 
 __all__ = ["collect", "collect_vector"]
@@ -86,12 +87,6 @@ def _check_seed(seed: int | None) -> int | None:
     return int(seed)
 
 
-def _check_n_steps(n_steps: int) -> int:
-    if isinstance(n_steps, bool) or not isinstance(n_steps, int | np.integer) or n_steps < 1:
-        raise ValueError(f"n_steps must be a positive integer, got {n_steps!r}")
-    return int(n_steps)
-
-
 def _steps_to_matrix(buffer: np.ndarray, sensor: str) -> np.ndarray:
     """(N, M, *c) per-step observations -> the (M, N * c) History matrix, c interleaved per step."""
     n, m = buffer.shape[:2]
@@ -138,12 +133,6 @@ def _shaped_actions(action: Any, space: Any, batch: int | None) -> np.ndarray:
         f"the policy returned actions of shape {out.shape} for {batch} sub-environments; a policy "
         f"used with a vector env must answer a batched observation with shape {shape}"
     )
-
-
-def _check_episodes(n_episodes: int) -> int:
-    if isinstance(n_episodes, bool) or not isinstance(n_episodes, int) or n_episodes < 1:
-        raise ValueError(f"n_episodes must be a positive integer, got {n_episodes!r}")
-    return n_episodes
 
 
 class _Episode:
@@ -262,7 +251,7 @@ def collect(
     """
     from lfmdr_gym.policies import as_policy
 
-    n_steps = _check_n_steps(n_steps)
+    n_steps = check_int("n_steps", n_steps, low=1)
     seed = _check_seed(seed)
     pol = as_policy(policy)
     with _env_from(env, make_kwargs) as env:
@@ -408,9 +397,9 @@ def collect_vector(
 
     from lfmdr_gym.policies import PredictPolicy, as_policy
 
-    n_steps = _check_n_steps(n_steps)
+    n_steps = check_int("n_steps", n_steps, low=1)
     seed = _check_seed(seed)
-    n_episodes = _check_episodes(n_episodes)
+    n_episodes = check_int("n_episodes", n_episodes, low=1)
     if not hasattr(envs, "num_envs") or not hasattr(envs, "single_action_space"):
         raise ValueError(f"envs must be a gymnasium VectorEnv, got {type(envs).__name__}")
     pol = as_policy(policy)

@@ -150,6 +150,27 @@ def test_collect_is_deterministic_for_a_seed():
     assert not np.array_equal(a.robot_poses, c.robot_poses)
 
 
+def test_step_counts_are_checked_alike_everywhere():
+    """collect, collect_history and checkpoints_for take numpy integers and refuse bools, floats
+    and counts below 1 with one message naming the argument."""
+    from lfmdr_gym.experiments.engine import check_jobs
+    from lfmdr_gym.experiments.episodes import collect_history
+    from lfmdr_gym.experiments.mapping import checkpoints_for
+
+    assert collect("LFMDR-Visibility-v0", RandomWalkPolicy(), np.int64(3), seed=1).n_steps == 3
+    assert checkpoints_for(np.int64(400), np.int32(200), "visibility") == (200, 400)
+    for bad, message in ((True, "must be an integer, got True"), (2.0, "must be an integer"),
+                         (0, "must be >= 1, got 0")):
+        with pytest.raises(ValueError, match="n_steps " + message):
+            collect("LFMDR-Visibility-v0", RandomWalkPolicy(), bad, seed=1)
+        with pytest.raises(ValueError, match="steps " + message):
+            collect_history("LFMDR-Visibility-v0", bad, seed=1)
+        with pytest.raises(ValueError, match="every " + message):
+            checkpoints_for(400, bad, "visibility")
+    with pytest.raises(ValueError, match="jobs must be"):
+        check_jobs(True)
+
+
 def test_collect_refuses_episodes_shorter_than_n_steps():
     env = gym.make("LFMDR-Visibility-v0", max_episode_steps=10)
     with pytest.raises(ValueError, match="max_episode_steps"):

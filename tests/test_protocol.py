@@ -70,8 +70,10 @@ def test_config_defaults_follow_the_paper():
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        ({"layouts": 0}, "layouts must be a positive integer"),
-        ({"poses": -1}, "poses must be a positive integer"),
+        ({"layouts": 0}, "layouts must be >= 1, got 0"),
+        ({"poses": -1}, "poses must be >= 1"),
+        ({"layouts": True}, "layouts must be an integer, got True"),
+        ({"every": 2.0}, "every must be an integer"),
         ({"steps": 250, "every": 100}, r"steps \(250\) must be a multiple of every \(100\)"),
         ({"methods": ["LPCA", "NOPE"]}, "unknown method 'NOPE'"),
         ({"sensor": "smell"}, "sensor must be one of"),

@@ -24,7 +24,7 @@ _PREPARED = False
 
 
 def check_jobs(jobs: int) -> int:
-    if not isinstance(jobs, int | np.integer) or jobs == 0 or jobs < -1:
+    if isinstance(jobs, bool) or not isinstance(jobs, int | np.integer) or jobs == 0 or jobs < -1:
         raise ValueError(f"jobs must be a positive integer or -1 (all cores), got {jobs!r}")
     return int(jobs)
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from lfmdr_gym.experiments.store import ensure_writable_dir
 from lfmdr_gym.history import History
+from lfmdr_gym.world import check_int
 
 __all__ = ["Episode", "collect_episode", "collect_history", "derived_seed", "describe_history"]
 
@@ -110,8 +111,7 @@ def collect_history(
     if policy not in POLICIES:
         raise ValueError(f"unknown policy {policy!r}; choose from {list(POLICIES)}")
 
-    if not isinstance(steps, int | np.integer) or steps < 1:
-        raise ValueError(f"steps must be a positive integer, got {steps!r}")
+    check_int("steps", steps, low=1)
     if out is not None:
         out = Path(out)
         if out.suffix != ".npz":

@@ -37,6 +37,7 @@ def online_episode(env_id: str, steps: int, *, seed: int | None = 0, policy: str
     from lfmdr_gym.experiments.episodes import make_env
     from lfmdr_gym.policies import POLICIES, as_policy
     from lfmdr_gym.render import draw_map
+    from lfmdr_gym.world import check_int
     from mappers.sensors import FUSED_SENSORS
 
     if ENV_IDS.get(env_id) in FUSED_SENSORS:
@@ -45,8 +46,7 @@ def online_episode(env_id: str, steps: int, *, seed: int | None = 0, policy: str
                          "offline (lfmdr run without --online)")
 
     for name, value in (("steps", steps), ("every", every), ("frame_every", frame_every)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        check_int(name, value, low=1)
     if policy not in POLICIES:
         raise ValueError(f"unknown policy {policy!r}; choose from {list(POLICIES)}")
     env = make_env(env_id, steps, {**dict(env_kwargs or {}), "render_mode": "rgb_array"})

@@ -19,6 +19,7 @@ from lfmdr_gym.experiments.protocol import DEFAULT_EVERY
 from lfmdr_gym.experiments.scoring import evaluate, map_history, score_map
 from lfmdr_gym.experiments.store import ensure_writable_dir
 from lfmdr_gym.history import History
+from lfmdr_gym.world import check_int
 
 __all__ = ["checkpoints_for", "map_history_file", "run_episode"]
 
@@ -29,16 +30,14 @@ def checkpoints_for(steps: int, every: int | None, sensor: str | None) -> tuple[
     With ``every`` None the sensor's default interval is used and ``steps`` is appended when it
     is not a multiple; an explicit ``every`` must divide ``steps``.
     """
-    if not isinstance(steps, int | np.integer) or steps < 1:
-        raise ValueError(f"steps must be a positive integer, got {steps!r}")
+    check_int("steps", steps, low=1)
     if every is None:
         step = min(DEFAULT_EVERY.get(sensor or "", 200), int(steps))
         points = list(range(step, steps + 1, step))
         if points[-1] != steps:
             points.append(int(steps))
         return tuple(points)
-    if not isinstance(every, int | np.integer) or every < 1:
-        raise ValueError(f"every must be a positive integer, got {every!r}")
+    check_int("every", every, low=1)
     if steps % every:
         raise ValueError(f"steps ({steps}) must be a multiple of every ({every})")
     return tuple(range(every, steps + 1, every))

@@ -44,6 +44,7 @@ from lfmdr_gym.experiments.reproducibility import write_environment
 from lfmdr_gym.experiments.scoring import evaluate
 from lfmdr_gym.experiments.store import RESULTS, ResultStore, ensure_writable_dir
 from lfmdr_gym.history import History, HistoryFileError
+from lfmdr_gym.world import check_int
 from mappers.sensors import check_sensor
 
 __all__ = ["DEFAULT_EVERY", "ProtocolConfig", "ProtocolSummary", "Unit", "run_protocol",
@@ -115,12 +116,9 @@ class ProtocolConfig:
             object.__setattr__(self, "sensor", mode)
         check_sensor(self.sensor)
         for name in ("layouts", "poses", "steps"):
-            value = getattr(self, name)
-            if not isinstance(value, int | np.integer) or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        every = DEFAULT_EVERY[self.sensor] if self.every is None else self.every
-        if not isinstance(every, int | np.integer) or every < 1:
-            raise ValueError(f"every must be a positive integer, got {every!r}")
+            check_int(name, getattr(self, name), low=1)
+        every = check_int("every", DEFAULT_EVERY[self.sensor] if self.every is None else self.every,
+                          low=1)
         if self.steps % every:
             raise ValueError(
                 f"steps ({self.steps}) must be a multiple of every ({every}): the last checkpoint is N"
