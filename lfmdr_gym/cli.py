@@ -16,7 +16,7 @@ from collections.abc import Sequence
 from typing import Any
 
 _POLICY_HELP = ("exploration policy, a name of lfmdr_gym.POLICIES (random-walk, coverage, "
-                "coverage-scan, rl, spread)")
+                "coverage-scan, rl, spread, even)")
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130

@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from lfmdr_gym.policies import RandomWalkPolicy
+from lfmdr_gym.scan_match import contact, matched_advance
 from lfmdr_gym.world import check_real
 
 __all__ = ["CoveragePolicy"]
@@ -53,6 +54,8 @@ class CoveragePolicy(RandomWalkPolicy):
     Attributes: ``visits`` (the grid of visit counts), ``odometry`` (x, y, heading) in the frame
     of the start.
     """
+
+    escape_moves = 0  # random-walk moves after a stopped move (the planners set their own)
 
     def __init__(self, max_turn: float = math.pi / 4, step_length: float = 0.2,
                  robot_radius: float = 0.05, *, cell: float = 0.25, extent: float = 3.0,
@@ -84,14 +87,12 @@ class CoveragePolicy(RandomWalkPolicy):
     def _forget(self) -> None:
         self.visits = np.zeros((self._n, self._n))
         self.odometry = np.zeros(3)
-        self._moved = False
+        self._escape = 0
         self._last: tuple | None = None  # (x, y, heading, turn, ring) of the last move's start
 
     def _correct(self, prox: np.ndarray) -> None:
         """Redo the last move's dead reckoning now that the ring after it is known: a move ends
         free after the full step, or in contact after the advance a scan match gives."""
-        from lfmdr_gym.scan_match import contact, matched_advance
-
         x, y, heading, turn, before = self._last
         advance = self.step_length
         if contact(prox, self.robot_radius):
@@ -123,12 +124,51 @@ class CoveragePolicy(RandomWalkPolicy):
             score += weight * np.where(room >= d, counts, self.visits.max())
         return score
 
+    def _sense(self, prox: np.ndarray) -> bool:
+        """Take in one ring: re-reckon the last move from it (with ``correct_drift``), remember
+        the viewpoint (:meth:`_remember`), and say whether this move is an escape, a random-walk
+        move (one of ``escape_moves``, 0 here) after a move the physics stopped short."""
+        stopped = False
+        if self._last is not None:
+            stopped = contact(prox, self.robot_radius)
+            self._correct(prox)
+        self._remember(prox)
+        if stopped:
+            self._escape = self.escape_moves
+        if self._escape > 0:
+            self._escape -= 1
+            return True
+        return False
+
+    def _remember(self, prox: np.ndarray) -> None:
+        """Count a visit to the viewpoint's cell."""
+        self.visits[self._cells(self.odometry[None, :2])] += 1
+
+    def _plans(self, proximity: np.ndarray, turns: np.ndarray,
+               later: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Every plan that starts with one of ``turns`` (t,) and goes on with the turns of a row
+        of ``later`` (p, k - 1), turn-major: the plans (t * p, k), their points' coordinates in
+        the odometry frame (two arrays (t * p, k)), and whether each point is blocked (the ring's
+        ray toward it reports an obstacle before it, a robot radius included)."""
+        x, y, heading = self.odometry
+        plans = np.concatenate([np.repeat(turns, len(later))[:, None],
+                                np.tile(later, (turns.size, 1))], axis=1)
+        rel = np.cumsum(plans, axis=1)  # headings relative to the current one
+        step = self.step_length
+        px = step * np.cumsum(np.cos(rel), axis=1)  # plan points in the robot's frame
+        py = step * np.cumsum(np.sin(rel), axis=1)
+        n = proximity.size
+        dist = np.hypot(px, py)
+        ray = np.round(np.arctan2(py, px) / (2.0 * np.pi / n)).astype(int) % n
+        limit = np.minimum(dist + self.robot_radius, self.proximity_range * (1.0 - 1e-6))
+        blocked = proximity[ray] < limit
+        ch, sh = math.cos(heading), math.sin(heading)
+        return plans, x + ch * px - sh * py, y + sh * px + ch * py, blocked
+
     def __call__(self, observation: Mapping[str, Any]) -> np.ndarray:
         """The heading change for one observation, shape (1,)."""
         prox = self._proximity(observation)
-        if self.correct_drift and self._last is not None:
-            self._correct(prox)
-        self.visits[self._cells(self.odometry[None, :2])] += 1
+        self._sense(prox)
         mt = self.max_turn
         turns = self.rng.uniform(-mt, mt, self.n_tries)
         return self._move(prox, turns[np.argsort(self._scores(prox, turns), kind="stable")])

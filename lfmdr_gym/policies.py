@@ -113,6 +113,18 @@ def _batch_size(observation: Any) -> int | None:
     return None
 
 
+def base_env(env: Any) -> Any:
+    """The unwrapped LFMDR env behind ``env`` (wrapped, or a vector env: its sub-env 0), or
+    ``env`` itself when it is neither; a policy factory reads its geometry from it."""
+    base = getattr(env, "unwrapped", env)
+    if hasattr(env, "get_attr") and not hasattr(base, "world"):  # vector env: ask sub-env 0
+        try:
+            base = env.get_attr("unwrapped")[0]
+        except (AttributeError, IndexError):
+            pass
+    return base
+
+
 class RandomWalkPolicy:
     """The paper's agent (Yairi 2007, §4.1): a random walk with reactive obstacle avoidance.
 
@@ -175,12 +187,7 @@ class RandomWalkPolicy:
         ``env`` may be an :class:`~lfmdr_gym.env.LFMDREnv` (wrapped or not) or a vector env of
         them; what cannot be read keeps its default, and keywords override.
         """
-        base = getattr(env, "unwrapped", env)
-        if hasattr(env, "get_attr") and not hasattr(base, "world"):  # vector env: ask sub-env 0
-            try:
-                base = env.get_attr("unwrapped")[0]
-            except (AttributeError, IndexError):
-                pass
+        base = base_env(env)
         world = getattr(base, "world", None)
         found = {
             "max_turn": getattr(base, "max_turn", None),
@@ -386,6 +393,12 @@ def _spread(env: Any, **kwargs: Any) -> Any:
     return SpreadPolicy.for_env(env, **kwargs)
 
 
+def _even(env: Any, **kwargs: Any) -> Any:
+    from lfmdr_gym.even import EvenPolicy
+
+    return EvenPolicy.for_env(env, **kwargs)
+
+
 def _rl(env: Any, **kwargs: Any) -> Any:
     from lfmdr_gym.rl_policy import MLPExplorationPolicy
 
@@ -398,10 +411,11 @@ POLICIES: Mapping[str, Callable[..., Any]] = MappingProxyType({
     "coverage-scan": _coverage_scan,
     "rl": _rl,
     "spread": _spread,
+    "even": _even,
 })
 """Name -> factory ``factory(env, **kwargs) -> policy``: the exploration policies ``lfmdr collect
 --policy NAME`` offers. A factory reads only the env's geometry (turn limit, step length, robot
-and object radii) and spaces; the policy then sees observations only (:func:`check_policy`).
+and object radii, the room's size) and spaces; the policy then sees observations only (:func:`check_policy`).
 
 - ``"random-walk"``: the paper's agent (:class:`RandomWalkPolicy`).
 - ``"coverage"``: even coverage from a dead-reckoned visit memory
@@ -413,6 +427,9 @@ and object radii) and spaces; the policy then sees observations only (:func:`che
 - ``"spread"``: viewpoints spread evenly at the scale of the step (a kernel density of the
   drift-corrected dead-reckoned viewpoints, three-move look-ahead, a pull toward unvisited
   seen-free ground; :class:`lfmdr_gym.spread.SpreadPolicy`).
+- ``"even"``: plans of three moves that keep the coverage of the room even (the room placed
+  from the walls the ring sees, which also correct the dead reckoning;
+  :class:`lfmdr_gym.even.EvenPolicy`); the fastest mapper of these.
 """
 
 

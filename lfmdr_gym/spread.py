@@ -35,7 +35,6 @@ from typing import Any
 import numpy as np
 
 from lfmdr_gym.exploration import CoveragePolicy
-from lfmdr_gym.scan_match import contact
 from lfmdr_gym.world import check_int, check_real
 
 __all__ = ["SpreadPolicy"]
@@ -92,7 +91,6 @@ class SpreadPolicy(CoveragePolicy):
         self._hit = np.zeros((n, n), dtype=bool)
         self._nearest = np.full((n, n), np.inf)  # distance of each cell to the nearest viewpoint
         self._points: list[tuple[float, float]] = []
-        self._escape = 0
 
     @property
     def viewpoints(self) -> np.ndarray:
@@ -134,22 +132,10 @@ class SpreadPolicy(CoveragePolicy):
 
     def _scores(self, proximity: np.ndarray, turns: np.ndarray) -> np.ndarray:
         """The cost of the best three-move plan starting with each turn; lower is better."""
-        x, y, heading = self.odometry
+        x, y = self.odometry[:2]
         t = turns.size
-        plans = np.concatenate([np.repeat(turns, len(self._later))[:, None],
-                                np.tile(self._later, (t, 1))], axis=1)  # (t * fan^2, 3)
-        rel = np.cumsum(plans, axis=1)  # headings relative to the current one
+        plans, wx, wy, blocked = self._plans(proximity, turns, self._later)
         step = self.step_length
-        px = step * np.cumsum(np.cos(rel), axis=1)  # plan points in the robot's frame
-        py = step * np.cumsum(np.sin(rel), axis=1)
-        # A plan point is blocked when the ray toward it reports an obstacle before it.
-        n = proximity.size
-        dist = np.hypot(px, py)
-        ray = np.round(np.arctan2(py, px) / (2.0 * np.pi / n)).astype(int) % n
-        limit = np.minimum(dist + self.robot_radius, self.proximity_range * (1.0 - 1e-6))
-        blocked = proximity[ray] < limit
-        ch, sh = math.cos(heading), math.sin(heading)
-        wx, wy = x + ch * px - sh * py, y + sh * px + ch * py  # in the odometry frame
         pts = self.viewpoints
         near = pts[(pts[:, 0] - x) ** 2 + (pts[:, 1] - y) ** 2 < (4 * self.sigma + 3 * step) ** 2]
         s2 = 2.0 * self.sigma ** 2
@@ -172,16 +158,9 @@ class SpreadPolicy(CoveragePolicy):
     def __call__(self, observation: Mapping[str, Any]) -> np.ndarray:
         """The heading change for one observation, shape (1,)."""
         prox = self._proximity(observation)
-        stopped = self._last is not None and contact(prox, self.robot_radius)
-        if self._last is not None:
-            self._correct(prox)
-        self._remember(prox)
-        if stopped:
-            self._escape = self.escape_moves
+        escaping = self._sense(prox)
         turns = self.rng.uniform(-self.max_turn, self.max_turn, self.n_tries)
-        if self._escape > 0:
-            self._escape -= 1  # a random-walk move: the draws in the order drawn
-        else:
+        if not escaping:  # (an escape is a random-walk move: the draws in the order drawn)
             turns = turns[np.argsort(self._scores(prox, turns), kind="stable")]
         return self._move(prox, turns)
 

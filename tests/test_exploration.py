@@ -13,7 +13,8 @@ from lfmdr_gym.exploration import CoveragePolicy
 from lfmdr_gym.policies import check_policy
 
 GEOMETRY = {"max_turn", "step_length", "world", "robot_radius", "object_radius", "unwrapped",
-            "observation_space", "action_space", "single_action_space"}
+            "observation_space", "action_space", "single_action_space",
+            "arena_size"}  # the room's size: configuration, as the step length is
 
 
 class GroundTruthRead(Exception):

@@ -1,0 +1,197 @@
+"""An exploration policy that covers the room evenly: the one whose 500-step map matches the
+random walk's 2,000-step map.
+
+A visibility map is built from how often two objects are seen together, i.e. from where the
+robot's viewpoints fall in the discs that see each object; it is best when the viewpoints cover
+the room evenly (``docs/online-and-exploration.md``). :class:`EvenPolicy` measures evenness
+directly and plans for it:
+
+- its coverage is a sum of Gaussian kernels (width ``sigma``) at its viewpoints on a fine grid
+  (``grid``) in its own dead-reckoned frame (the drift-corrected odometry of
+  :class:`~lfmdr_gym.exploration.CoveragePolicy` with ``correct_drift=True``);
+- the ground to cover is the room: the walls the proximity ring shows, with the room's size,
+  place its rectangle (:class:`~lfmdr_gym.walls.WallFrame`); before a wall is seen, the convex
+  hull of the ground the ring has shown free;
+- each of ``fan`` turns is scored by the best plan of ``1 + lookahead`` moves that starts with
+  it (the later turns from the same fan): the variance of the coverage over the room once the
+  plan's kernels are added (lower is more even); a plan through a point the ring does not
+  report free is blocked; the best turn the collision check passes is taken;
+- once the walls of an axis are fixed, seeing them again corrects the dead reckoning (its drift
+  stays at millimetres over 500 steps);
+- a move the physics stopped short (the ring shows contact) is followed by ``escape_moves``
+  random-walk moves, so that a blocked plan is not tried again and again.
+
+It knows only what it senses, what it did, and the room's size (``arena_size``, configuration
+like the step length: :meth:`EvenPolicy.for_env` reads it from the env's world), never the pose
+or the layout in ``info``. With ``arena_size=None`` it covers the seen-free hull only.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+from lfmdr_gym.exploration import CoveragePolicy
+from lfmdr_gym.policies import base_env
+from lfmdr_gym.walls import WallFrame
+from lfmdr_gym.world import check_int, check_real
+
+__all__ = ["EvenPolicy"]
+
+
+class EvenPolicy(CoveragePolicy):
+    """Plan moves that keep the coverage of the room even (module docstring).
+
+    Args:
+        sigma: width of the Gaussian kernel of a viewpoint's coverage [m].
+        grid: side of the cells the coverage is kept on [m].
+        fan: number of turns, evenly over ``[-max_turn, max_turn]``, tried for each move of a
+            plan, at least 2 (a plan count of ``fan ** (1 + lookahead)``).
+        lookahead: moves planned after the first (0: greedy).
+        arena_size: the room's side [m], or None to cover the seen-free hull only.
+        wall_sightings: sightings of an axis's walls that fix them (:class:`~lfmdr_gym.walls.WallFrame`).
+        escape_moves: random-walk moves after a stopped move (0: none).
+        max_turn, step_length, robot_radius, extent, proximity_range, seed, and the collision
+            check's keywords: as for :class:`~lfmdr_gym.exploration.CoveragePolicy` (its drift
+            correction is always on, its ``cell`` grid unused; ``extent`` bounds the coverage
+            grid around the start).
+
+    One observation at a time (it keeps per-episode memory); :meth:`reset` forgets it.
+    Attributes: ``coverage`` (the grid of summed kernels), ``odometry`` (x, y, heading) in the
+    frame of the start, ``walls`` (the :class:`~lfmdr_gym.walls.WallFrame`, or None).
+    """
+
+    def __init__(self, max_turn: float = math.pi / 4, step_length: float = 0.2,
+                 robot_radius: float = 0.05, *, sigma: float = 0.1, grid: float = 0.05,
+                 fan: int = 9, lookahead: int = 2, arena_size: float | None = 2.5,
+                 wall_sightings: int = 3, escape_moves: int = 3, **kwargs: Any) -> None:
+        if "correct_drift" in kwargs and kwargs["correct_drift"] is not True:
+            raise ValueError("EvenPolicy always corrects its drift; correct_drift must be True")
+        kwargs["correct_drift"] = True
+        self.sigma = check_real("sigma", sigma, low=0.0, low_open=True)
+        self.grid = check_real("grid", grid, low=0.0, low_open=True)
+        self.fan = check_int("fan", fan, low=2)
+        self.lookahead = check_int("lookahead", lookahead, low=0)
+        self.escape_moves = check_int("escape_moves", escape_moves, low=0)
+        self.arena_size = None if arena_size is None else check_real(
+            "arena_size", arena_size, low=0.0, low_open=True)
+        self.wall_sightings = check_int("wall_sightings", wall_sightings, low=1)
+        self._ready = False
+        super().__init__(max_turn, step_length, robot_radius, **kwargs)
+        if self.grid > self.extent:
+            raise ValueError(f"grid must be at most extent ({self.extent:g}), got {grid!r}")
+        self.walls = None if self.arena_size is None else WallFrame(
+            self.arena_size, self.robot_radius, self.proximity_range, self.wall_sightings)
+        n = 2 * int(math.ceil(self.extent / self.grid))
+        centres = (np.arange(n) + 0.5) * self.grid - self.extent
+        gx, gy = np.meshgrid(centres, centres, indexing="ij")
+        self._points = np.column_stack([gx.ravel(), gy.ravel()])  # the cells' centres
+        self._side = n
+        fan_turns = np.linspace(-self.max_turn, self.max_turn, self.fan)
+        self._fan = fan_turns
+        self._later = np.array(list(itertools.product(fan_turns, repeat=self.lookahead)),
+                               dtype=np.float64).reshape(self.fan ** self.lookahead, self.lookahead)
+        self._ready = True
+        self._forget()
+
+    @classmethod
+    def for_env(cls, env: Any, **kwargs: Any) -> EvenPolicy:
+        """As :meth:`CoveragePolicy.for_env`, plus the room's size from the env's world
+        (``world.arena_size``: configuration, as the step length is; not the layout)."""
+        size = getattr(getattr(base_env(env), "world", None), "arena_size", None)
+        if size is not None:
+            kwargs.setdefault("arena_size", float(size))
+        return super().for_env(env, **kwargs)
+
+    def _forget(self) -> None:
+        super()._forget()
+        if not self._ready:  # (the base class's __init__ calls this first)
+            return
+        self.coverage = np.zeros(self._side * self._side)
+        self._mask = np.zeros(self._side * self._side, dtype=bool)
+        self._hull = np.zeros((0, 2))
+        if self.walls is not None:
+            self.walls.reset()
+
+    def _patch(self, x: float, y: float, reach: float) -> np.ndarray:
+        """Flat indices of the grid's cells within ``reach`` (per axis) of (x, y)."""
+        lo = np.floor((np.array([x, y]) - reach + self.extent) / self.grid).astype(int)
+        hi = np.ceil((np.array([x, y]) + reach + self.extent) / self.grid).astype(int) + 1
+        lo, hi = np.maximum(lo, 0), np.minimum(hi, self._side)
+        ii, jj = np.meshgrid(np.arange(lo[0], hi[0]), np.arange(lo[1], hi[1]), indexing="ij")
+        return (ii * self._side + jj).ravel()
+
+    def _kernel(self, cells: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """The coverage kernels at points (x, y) (any shape ``s``) over ``cells``: ``s + (c,)``."""
+        p = self._points[cells]
+        d2 = (p[:, 0] - x[..., None]) ** 2 + (p[:, 1] - y[..., None]) ** 2
+        return np.exp(-d2 / (2.0 * self.sigma ** 2))
+
+    def _remember(self, prox: np.ndarray) -> None:
+        """Relocalise on the walls, add the viewpoint's kernel, and update the room's mask."""
+        if self.walls is not None:
+            shift = self.walls.observe(prox, self.odometry)
+            self.odometry = self.odometry + np.array([shift[0], shift[1], 0.0])
+        x, y, heading = self.odometry
+        cells = self._patch(x, y, 4.0 * self.sigma)
+        self.coverage[cells] += self._kernel(cells, np.array(x), np.array(y))
+        # the ground the ring shows free: each ray up to a robot radius short of its reading
+        n = prox.size
+        angles = heading + 2.0 * np.pi * np.arange(n) / n
+        reach = np.maximum(prox - self.robot_radius, 0.0)
+        ends = np.column_stack([x + reach * np.cos(angles), y + reach * np.sin(angles)])
+        pts = np.vstack([self._hull, ends, [[x, y]]])
+        inside = None if self.walls is None else self.walls.inside(self._points, pts)
+        try:
+            hull = ConvexHull(pts)
+        except QhullError:  # all the free ground on a line (a ring reading zero): keep the points
+            self._hull = pts
+        else:
+            self._hull = pts[hull.vertices]
+            if inside is None:
+                eq = hull.equations
+                inside = ((self._points @ eq[:, :2].T + eq[:, 2]) <= 1e-9).all(axis=1)
+        if inside is not None:
+            self._mask = inside
+
+    def _scores(self, proximity: np.ndarray, turns: np.ndarray) -> np.ndarray:
+        """The coverage's variance over the room after the best plan starting with each turn
+        (turns whose every plan is blocked after the rest, by their own variance); lower is
+        better."""
+        x, y = self.odometry[:2]
+        plans, wx, wy, blocked = self._plans(proximity, turns, self._later)
+        cells = self._patch(x, y, plans.shape[1] * self.step_length + 4.0 * self.sigma)
+        cells = cells[self._mask[cells]]
+        room = self.coverage[self._mask]
+        n = max(room.size, 1)
+        s1, s2 = float(room.sum()), float((room ** 2).sum())
+        added = self._kernel(cells, wx, wy).sum(axis=1)  # (plans, cells): the plan's kernels
+        here = self.coverage[cells]
+        var = ((s2 + (2.0 * here * added + added ** 2).sum(axis=1)) / n
+               - ((s1 + added.sum(axis=1)) / n) ** 2)
+        best = np.where(blocked.any(axis=1), np.inf, var).reshape(turns.size, -1).min(axis=1)
+        if np.isfinite(best).all():
+            return best
+        first = self._kernel(cells, wx[::len(self._later), 0], wy[::len(self._later), 0])
+        greedy = ((s2 + (2.0 * here * first + first ** 2).sum(axis=1)) / n
+                  - ((s1 + first.sum(axis=1)) / n) ** 2)
+        return np.where(np.isfinite(best), best, 1e6 + greedy)
+
+    def __call__(self, observation: Mapping[str, Any]) -> np.ndarray:
+        """The heading change for one observation, shape (1,)."""
+        prox = self._proximity(observation)
+        if self._sense(prox):
+            return self._move(prox, self.rng.uniform(-self.max_turn, self.max_turn, self.n_tries))
+        # ties between turns (e.g. all plans blocked alike) are broken by a tiny random jitter
+        turns = np.clip(self._fan + self.rng.uniform(-1e-6, 1e-6, self.fan),
+                        -self.max_turn, self.max_turn)
+        return self._move(prox, turns[np.argsort(self._scores(prox, turns), kind="stable")])
+
+    def __repr__(self) -> str:
+        return (f"EvenPolicy(sigma={self.sigma:g}, fan={self.fan}, lookahead={self.lookahead}, "
+                f"arena_size={self.arena_size!r}, seed={self.seed!r})")
