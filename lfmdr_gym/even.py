@@ -85,6 +85,9 @@ class EvenPolicy(CoveragePolicy):
         super().__init__(max_turn, step_length, robot_radius, **kwargs)
         if self.grid > self.extent:
             raise ValueError(f"grid must be at most extent ({self.extent:g}), got {grid!r}")
+        if self.arena_size is not None and self.extent < self.arena_size:
+            raise ValueError(f"extent ({self.extent:g}) must be at least arena_size "
+                             f"({self.arena_size:g}): the room may lie that far from the start")
         self.walls = None if self.arena_size is None else WallFrame(
             self.arena_size, self.robot_radius, self.proximity_range, self.wall_sightings)
         n = 2 * int(math.ceil(self.extent / self.grid))
@@ -102,10 +105,13 @@ class EvenPolicy(CoveragePolicy):
     @classmethod
     def for_env(cls, env: Any, **kwargs: Any) -> EvenPolicy:
         """As :meth:`CoveragePolicy.for_env`, plus the room's size from the env's world
-        (``world.arena_size``: configuration, as the step length is; not the layout)."""
+        (``world.arena_size``: configuration, as the step length is; not the layout) and a
+        coverage grid (``extent``) that holds the room from any start."""
         size = getattr(getattr(base_env(env), "world", None), "arena_size", None)
         if size is not None:
             kwargs.setdefault("arena_size", float(size))
+        if kwargs.get("arena_size") is not None:  # the grid holds the room from any start
+            kwargs.setdefault("extent", max(3.0, kwargs["arena_size"] + 0.5))
         return super().for_env(env, **kwargs)
 
     def _forget(self) -> None:

@@ -145,10 +145,20 @@ def test_even_covers_the_room_more_evenly_than_the_random_walk():
     ({"lookahead": -1}, "lookahead"), ({"arena_size": 0.0}, "arena_size"),
     ({"arena_size": 0.05}, "robot_radius"), ({"wall_sightings": 0}, "wall_sightings"),
     ({"escape_moves": -1}, "escape_moves"), ({"correct_drift": False}, "correct_drift"),
+    ({"arena_size": 4.0}, "extent"),
 ])
 def test_even_refuses_bad_arguments(kwargs, name):
     with pytest.raises(ValueError, match=name):
         EvenPolicy(**kwargs)
+
+
+def test_even_fits_its_grid_to_a_larger_room():
+    env = gym.make("LFMDR-Visibility-v0", max_episode_steps=100, arena_size=5.0, n_objects=20)
+    policy = EvenPolicy.for_env(env, seed=0)
+    assert policy.arena_size == 5.0 and policy.extent >= 5.0
+    history = collect(env, policy, 60, seed=1)
+    assert history.n_steps == 60
+    env.close()
 
 
 def test_even_without_the_room_size_covers_the_seen_free_ground():
