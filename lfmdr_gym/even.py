@@ -166,6 +166,25 @@ class EvenPolicy(CoveragePolicy):
         if inside is not None:
             self._mask = inside
 
+    def _plan_kernels(self, cells: np.ndarray, wx: np.ndarray, wy: np.ndarray) -> np.ndarray:
+        """Each plan's kernels summed over ``cells``, (plans, cells), from its points ``wx, wy``
+        (plans, moves). The plans come turn-major, so a plan's first j + 1 turns fix its first
+        j + 1 points and every ``fan ** (moves - 1 - j)`` consecutive plans share point j: its
+        kernel is computed once per distinct point (819 instead of 2,187 for the default fan and
+        look-ahead; the same values, summed in the same order)."""
+        total = None
+        plans, moves = wx.shape
+        first = plans // self.fan ** (moves - 1)  # the first turns tried
+        for j in range(moves):
+            shared = self.fan ** (moves - 1 - j)
+            rows = np.arange(0, plans, shared)
+            kernel = self._kernel(cells, wx[rows, j], wy[rows, j])  # (plans // shared, cells)
+            # broadcast over the plans that share the point: (first, fan x j, 1 x rest, cells)
+            kernel = kernel.reshape((first,) + (self.fan,) * j + (1,) * (moves - 1 - j)
+                                    + (cells.size,))
+            total = kernel if total is None else total + kernel
+        return total.reshape(plans, cells.size)
+
     def _scores(self, proximity: np.ndarray, turns: np.ndarray) -> np.ndarray:
         """The coverage's variance over the room after the best plan starting with each turn
         (turns whose every plan is blocked after the rest, by their own variance); lower is
@@ -177,7 +196,7 @@ class EvenPolicy(CoveragePolicy):
         room = self.coverage[self._mask]
         n = max(room.size, 1)
         s1, s2 = float(room.sum()), float((room ** 2).sum())
-        added = self._kernel(cells, wx, wy).sum(axis=1)  # (plans, cells): the plan's kernels
+        added = self._plan_kernels(cells, wx, wy)  # (plans, cells)
         here = self.coverage[cells]
         var = ((s2 + (2.0 * here * added + added ** 2).sum(axis=1)) / n
                - ((s1 + added.sum(axis=1)) / n) ** 2)

@@ -139,6 +139,19 @@ def test_even_covers_the_room_more_evenly_than_the_random_walk():
     env.close()
 
 
+@pytest.mark.parametrize("lookahead", [0, 1, 2])
+def test_even_scores_each_plan_by_all_its_kernels(lookahead):
+    # the shared-prefix evaluation gives exactly the plain sum over each plan's points
+    policy = EvenPolicy(lookahead=lookahead, fan=5, seed=0)
+    policy.odometry = np.array([0.3, -0.2, 0.7])
+    ring = _ring(0.3, -0.2, 0.7, discs=[(0.6, 0.0, 0.05)])
+    _, wx, wy, _ = policy._plans(ring, policy._fan, policy._later)
+    assert wx.shape == (5 ** (lookahead + 1), lookahead + 1)
+    for cells in (policy._patch(0.3, -0.2, 0.8), np.array([], dtype=int)):
+        plain = policy._kernel(cells, wx, wy).sum(axis=1)
+        np.testing.assert_array_equal(policy._plan_kernels(cells, wx, wy), plain)
+
+
 @pytest.mark.parametrize("kwargs, name", [
     ({"sigma": 0.0}, "sigma"), ({"sigma": float("nan")}, "sigma"), ({"grid": -0.1}, "grid"),
     ({"grid": 5.0}, "grid"), ({"fan": 1}, "fan"), ({"fan": 2.5}, "fan"), ({"fan": True}, "fan"),
