@@ -122,6 +122,7 @@ class EvenPolicy(CoveragePolicy):
         self.coverage = np.zeros(self._side * self._side)
         self._mask = np.zeros(self._side * self._side, dtype=bool)
         self._hull = np.zeros((0, 2))
+        self._room_fixed = False  # the mask is the fixed walls' rectangle: nothing to update
         if self.walls is not None:
             self.walls.reset()
 
@@ -147,6 +148,8 @@ class EvenPolicy(CoveragePolicy):
         x, y, heading = self.odometry
         cells = self._patch(x, y, 4.0 * self.sigma)
         self.coverage[cells] += self._kernel(cells, np.array(x), np.array(y))
+        if self._room_fixed:
+            return
         # the ground the ring shows free: each ray up to a robot radius short of its reading
         n = prox.size
         angles = heading + 2.0 * np.pi * np.arange(n) / n
@@ -165,6 +168,7 @@ class EvenPolicy(CoveragePolicy):
                 inside = ((self._points @ eq[:, :2].T + eq[:, 2]) <= 1e-9).all(axis=1)
         if inside is not None:
             self._mask = inside
+        self._room_fixed = self.walls is not None and self.walls.fixed
 
     def _plan_kernels(self, cells: np.ndarray, wx: np.ndarray, wy: np.ndarray) -> np.ndarray:
         """Each plan's kernels summed over ``cells``, (plans, cells), from its points ``wx, wy``
@@ -196,17 +200,19 @@ class EvenPolicy(CoveragePolicy):
         room = self.coverage[self._mask]
         n = max(room.size, 1)
         s1, s2 = float(room.sum()), float((room ** 2).sum())
-        added = self._plan_kernels(cells, wx, wy)  # (plans, cells)
         here = self.coverage[cells]
-        var = ((s2 + (2.0 * here * added + added ** 2).sum(axis=1)) / n
-               - ((s1 + added.sum(axis=1)) / n) ** 2)
+
+        def variance(added: np.ndarray) -> np.ndarray:
+            """The room's coverage variance once each row of ``added`` (over ``cells``) is in."""
+            return ((s2 + (2.0 * here * added + added ** 2).sum(axis=1)) / n
+                    - ((s1 + added.sum(axis=1)) / n) ** 2)
+
+        var = variance(self._plan_kernels(cells, wx, wy))
         best = np.where(blocked.any(axis=1), np.inf, var).reshape(turns.size, -1).min(axis=1)
         if np.isfinite(best).all():
             return best
-        first = self._kernel(cells, wx[::len(self._later), 0], wy[::len(self._later), 0])
-        greedy = ((s2 + (2.0 * here * first + first ** 2).sum(axis=1)) / n
-                  - ((s1 + first.sum(axis=1)) / n) ** 2)
-        return np.where(np.isfinite(best), best, 1e6 + greedy)
+        first = variance(self._kernel(cells, wx[::len(self._later), 0], wy[::len(self._later), 0]))
+        return np.where(np.isfinite(best), best, 1e6 + first)
 
     def __call__(self, observation: Mapping[str, Any]) -> np.ndarray:
         """The heading change for one observation, shape (1,)."""

@@ -98,6 +98,11 @@ class WallFrame:
         self.theta: float | None = None
         self.lows: tuple[list[float], list[float]] = ([], [])
 
+    @property
+    def fixed(self) -> bool:
+        """Whether both axes' walls are fixed (the rectangle no longer changes)."""
+        return all(len(lows) >= self.sightings for lows in self.lows)
+
     def _rotation(self) -> np.ndarray:
         """Odometry frame -> the walls' frame (axis 0 and 1 along the walls)."""
         c, s = math.cos(self.theta), math.sin(self.theta)
