@@ -428,8 +428,9 @@ and object radii, the room's size) and spaces; the policy then sees observations
   drift-corrected dead-reckoned viewpoints, three-move look-ahead, a pull toward unvisited
   seen-free ground; :class:`lfmdr_gym.spread.SpreadPolicy`).
 - ``"even"``: plans of three moves that keep the coverage of the room even (the room placed
-  from the walls the ring sees, which also correct the dead reckoning;
-  :class:`lfmdr_gym.even.EvenPolicy`); the fastest mapper of these.
+  from the walls the ring sees, which also correct the dead reckoning; the moves simulated
+  among cylinders fitted to every ring hit so far; :class:`lfmdr_gym.even.EvenPolicy`); the
+  fastest mapper of these.
 """
 
 

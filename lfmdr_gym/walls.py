@@ -131,6 +131,34 @@ class WallFrame:
                 self.lows[axis].append(low)
         return shift
 
+    def halfplanes(self) -> list:
+        """The room's bounds on the robot's centre from the axes whose walls have been seen:
+        (normal (2,), offset) pairs, the centre fitting where ``normal . p >= offset`` (none
+        before a wall is seen)."""
+        if self.theta is None:
+            return []
+        rot = self._rotation()
+        width = self.arena_size - 2.0 * self.robot_radius
+        out = []
+        for axis in (0, 1):
+            if self.lows[axis]:
+                lo = float(np.median(self.lows[axis])) + self.robot_radius
+                out += [(rot[axis], lo), (-rot[axis], -(lo + width))]
+        return out
+
+    def on_walls(self, points: np.ndarray, tolerance: float) -> np.ndarray:
+        """Whether each of ``points`` (k, 2) lies within ``tolerance`` of a wall seen so far."""
+        near = np.zeros(len(points), dtype=bool)
+        if self.theta is None:
+            return near
+        p = points @ self._rotation().T
+        for axis in (0, 1):
+            if self.lows[axis]:
+                lo = float(np.median(self.lows[axis]))
+                near |= ((np.abs(p[:, axis] - lo) <= tolerance)
+                         | (np.abs(p[:, axis] - lo - self.arena_size) <= tolerance))
+        return near
+
     def inside(self, points: np.ndarray, free: np.ndarray) -> np.ndarray:
         """Whether each of ``points`` (k, 2) is inside the room's rectangle (where the robot's
         centre fits), or None before any wall is seen. An axis with no sighting yet spans the
