@@ -17,6 +17,8 @@ first predicted contact. Both see only what the ring reported and the radius of 
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
@@ -74,7 +76,8 @@ class ObstacleMap:
         """Hits kept so far."""
         return sum(len(p) for p in self._points)
 
-    def centres(self, near: np.ndarray, reach: float, drop=None) -> np.ndarray:
+    def centres(self, near: np.ndarray, reach: float,
+                drop: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
         """The cylinders' centres (k, 2) from the hits within ``reach`` of ``near`` (2,):
         per cluster of hits the centre of the circle of the objects' radius through them
         (least squares), or, for a cluster of fewer than 3 hits or one that fits no circle, a
@@ -126,7 +129,7 @@ def _fit_circle(points: np.ndarray, radius: float, guess: np.ndarray) -> np.ndar
 
 
 def advance(start: np.ndarray, directions: np.ndarray, length: float, centres: np.ndarray,
-            reach: float, halfplanes=()) -> np.ndarray:
+            reach: float, halfplanes: Sequence = ()) -> np.ndarray:
     """How far (at most ``length``) a point moves from each of ``start`` (P, 2) along the unit
     ``directions`` (P, 2) before it comes within ``reach`` of one of ``centres`` (k, 2) (the
     robot's and a cylinder's radii, plus a margin) or leaves a half-plane of ``halfplanes``

@@ -159,7 +159,7 @@ def test_even_scores_each_plan_by_all_its_kernels(lookahead):
     ({"lookahead": -1}, "lookahead"), ({"arena_size": 0.0}, "arena_size"),
     ({"arena_size": 0.05}, "robot_radius"), ({"wall_sightings": 0}, "wall_sightings"),
     ({"escape_moves": -1}, "escape_moves"), ({"correct_drift": False}, "correct_drift"),
-    ({"arena_size": 4.0}, "extent"),
+    ({"arena_size": 4.0}, "extent"), ({"stop_margin": -0.01}, "stop_margin"),
 ])
 def test_even_refuses_bad_arguments(kwargs, name):
     with pytest.raises(ValueError, match=name):

@@ -116,9 +116,10 @@ def test_even_plans_stop_at_the_cylinders_it_has_seen():
     assert not blocked[0].any()  # turned away: both moves full
 
 
-@pytest.mark.parametrize("kwargs, name", [
-    ({"link": -0.1}, "link"), ({"tolerance": float("nan")}, "tolerance"),
+@pytest.mark.parametrize("args, kwargs, name", [
+    ((-0.01, RANGE), {}, "obstacle_radius"), ((R, 0.0), {}, "proximity_range"),
+    ((R, RANGE), {"link": -0.1}, "link"), ((R, RANGE), {"tolerance": float("nan")}, "tolerance"),
 ])
-def test_obstacle_map_refuses_bad_arguments(kwargs, name):
+def test_obstacle_map_refuses_bad_arguments(args, kwargs, name):
     with pytest.raises(ValueError, match=name):
-        ObstacleMap(R, RANGE, **kwargs)
+        ObstacleMap(*args, **kwargs)
