@@ -146,7 +146,6 @@ class EvenPolicy(CoveragePolicy):
         self._hull = np.zeros((0, 2))
         self._room_fixed = False  # the mask is the fixed walls' rectangle: nothing to update
         self._ring_walls: list = []  # the current ring's walls as half-planes of the centre
-        self._escaping = False
         if self.walls is not None:
             self.walls.reset()
         self.obstacles.reset()
@@ -234,8 +233,7 @@ class EvenPolicy(CoveragePolicy):
             bounds = bounds + self._ring_walls
         bounds = [(normal, offset + margin) for normal, offset in bounds]
         contact = self.robot_radius + self.obstacle_radius + margin
-        plans = np.concatenate([np.repeat(turns, len(later))[:, None],
-                                np.tile(later, (turns.size, 1))], axis=1)
+        plans = self._plan_turns(turns, later)
         headings = heading + np.cumsum(plans, axis=1)
         count, moves = plans.shape
         wx, wy = np.empty((count, moves)), np.empty((count, moves))
@@ -243,7 +241,7 @@ class EvenPolicy(CoveragePolicy):
         # move j is shared by every fan ** (moves - 1 - j) consecutive plans: simulated once
         starts = np.array([[x, y]])
         for j in range(moves):
-            shared = len(later) // self.fan ** j
+            shared = self.fan ** (moves - 1 - j)
             rows = np.arange(0, count, shared)
             units = np.column_stack([np.cos(headings[rows, j]), np.sin(headings[rows, j])])
             starts = np.repeat(starts, len(rows) // len(starts), axis=0)
@@ -253,11 +251,6 @@ class EvenPolicy(CoveragePolicy):
             wy[:, j] = np.repeat(starts[:, 1], shared)
             blocked[:, j] = np.repeat(went < step - 1e-9, shared)
         return plans, wx, wy, blocked
-
-    def _first_choice(self, proximity: np.ndarray, turns: np.ndarray) -> int:
-        """The best-scored turn (the plans already simulated the obstacles), or during an
-        escape the random walk's collision check."""
-        return super()._first_choice(proximity, turns) if self._escaping else 0
 
     def _plan_kernels(self, cells: np.ndarray, wx: np.ndarray, wy: np.ndarray) -> np.ndarray:
         """Each plan's kernels summed over ``cells``, (plans, cells), from its points ``wx, wy``
@@ -306,17 +299,14 @@ class EvenPolicy(CoveragePolicy):
     def __call__(self, observation: Mapping[str, Any]) -> np.ndarray:
         """The heading change for one observation, shape (1,)."""
         prox = self._proximity(observation)
-        if self._sense(prox):
-            self._escaping = True
-            try:
-                return self._move(prox, self.rng.uniform(-self.max_turn, self.max_turn,
-                                                         self.n_tries))
-            finally:
-                self._escaping = False
+        if self._sense(prox):  # an escape: the random walk's move, under its collision check
+            return self._move(prox, self.rng.uniform(-self.max_turn, self.max_turn, self.n_tries))
         # ties between turns (e.g. all plans blocked alike) are broken by a tiny random jitter
         turns = np.clip(self._fan + self.rng.uniform(-1e-6, 1e-6, self.fan),
                         -self.max_turn, self.max_turn)
-        return self._move(prox, turns[np.argsort(self._scores(prox, turns), kind="stable")])
+        # the best turn: its plans already stopped at the obstacles it has sensed
+        return self._move(prox, turns[np.argsort(self._scores(prox, turns), kind="stable")],
+                          check=False)
 
     def __repr__(self) -> str:
         return (f"EvenPolicy(sigma={self.sigma:g}, fan={self.fan}, lookahead={self.lookahead}, "

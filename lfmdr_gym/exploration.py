@@ -144,6 +144,13 @@ class CoveragePolicy(RandomWalkPolicy):
         """Count a visit to the viewpoint's cell."""
         self.visits[self._cells(self.odometry[None, :2])] += 1
 
+    @staticmethod
+    def _plan_turns(turns: np.ndarray, later: np.ndarray) -> np.ndarray:
+        """Every plan (t * p, k) that starts with one of ``turns`` (t,) and goes on with a row
+        of ``later`` (p, k - 1), turn-major."""
+        return np.concatenate([np.repeat(turns, len(later))[:, None],
+                               np.tile(later, (turns.size, 1))], axis=1)
+
     def _plans(self, proximity: np.ndarray, turns: np.ndarray,
                later: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Every plan that starts with one of ``turns`` (t,) and goes on with the turns of a row
@@ -151,8 +158,7 @@ class CoveragePolicy(RandomWalkPolicy):
         the odometry frame (two arrays (t * p, k)), and whether each point is blocked (the ring's
         ray toward it reports an obstacle before it, a robot radius included)."""
         x, y, heading = self.odometry
-        plans = np.concatenate([np.repeat(turns, len(later))[:, None],
-                                np.tile(later, (turns.size, 1))], axis=1)
+        plans = self._plan_turns(turns, later)
         rel = np.cumsum(plans, axis=1)  # headings relative to the current one
         step = self.step_length
         px = step * np.cumsum(np.cos(rel), axis=1)  # plan points in the robot's frame
@@ -187,10 +193,11 @@ class CoveragePolicy(RandomWalkPolicy):
             self._stuck_sign = np.zeros(1)
         return prox
 
-    def _move(self, prox: np.ndarray, turns: np.ndarray) -> np.ndarray:
-        """Take the first of ``turns`` (best first) the collision check passes, dead-reckon the
+    def _move(self, prox: np.ndarray, turns: np.ndarray, check: bool = True) -> np.ndarray:
+        """Take the first of ``turns`` (best first) the collision check passes (with ``check``;
+        else the first, for a planner that has simulated the obstacles itself), dead-reckon the
         move, and return the action, shape (1,)."""
-        first = self._first_choice(prox, turns)
+        first = self._first_choice(prox, turns) if check else 0
         if first < 0:
             turn = self._unstick(0, prox)
         else:

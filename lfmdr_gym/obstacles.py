@@ -86,6 +86,7 @@ class ObstacleMap:
         if not self._points:
             return np.zeros((0, 2))
         points, rays = np.vstack(self._points), np.vstack(self._rays)
+        self._points, self._rays = [points], [rays]  # stacked once: later calls add the new
         close = np.hypot(points[:, 0] - near[0], points[:, 1] - near[1]) < reach
         points, rays = points[close], rays[close]
         if drop is not None and len(points):

@@ -125,11 +125,16 @@ class WallFrame:
             low = wall if robot > wall else wall - self.arena_size
             if len(self.lows[axis]) >= self.sightings:
                 offset = np.zeros(2)
-                offset[axis] = float(np.median(self.lows[axis])) - low
+                offset[axis] = self._low(axis) - low
                 shift += rot.T @ offset
             else:
                 self.lows[axis].append(low)
         return shift
+
+    def _low(self, axis: int) -> float | None:
+        """The low wall's fixed offset along ``axis`` (the median of its sightings), or None
+        before any sighting."""
+        return float(np.median(self.lows[axis])) if self.lows[axis] else None
 
     def halfplanes(self) -> list:
         """The room's bounds on the robot's centre from the axes whose walls have been seen:
@@ -141,8 +146,9 @@ class WallFrame:
         width = self.arena_size - 2.0 * self.robot_radius
         out = []
         for axis in (0, 1):
-            if self.lows[axis]:
-                lo = float(np.median(self.lows[axis])) + self.robot_radius
+            low = self._low(axis)
+            if low is not None:
+                lo = low + self.robot_radius
                 out += [(rot[axis], lo), (-rot[axis], -(lo + width))]
         return out
 
@@ -153,8 +159,8 @@ class WallFrame:
             return near
         p = points @ self._rotation().T
         for axis in (0, 1):
-            if self.lows[axis]:
-                lo = float(np.median(self.lows[axis]))
+            lo = self._low(axis)
+            if lo is not None:
                 near |= ((np.abs(p[:, axis] - lo) <= tolerance)
                          | (np.abs(p[:, axis] - lo - self.arena_size) <= tolerance))
         return near
@@ -170,8 +176,9 @@ class WallFrame:
         width = self.arena_size - 2.0 * self.robot_radius
         ok = np.ones(len(points), dtype=bool)
         for axis in (0, 1):
-            if self.lows[axis]:
-                lo = float(np.median(self.lows[axis])) + self.robot_radius
+            low = self._low(axis)
+            if low is not None:
+                lo = low + self.robot_radius
             else:
                 lo = 0.5 * (f[:, axis].max() + f[:, axis].min() - width)
             ok &= (p[:, axis] >= lo) & (p[:, axis] <= lo + width)
