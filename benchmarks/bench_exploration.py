@@ -12,6 +12,11 @@ figure (matplotlib, the ``plots`` extra).
     PYTHONPATH=. python benchmarks/bench_exploration.py --runs 5 --sensors visibility
     PYTHONPATH=. python benchmarks/bench_exploration.py --runs 6 --seed 5000 --policies rl \
         --rl-model /tmp/m.npz   # a model of one's own, on layouts for tuning
+    PYTHONPATH=. python benchmarks/bench_exploration.py --sensors bearing \
+        --policies random-walk even --env bearing_noise_deg=2   # imperfect sensing
+
+``--env KEY=VALUE`` (repeatable) passes env keywords (noise; a limited view, whose masked
+history is mapped with the masked default); the CSV does not record them.
 """
 
 from __future__ import annotations
@@ -47,10 +52,12 @@ def _mpe(hist, n: int, method: str | None = None) -> float:
 
 
 def run(sensor: str, runs: int, seed: int, policies: list[str] | None = None,
-        kwargs: dict[str, dict] | None = None, method: str | None = None) -> dict[str, np.ndarray]:
+        kwargs: dict[str, dict] | None = None, method: str | None = None,
+        env_kwargs: dict | None = None) -> dict[str, np.ndarray]:
     """Per policy, an array (runs, len(STEPS)) of MPEs. ``kwargs``: per policy, factory keywords
     (e.g. ``{"rl": {"model": "m.npz"}}`` to score a model of one's own); ``method``: map with
-    this method instead of the default."""
+    this method instead of the default; ``env_kwargs``: env keywords (e.g.
+    ``{"bearing_noise_deg": 2.0}``)."""
     names = list(POLICIES) if policies is None else policies
     unknown = [n for n in names if n not in POLICIES]
     if unknown:
@@ -59,7 +66,7 @@ def run(sensor: str, runs: int, seed: int, policies: list[str] | None = None,
     for r in range(runs):
         s = derived_seed(seed, r)
         for name in names:
-            env = make_env(env_id_for(sensor), max(STEPS))
+            env = make_env(env_id_for(sensor), max(STEPS), env_kwargs)
             try:
                 policy = POLICIES[name](env, seed=s, **(kwargs or {}).get(name, {}))
                 hist = collect(env, policy, max(STEPS), seed=s)
@@ -134,16 +141,28 @@ def main() -> None:
                     help="score this model as the 'rl' policy (default: the shipped one)")
     ap.add_argument("--method", default=None,
                     help="map with this method (a label of mappers.METHODS) instead of the default")
+    ap.add_argument("--env", action="append", default=[], metavar="KEY=VALUE",
+                    help="env keyword (repeatable), e.g. bearing_noise_deg=2")
     ap.add_argument("--plot", default=None, metavar="FILE.png")
     ap.add_argument("--csv", default=None, metavar="FILE.csv", help="write the per-run MPEs")
     ap.add_argument("--load", nargs="+", default=None, metavar="FILE.csv",
                     help="print and plot these saved runs (merged) instead of running")
     args = ap.parse_args()
+    env_kwargs = {}
+    for item in args.env:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            ap.error(f"--env takes KEY=VALUE, got {item!r}")
+        try:
+            env_kwargs[key] = float(value)
+        except ValueError:
+            ap.error(f"--env {key}: {value!r} is not a number")
     kwargs = {"rl": {"model": args.rl_model}} if args.rl_model else None
     if args.load:
         results = load_csv(args.load)
     else:
-        results = {sensor: run(sensor, args.runs, args.seed, args.policies, kwargs, args.method)
+        results = {sensor: run(sensor, args.runs, args.seed, args.policies, kwargs, args.method,
+                               env_kwargs or None)
                    for sensor in args.sensors}
     if args.csv:
         save_csv(results, args.csv, args.seed)

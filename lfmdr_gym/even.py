@@ -1,6 +1,6 @@
 """An exploration policy that covers the room evenly: our fastest mapper, whose 500-step
-visibility map is better than the random walk's after 2,000 steps (by 1-10 % on three unseen
-sets of 25 layouts, 7 % over the 75; the measurements are in ``docs/online-and-exploration.md``).
+visibility map is better than the random walk's after 2,000 steps (by 1-10 % on four unseen
+sets of 25 layouts, 7 % over the 100; the measurements are in ``docs/online-and-exploration.md``).
 
 A visibility map is built from how often two objects are seen together, i.e. from where the
 robot's viewpoints fall in the discs that see each object; it is best when the viewpoints cover

@@ -39,3 +39,23 @@ def test_run_refuses_an_unknown_policy():
 
     with pytest.raises(ValueError, match="no-such"):
         _bench().run("visibility", 1, 0, ["no-such"])
+
+
+def test_run_passes_env_keywords_to_every_env(monkeypatch):
+    bench = _bench()
+    seen = []
+    real = bench.make_env
+
+    def spy(env_id, steps, env_kwargs=None):
+        seen.append(env_kwargs)
+        return real(env_id, steps, env_kwargs)
+
+    monkeypatch.setattr(bench, "make_env", spy)
+    monkeypatch.setattr(bench, "STEPS", (30, 60))
+    noisy = bench.run("bearing", 1, 0, ["random-walk"], env_kwargs={"bearing_noise_deg": 2.0})
+    exact = bench.run("bearing", 1, 0, ["random-walk"])
+    assert seen == [{"bearing_noise_deg": 2.0}, None]
+    assert noisy["random-walk"].shape == (1, 2)
+    # perfect bearings map exactly (BEARING-BA); 2 degrees of noise leave a real error
+    assert np.all(exact["random-walk"] < 1e-6)
+    assert np.all(noisy["random-walk"] > 1e-3)
