@@ -34,10 +34,10 @@ from lfmdr_gym.experiments.episodes import derived_seed, make_env
 STEPS = (250, 500, 1000, 2000)
 
 
-def _mpe(hist, n: int, method: str | None = None) -> float:
+def _mpe(hist, n: int, method: str | None = None) -> tuple[float, str | None]:
     """MPE of the map of the first n steps (``method``: None for the default); NaN when no map
     can be made (fewer than 3 anchors sensed yet: a policy that has not been near three corners
-    has no map to score)."""
+    has no map to score), with the label of the method that made the map (None without one)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
@@ -45,19 +45,21 @@ def _mpe(hist, n: int, method: str | None = None) -> float:
         except ValueError as exc:
             if "anchors remain" not in str(exc):
                 raise
-            return float("nan")
+            return float("nan"), None
     truth = hist.object_positions
     keep = np.setdiff1d(np.arange(len(truth)), [*hist.anchor_ids, *m.unmapped])
-    return mappers.mean_position_error(m.positions[keep], truth[keep])
+    return mappers.mean_position_error(m.positions[keep], truth[keep]), m.method
 
 
 def run(sensor: str, runs: int, seed: int, policies: list[str] | None = None,
         kwargs: dict[str, dict] | None = None, method: str | None = None,
-        env_kwargs: dict | None = None) -> dict[str, np.ndarray]:
+        env_kwargs: dict | None = None, labels: set | None = None) -> dict[str, np.ndarray]:
     """Per policy, an array (runs, len(STEPS)) of MPEs. ``kwargs``: per policy, factory keywords
     (e.g. ``{"rl": {"model": "m.npz"}}`` to score a model of one's own); ``method``: map with
     this method instead of the default; ``env_kwargs``: env keywords (e.g.
-    ``{"bearing_noise_deg": 2.0}``)."""
+    ``{"bearing_noise_deg": 2.0}``); ``labels``: a set to which the labels of the methods that
+    made the maps are added (the default depends on the sensor and on whether the env masks the
+    history)."""
     names = list(POLICIES) if policies is None else policies
     unknown = [n for n in names if n not in POLICIES]
     if unknown:
@@ -73,24 +75,30 @@ def run(sensor: str, runs: int, seed: int, policies: list[str] | None = None,
             finally:
                 env.close()
             with threadpool_limits(limits=1):
-                out[name].append([_mpe(hist, n, method) for n in STEPS])
+                scored = [_mpe(hist, n, method) for n in STEPS]
+            out[name].append([value for value, _ in scored])
+            if labels is not None:
+                labels.update(label for _, label in scored if label is not None)
     return {name: np.array(rows) for name, rows in out.items()}
 
 
-def save_csv(results: dict[str, dict[str, np.ndarray]], path: str, seed: int) -> None:
-    """Tidy rows (sensor, policy, layout, steps, mpe), written atomically."""
+def save_csv(results: dict[str, dict[str, np.ndarray]], path: str, seed: int,
+             methods: dict[str, str] | None = None) -> None:
+    """Tidy rows (sensor, policy, seed, layout, steps, mpe, method), written atomically;
+    ``methods``: per sensor, the label(s) of the mapping method (empty when not given)."""
     import csv
 
     from lfmdr_gym.atomic import atomic_write
 
     with atomic_write(path) as fh:
         out = csv.writer(fh)
-        out.writerow(["sensor", "policy", "seed", "layout", "steps", "mpe"])
+        out.writerow(["sensor", "policy", "seed", "layout", "steps", "mpe", "method"])
         for sensor, res in results.items():
+            label = (methods or {}).get(sensor, "")
             for name, rows in res.items():
                 for r, row in enumerate(rows):
                     for n, v in zip(STEPS, row, strict=True):
-                        out.writerow([sensor, name, seed, r, n, repr(float(v))])
+                        out.writerow([sensor, name, seed, r, n, repr(float(v)), label])
 
 
 def load_csv(paths: list[str]) -> dict[str, dict[str, np.ndarray]]:
@@ -107,7 +115,25 @@ def load_csv(paths: list[str]) -> dict[str, dict[str, np.ndarray]]:
                      for name, runs in res.items()} for sensor, res in cells.items()}
 
 
-def plot(results: dict[str, dict[str, np.ndarray]], path: str) -> None:
+def csv_methods(paths: list[str]) -> dict[str, str]:
+    """Per sensor, the mapping methods the files :func:`save_csv` wrote record (joined by
+    " / "; files written before the column existed record none)."""
+    import csv
+
+    found: dict[str, list[str]] = {}
+    for path in paths:
+        with open(path, newline="", encoding="utf-8") as fh:
+            for row in csv.DictReader(fh):
+                labels = found.setdefault(row["sensor"], [])
+                for label in (row.get("method") or "").split(" / "):
+                    if label and label not in labels:
+                        labels.append(label)
+    return {sensor: " / ".join(labels) for sensor, labels in found.items() if labels}
+
+
+def plot(results: dict[str, dict[str, np.ndarray]], path: str,
+         methods: dict[str, str] | None = None) -> None:
+    """MPE against steps per policy, one panel per sensor, titled with ``methods[sensor]``."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -119,7 +145,8 @@ def plot(results: dict[str, dict[str, np.ndarray]], path: str) -> None:
     for ax, (sensor, res) in zip(axes[0], results.items(), strict=True):
         for name, rows in res.items():
             ax.plot(STEPS, np.nanmean(rows, axis=0), marker="o", label=name)
-        ax.set(title=f"{sensor} (CAL-SMA, {len(rows)} layouts)", xlabel="steps",
+        label = (methods or {}).get(sensor)
+        ax.set(title=f"{sensor} ({label + ', ' if label else ''}{len(rows)} layouts)", xlabel="steps",
                ylabel="mean MPE [m]", xscale="log")
         ax.set_xticks(STEPS, [str(n) for n in STEPS])
         ax.minorticks_off()
@@ -159,16 +186,20 @@ def main() -> None:
             ap.error(f"--env {key}: {value!r} is not a number")
     kwargs = {"rl": {"model": args.rl_model}} if args.rl_model else None
     if args.load:
-        results = load_csv(args.load)
+        results, methods = load_csv(args.load), csv_methods(args.load)
     else:
-        results = {sensor: run(sensor, args.runs, args.seed, args.policies, kwargs, args.method,
-                               env_kwargs or None)
-                   for sensor in args.sensors}
+        results, methods = {}, {}
+        for sensor in args.sensors:
+            labels: set = set()
+            results[sensor] = run(sensor, args.runs, args.seed, args.policies, kwargs, args.method,
+                                  env_kwargs or None, labels)
+            methods[sensor] = " / ".join(sorted(labels))
     if args.csv:
-        save_csv(results, args.csv, args.seed)
+        save_csv(results, args.csv, args.seed, methods)
     for sensor, res in results.items():
         n_runs = len(next(iter(res.values())))
-        print(f"\n{sensor}: mean MPE [m] over {n_runs} layouts")
+        print(f"\n{sensor}: mean MPE [m] over {n_runs} layouts"
+              f"{f' ({methods[sensor]})' if methods.get(sensor) else ''}")
         print(f"  {'policy':14s}" + "".join(f"{n:>9d}" for n in STEPS))
         for name, rows in res.items():
             failed = np.isnan(rows).sum(axis=0)
@@ -182,7 +213,7 @@ def main() -> None:
         print(f"  goal: best at 500 steps ({best}, {value:.4f}) <= random walk at 2000 "
               f"({target:.4f}): {'met' if value <= target else 'NOT met'}")
     if args.plot:
-        plot(results, args.plot)
+        plot(results, args.plot, methods)
         print(f"wrote {args.plot}")
 
 

@@ -34,6 +34,23 @@ def test_results_round_trip_through_csv_and_merge(tmp_path):
     np.testing.assert_array_equal(merged["bearing"]["random-walk"], a["bearing"]["random-walk"])
 
 
+def test_csv_records_the_mapping_method_and_old_files_still_load(tmp_path):
+    bench = _bench()
+    rows = np.random.default_rng(1).random((2, 4))
+    bench.save_csv({"bearing": {"even": rows}}, tmp_path / "a.csv", seed=3,
+                   methods={"bearing": "CAL-SMA"})
+    bench.save_csv({"visibility": {"even": rows}}, tmp_path / "b.csv", seed=3)
+    assert bench.csv_methods([tmp_path / "a.csv", tmp_path / "b.csv"]) == {"bearing": "CAL-SMA"}
+    old = tmp_path / "old.csv"  # written before the method column
+    old.write_text("sensor,policy,seed,layout,steps,mpe\n"
+                   + "".join(f"bearing,rl,3,0,{n},0.5\n" for n in bench.STEPS))
+    assert bench.load_csv([old])["bearing"]["rl"].shape == (1, 4)
+    assert bench.csv_methods([old]) == {}
+    # every file the README's figure is drawn from says which method mapped it
+    shipped = sorted((ROOT / "docs" / "exploration").glob("*.csv"))
+    assert shipped and set(bench.csv_methods(shipped)) == {"visibility", "bearing"}
+
+
 def test_run_refuses_an_unknown_policy():
     import pytest
 
@@ -52,9 +69,12 @@ def test_run_passes_env_keywords_to_every_env(monkeypatch):
 
     monkeypatch.setattr(bench, "make_env", spy)
     monkeypatch.setattr(bench, "STEPS", (30, 60))
-    noisy = bench.run("bearing", 1, 0, ["random-walk"], env_kwargs={"bearing_noise_deg": 2.0})
+    labels = set()
+    noisy = bench.run("bearing", 1, 0, ["random-walk"], env_kwargs={"bearing_noise_deg": 2.0},
+                      labels=labels)
     exact = bench.run("bearing", 1, 0, ["random-walk"])
     assert seen == [{"bearing_noise_deg": 2.0}, None]
+    assert labels == {"BEARING-BA"}  # the bearing default made the maps
     assert noisy["random-walk"].shape == (1, 2)
     # perfect bearings map exactly (BEARING-BA); 2 degrees of noise leave a real error
     assert np.all(exact["random-walk"] < 1e-6)
