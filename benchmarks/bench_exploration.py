@@ -37,11 +37,15 @@ STEPS = (250, 500, 1000, 2000)
 def _mpe(hist, n: int, method: str | None = None) -> tuple[float, str | None]:
     """MPE of the map of the first n steps (``method``: None for the default); NaN when no map
     can be made (fewer than 3 anchors sensed yet: a policy that has not been near three corners
-    has no map to score), with the label of the method that made the map (None without one)."""
+    has no map to score; or, through a limited view, co-observations too few for the method:
+    :class:`mappers.MappingError`), with the label of the method that made the map (None
+    without one). The printout counts the layouts without a map."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
             m = mappers.build_map(hist.head(n), hist.anchor_ids, hist.anchor_positions, method)
+        except mappers.MappingError:
+            return float("nan"), None
         except ValueError as exc:
             if "anchors remain" not in str(exc):
                 raise
@@ -203,7 +207,9 @@ def main() -> None:
         print(f"  {'policy':14s}" + "".join(f"{n:>9d}" for n in STEPS))
         for name, rows in res.items():
             failed = np.isnan(rows).sum(axis=0)
-            note = "" if not failed.any() else f"   (no map, fewer than 3 anchors sensed: {failed.tolist()})"
+            note = "" if not failed.any() else (
+                f"   (layouts without a map: {failed.tolist()}; fewer than 3 anchors sensed, or "
+                "too few co-observations for the method)")
             print(f"  {name:14s}" + "".join(f"{v:9.4f}" for v in np.nanmean(rows, axis=0)) + note)
         if "random-walk" not in res:
             continue

@@ -82,3 +82,22 @@ def test_run_passes_env_keywords_to_every_env(monkeypatch):
     # perfect bearings map exactly (BEARING-BA); 2 degrees of noise leave a real error
     assert np.all(exact["random-walk"] < 1e-6)
     assert np.all(noisy["random-walk"] > 1e-3)
+
+
+def test_a_history_the_method_cannot_map_scores_nan_not_a_crash(monkeypatch):
+    import mappers
+
+    bench = _bench()
+
+    def refuse(*args, **kwargs):
+        raise mappers.MappingError("the graph of usable pairs falls apart")
+
+    class Hist:
+        anchor_ids, anchor_positions = [0, 1, 2], None
+
+        def head(self, n):
+            return self
+
+    monkeypatch.setattr(bench.mappers, "build_map", refuse)
+    value, label = bench._mpe(Hist(), 10)
+    assert np.isnan(value) and label is None
