@@ -29,6 +29,7 @@ from threadpoolctl import threadpool_limits
 
 import mappers
 from lfmdr_gym import POLICIES, collect, env_id_for
+from lfmdr_gym.experiments.env_settings import check_env_kwargs, parse_env_kwargs
 from lfmdr_gym.experiments.episodes import derived_seed, make_env
 
 STEPS = (250, 500, 1000, 2000)
@@ -105,34 +106,28 @@ def save_csv(results: dict[str, dict[str, np.ndarray]], path: str, seed: int,
                         out.writerow([sensor, name, seed, r, n, repr(float(v)), label])
 
 
-def load_csv(paths: list[str]) -> dict[str, dict[str, np.ndarray]]:
-    """The results :func:`save_csv` wrote, merged over files (policies run separately)."""
+def load_csv(paths: list[str], methods: dict[str, str] | None = None
+             ) -> dict[str, dict[str, np.ndarray]]:
+    """The results :func:`save_csv` wrote, merged over files (policies run separately). A
+    ``methods`` dict given is filled, per sensor, with the mapping methods the files record
+    (joined by " / "; files written before the column existed record none)."""
     import csv
 
     cells: dict[str, dict[str, dict[int, dict[int, float]]]] = {}
+    found: dict[str, list[str]] = {}
     for path in paths:
         with open(path, newline="", encoding="utf-8") as fh:
             for row in csv.DictReader(fh):
                 per = cells.setdefault(row["sensor"], {}).setdefault(row["policy"], {})
                 per.setdefault(int(row["layout"]), {})[int(row["steps"])] = float(row["mpe"])
-    return {sensor: {name: np.array([[runs[r][n] for n in STEPS] for r in sorted(runs)])
-                     for name, runs in res.items()} for sensor, res in cells.items()}
-
-
-def csv_methods(paths: list[str]) -> dict[str, str]:
-    """Per sensor, the mapping methods the files :func:`save_csv` wrote record (joined by
-    " / "; files written before the column existed record none)."""
-    import csv
-
-    found: dict[str, list[str]] = {}
-    for path in paths:
-        with open(path, newline="", encoding="utf-8") as fh:
-            for row in csv.DictReader(fh):
                 labels = found.setdefault(row["sensor"], [])
                 for label in (row.get("method") or "").split(" / "):
                     if label and label not in labels:
                         labels.append(label)
-    return {sensor: " / ".join(labels) for sensor, labels in found.items() if labels}
+    if methods is not None:
+        methods.update({sensor: " / ".join(labels) for sensor, labels in found.items() if labels})
+    return {sensor: {name: np.array([[runs[r][n] for n in STEPS] for r in sorted(runs)])
+                     for name, runs in res.items()} for sensor, res in cells.items()}
 
 
 def plot(results: dict[str, dict[str, np.ndarray]], path: str,
@@ -179,18 +174,16 @@ def main() -> None:
     ap.add_argument("--load", nargs="+", default=None, metavar="FILE.csv",
                     help="print and plot these saved runs (merged) instead of running")
     args = ap.parse_args()
-    env_kwargs = {}
-    for item in args.env:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            ap.error(f"--env takes KEY=VALUE, got {item!r}")
-        try:
-            env_kwargs[key] = float(value)
-        except ValueError:
-            ap.error(f"--env {key}: {value!r} is not a number")
+    try:
+        env_kwargs = parse_env_kwargs(args.env)
+        for sensor in args.sensors if not args.load else ():
+            check_env_kwargs(sensor, env_kwargs)
+    except ValueError as err:
+        ap.error(f"--env: {err}")
     kwargs = {"rl": {"model": args.rl_model}} if args.rl_model else None
     if args.load:
-        results, methods = load_csv(args.load), csv_methods(args.load)
+        methods = {}
+        results = load_csv(args.load, methods)
     else:
         results, methods = {}, {}
         for sensor in args.sensors:

@@ -40,18 +40,22 @@ def test_csv_records_the_mapping_method_and_old_files_still_load(tmp_path):
     bench.save_csv({"bearing": {"even": rows}}, tmp_path / "a.csv", seed=3,
                    methods={"bearing": "CAL-SMA"})
     bench.save_csv({"visibility": {"even": rows}}, tmp_path / "b.csv", seed=3)
-    assert bench.csv_methods([tmp_path / "a.csv", tmp_path / "b.csv"]) == {"bearing": "CAL-SMA"}
+    methods: dict = {}
+    bench.load_csv([tmp_path / "a.csv", tmp_path / "b.csv"], methods)
+    assert methods == {"bearing": "CAL-SMA"}
     old = tmp_path / "old.csv"  # written before the method column
     old.write_text("sensor,policy,seed,layout,steps,mpe\n"
                    + "".join(f"bearing,rl,3,0,{n},0.5\n" for n in bench.STEPS))
-    assert bench.load_csv([old])["bearing"]["rl"].shape == (1, 4)
-    assert bench.csv_methods([old]) == {}
+    methods = {}
+    assert bench.load_csv([old], methods)["bearing"]["rl"].shape == (1, 4)
+    assert methods == {}
     # every shipped CSV (the README's figure and tables) says, per sensor, which method mapped it
     shipped = sorted((ROOT / "docs" / "exploration").glob("*.csv"))
     assert shipped
     for path in shipped:
-        sensors = set(bench.load_csv([path]))
-        assert set(bench.csv_methods([path])) == sensors, path.name
+        methods = {}
+        sensors = set(bench.load_csv([path], methods))
+        assert set(methods) == sensors, path.name
 
 
 def test_run_refuses_an_unknown_policy():
