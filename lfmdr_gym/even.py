@@ -49,7 +49,7 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from lfmdr_gym.exploration import CoveragePolicy
-from lfmdr_gym.obstacles import ObstacleMap, advance
+from lfmdr_gym.obstacles import ObstacleMap, advance, ring_hits
 from lfmdr_gym.policies import base_env
 from lfmdr_gym.walls import WallFrame, wall_runs
 from lfmdr_gym.world import check_int, check_real
@@ -199,12 +199,9 @@ class EvenPolicy(CoveragePolicy):
     def _keep_hits(self, prox: np.ndarray) -> None:
         """Add the ring's hits off its straight runs (walls) to the obstacle map; keep the runs
         as bounds on the robot's centre for this step's plans."""
-        n = prox.size
-        x, y, heading = self.odometry
-        angles = heading + 2.0 * np.pi * np.arange(n) / n
-        hits = np.column_stack([x + prox * np.cos(angles), y + prox * np.sin(angles)])
-        hit = prox < self.proximity_range * (1.0 - 1e-6)
-        on_wall = np.zeros(n, dtype=bool)
+        x, y, _ = self.odometry
+        hits, rays, hit = ring_hits(prox, self.odometry, self.proximity_range)
+        on_wall = np.zeros(prox.size, dtype=bool)
         self._ring_walls = []
         for centre, direction in wall_runs(prox, self.odometry, self.proximity_range):
             normal = np.array([-direction[1], direction[0]])
@@ -212,7 +209,8 @@ class EvenPolicy(CoveragePolicy):
                 normal = -normal  # toward the robot
             on_wall |= hit & (np.abs((hits - centre) @ normal) < RUN_TOLERANCE)
             self._ring_walls.append((normal, float(centre @ normal) + self.robot_radius))
-        self.obstacles.add(prox, self.odometry, skip=on_wall)
+        keep = hit & ~on_wall
+        self.obstacles.add_hits(hits[keep], rays[keep])
 
     def _plans(self, proximity: np.ndarray, turns: np.ndarray,
                later: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

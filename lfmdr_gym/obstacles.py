@@ -26,7 +26,7 @@ from scipy.spatial import cKDTree
 
 from lfmdr_gym.world import check_real
 
-__all__ = ["ObstacleMap", "advance"]
+__all__ = ["ObstacleMap", "advance", "ring_hits"]
 
 FIT_STEPS = 8  # Gauss-Newton steps of a circle fit (it converges in 3-4 from the first guess)
 
@@ -60,15 +60,16 @@ class ObstacleMap:
     def add(self, proximity: np.ndarray, pose: np.ndarray, skip: np.ndarray | None = None) -> None:
         """Keep the hits of one ring read at ``pose`` (x, y, heading), but those of rays
         ``skip`` (a bool mask, e.g. the rays on a wall)."""
-        n = proximity.size
-        x, y, heading = pose
-        angles = heading + 2.0 * np.pi * np.arange(n) / n
-        keep = proximity < self.proximity_range * (1.0 - 1e-6)
+        points, rays, keep = ring_hits(proximity, pose, self.proximity_range)
         if skip is not None:
             keep &= ~skip
-        if keep.any():
-            rays = np.column_stack([np.cos(angles[keep]), np.sin(angles[keep])])
-            self._points.append(np.array([x, y]) + proximity[keep, None] * rays)
+        self.add_hits(points[keep], rays[keep])
+
+    def add_hits(self, points: np.ndarray, rays: np.ndarray) -> None:
+        """Keep hit ``points`` (m, 2) and the unit ``rays`` (m, 2) that found them, as
+        :func:`ring_hits` gives them."""
+        if len(points):
+            self._points.append(points)
             self._rays.append(rays)
 
     @property
@@ -111,6 +112,18 @@ class ObstacleMap:
                     continue
             out.append(behind[idx])
         return np.vstack(out)
+
+
+def ring_hits(proximity: np.ndarray, pose: np.ndarray,
+              proximity_range: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One ring read at ``pose`` (x, y, heading): every ray's end point (n, 2), its unit
+    direction (n, 2), and whether it hit something (n,) (a ray that reads the range has not)."""
+    n = proximity.size
+    x, y, heading = pose
+    angles = heading + 2.0 * np.pi * np.arange(n) / n
+    rays = np.column_stack([np.cos(angles), np.sin(angles)])
+    points = np.array([x, y]) + proximity[:, None] * rays
+    return points, rays, proximity < proximity_range * (1.0 - 1e-6)
 
 
 def _fit_circle(points: np.ndarray, radius: float, guess: np.ndarray) -> np.ndarray:
