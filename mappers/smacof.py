@@ -29,6 +29,7 @@ from sklearn.utils.validation import check_symmetric, validate_data
 from mappers.graph import connected_knn_graph, warn_if_repaired
 
 __all__ = [
+    "GuttmanTransform",
     "WeightedSMACOF",
     "classical_mds",
     "euclidean_distance_matrix",
@@ -111,6 +112,51 @@ def _check_core_inputs(delta, weights, init, fixed, fixed_positions):
     return delta, weights, X, free
 
 
+class GuttmanTransform:
+    """The Guttman update for fixed weights and fixed points (module docstring), with the
+    (pseudo-)inverse of V, or of V_ff with fixed points, computed once.
+
+    :func:`weighted_smacof` takes its steps with it; the SMACOF variants
+    (:mod:`mappers.smacof_variants`), whose targets change at every step while the weights do
+    not, keep one instead of inverting V again per step.
+
+    Args:
+        W: (n, n) symmetric non-negative weights, zero diagonal (checked by the caller).
+        free: (n,) bool, the points that move.
+        X: (n, p) configuration holding the fixed points' positions.
+    """
+
+    def __init__(self, W: np.ndarray, free: np.ndarray, X: np.ndarray) -> None:
+        n = len(W)
+        self.W, self.free = W, free
+        V = np.diag(W.sum(axis=1)) - W
+        self.all_free = bool(free.all())
+        self.equal = self.all_free and np.allclose(W[~np.eye(n, dtype=bool)],
+                                                   W[0, 1] if n > 1 else 0.0)
+        if self.all_free and not self.equal:
+            self.V_inv = np.linalg.pinv(V, hermitian=True)
+        elif not self.all_free:
+            # Constrained Guttman update: the majoriser is quadratic in X_f with Hessian V_ff.
+            self.V_ff_inv = np.linalg.pinv(V[np.ix_(free, free)], hermitian=True)
+            self.rhs_fixed = V[np.ix_(free, ~free)] @ X[~free]
+
+    def __call__(self, wd: np.ndarray, D: np.ndarray, X: np.ndarray) -> np.ndarray:
+        """One update of ``X`` given ``wd`` = W * targets and ``D``, X's distance matrix."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            B = -np.where(D > 0, wd / D, 0.0)
+        np.fill_diagonal(B, 0.0)
+        np.fill_diagonal(B, -B.sum(axis=1))
+        BX = B @ X
+        if self.equal:
+            n, w = len(X), self.W[0, 1]
+            return BX / (n * w) if w > 0 else X
+        if self.all_free:
+            return self.V_inv @ BX
+        X_new = X.copy()
+        X_new[self.free] = self.V_ff_inv @ (BX[self.free] - self.rhs_fixed)
+        return X_new
+
+
 def weighted_smacof(
     delta: np.ndarray,
     weights: np.ndarray,
@@ -140,33 +186,13 @@ def weighted_smacof(
     if max_iter < 0:
         raise ValueError(f"max_iter must be >= 0, got {max_iter}")
     delta, W, X, free = _check_core_inputs(delta, weights, init, fixed, fixed_positions)
-    n = len(delta)
-    V = np.diag(W.sum(axis=1)) - W
-    all_free = bool(free.all())
-    equal = all_free and np.allclose(W[~np.eye(n, dtype=bool)], W[0, 1] if n > 1 else 0.0)
-    if all_free and not equal:
-        V_inv = np.linalg.pinv(V, hermitian=True)
-    elif not all_free:
-        # Constrained Guttman update: the majoriser is quadratic in X_f with Hessian V_ff.
-        V_ff_inv = np.linalg.pinv(V[np.ix_(free, free)], hermitian=True)
-        rhs_fixed = V[np.ix_(free, ~free)] @ X[~free]
+    guttman = GuttmanTransform(W, free, X)
     wd = W * delta
     D = euclidean_distance_matrix(X)
     stress = float(0.5 * np.sum(W * (delta - D) ** 2))
     n_iter = 0
     for n_iter in range(1, max_iter + 1):  # noqa: B007 - n_iter is returned
-        with np.errstate(divide="ignore", invalid="ignore"):
-            B = -np.where(D > 0, wd / D, 0.0)
-        np.fill_diagonal(B, 0.0)
-        np.fill_diagonal(B, -B.sum(axis=1))
-        BX = B @ X
-        if equal:
-            X_new = BX / (n * W[0, 1]) if W[0, 1] > 0 else X
-        elif all_free:
-            X_new = V_inv @ BX
-        else:
-            X_new = X.copy()
-            X_new[free] = V_ff_inv @ (BX[free] - rhs_fixed)
+        X_new = guttman(wd, D, X)
         D = euclidean_distance_matrix(X_new)
         X, old = X_new, stress
         stress = float(0.5 * np.sum(W * (delta - D) ** 2))

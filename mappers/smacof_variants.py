@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from sklearn.isotonic import IsotonicRegression
 
-from mappers.smacof import weighted_smacof
+from mappers.smacof import GuttmanTransform, euclidean_distance_matrix, weighted_smacof
 
 __all__ = ["bounded_smacof", "nonmetric_smacof", "power_link_smacof"]
 
@@ -69,6 +69,7 @@ def nonmetric_smacof(
     if obs.sum() < 2:
         raise ValueError("nonmetric_smacof needs at least 2 measured (weighted, uncensored) pairs")
     X, span = _start(init, fixed, fixed_positions)
+    guttman = _guttman(W, X, fixed)
     iso = IsotonicRegression(increasing=True)
     scale = np.sqrt(np.sum(w[obs | cen]))
     for _ in range(max_iter):
@@ -85,7 +86,7 @@ def nonmetric_smacof(
         T = np.zeros((n, n))
         T[iu] = dh
         T = T + T.T
-        X, converged = _guttman_step(T, W, X, fixed, tol)
+        X, converged = _guttman_step(guttman, T, X, tol)
         if converged:
             break
     return X
@@ -157,19 +158,32 @@ def bounded_smacof(
     lower = np.asarray(lower, dtype=float)
     upper = np.maximum(np.asarray(upper, dtype=float), lower)
     X, _ = _start(init, fixed, fixed_positions)
+    guttman = _guttman(weights, X, fixed)
     for _ in range(max_iter):
         D = np.linalg.norm(X[:, None] - X[None], axis=2)
         T = np.clip(D, lower, upper)
         np.fill_diagonal(T, 0.0)
-        X, converged = _guttman_step(T, weights, X, fixed, tol)
+        X, converged = _guttman_step(guttman, T, X, tol)
         if converged:
             break
     return X
 
 
 
-def _guttman_step(targets, weights, X, fixed, tol):
-    """One Guttman transform towards ``targets`` (anchors ``fixed``), and whether it moved the
-    map by less than ``tol`` of its extent."""
-    X_new, _, _ = weighted_smacof(targets, weights, X, fixed=fixed, max_iter=1, tol=0.0)
+def _guttman(weights, X, fixed) -> GuttmanTransform:
+    """The Guttman update for these weights (diagonal ignored) and fixed points, inverted once
+    for all the steps of a loop below."""
+    W = np.asarray(weights, dtype=float).copy()
+    np.fill_diagonal(W, 0.0)
+    free = np.ones(len(W), dtype=bool)
+    fixed = np.asarray([] if fixed is None else fixed)
+    if fixed.size:
+        free[fixed] = False  # indices or a boolean mask
+    return GuttmanTransform(W, free, X)
+
+
+def _guttman_step(guttman: GuttmanTransform, targets, X, tol):
+    """One Guttman transform towards ``targets``, and whether it moved the map by less than
+    ``tol`` of its extent."""
+    X_new = guttman(guttman.W * targets, euclidean_distance_matrix(X), X)
     return X_new, np.abs(X_new - X).max() <= tol * max(np.abs(X_new).max(), 1e-12)

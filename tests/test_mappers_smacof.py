@@ -63,6 +63,31 @@ def test_equal_weights_closed_form_matches_pinv():
     np.testing.assert_allclose(X1, X2, atol=1e-10)
 
 
+@pytest.mark.parametrize("kind", ["equal", "knn", "fixed"])
+def test_guttman_transform_kept_across_targets_matches_a_fresh_one(kind):
+    # the SMACOF variants keep one GuttmanTransform while their targets change: each of its
+    # steps must be the step weighted_smacof takes from scratch, bit for bit
+    from mappers.smacof import GuttmanTransform, euclidean_distance_matrix
+
+    rng = np.random.default_rng(3)
+    P = _points()
+    W = np.ones((30, 30)) if kind == "equal" else _knn_weights(_dist(P), 6)
+    np.fill_diagonal(W, 0.0)
+    free = np.arange(30) >= (3 if kind == "fixed" else 0)
+    X = rng.uniform(-1, 1, (30, 2))
+    X[~free] = P[~free]
+    guttman = GuttmanTransform(W, free, X)
+    for step in range(3):
+        targets = _dist(P) * (1.0 + 0.1 * step)
+        kept = guttman(W * targets, euclidean_distance_matrix(X), X)
+        fresh, _, _ = weighted_smacof(targets, W, X, fixed=np.flatnonzero(~free), max_iter=1,
+                                      tol=0.0)
+        np.testing.assert_array_equal(kept, fresh)
+        np.testing.assert_array_equal(kept[~free], P[~free])
+        assert not np.array_equal(kept, X)  # a step was taken
+        X = kept
+
+
 def test_recovers_euclidean_configuration_and_fixed_anchors():
     P = _points(25, seed=3)
     D = _dist(P)
