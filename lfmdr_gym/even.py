@@ -167,10 +167,12 @@ class EvenPolicy(CoveragePolicy):
     def _remember(self, prox: np.ndarray) -> None:
         """Relocalise on the walls, keep the ring's hits on obstacles, add the viewpoint's
         kernel, and update the room's mask."""
+        runs = wall_runs(prox, self.odometry, self.proximity_range)
         if self.walls is not None:
-            shift = self.walls.observe(prox, self.odometry)
+            shift = self.walls.observe(prox, self.odometry, runs)
             self.odometry = self.odometry + np.array([shift[0], shift[1], 0.0])
-        self._keep_hits(prox)
+            runs = [(centre + shift, direction) for centre, direction in runs]  # moved along
+        self._keep_hits(prox, runs)
         x, y, heading = self.odometry
         cells = self._patch(x, y, 4.0 * self.sigma)
         self.coverage[cells] += self._kernel(cells, np.array(x), np.array(y))
@@ -196,14 +198,15 @@ class EvenPolicy(CoveragePolicy):
             self._mask = inside
         self._room_fixed = self.walls is not None and self.walls.fixed
 
-    def _keep_hits(self, prox: np.ndarray) -> None:
-        """Add the ring's hits off its straight runs (walls) to the obstacle map; keep the runs
-        as bounds on the robot's centre for this step's plans."""
+    def _keep_hits(self, prox: np.ndarray, runs: list) -> None:
+        """Add the ring's hits off its straight ``runs`` (walls, :func:`wall_runs` at the
+        current odometry) to the obstacle map; keep the runs as bounds on the robot's centre for
+        this step's plans."""
         x, y, _ = self.odometry
         hits, rays, hit = ring_hits(prox, self.odometry, self.proximity_range)
         on_wall = np.zeros(prox.size, dtype=bool)
         self._ring_walls = []
-        for centre, direction in wall_runs(prox, self.odometry, self.proximity_range):
+        for centre, direction in runs:
             normal = np.array([-direction[1], direction[0]])
             if normal @ (np.array([x, y]) - centre) < 0.0:
                 normal = -normal  # toward the robot

@@ -108,13 +108,17 @@ class WallFrame:
         c, s = math.cos(self.theta), math.sin(self.theta)
         return np.array([[c, s], [-s, c]])
 
-    def observe(self, proximity: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    def observe(self, proximity: np.ndarray, pose: np.ndarray, runs: list | None = None
+                ) -> np.ndarray:
         """Take one ring seen from ``pose`` (x, y, heading in the odometry frame); return the
         shift (2,) to add to the pose's position: zero until an axis's walls are fixed, then
-        what puts the walls seen back where they were fixed."""
+        what puts the walls seen back where they were fixed. ``runs``: the ring's
+        :func:`wall_runs` at ``pose``, if the caller has them already."""
         shift = np.zeros(2)
         position = np.asarray(pose[:2], dtype=np.float64)
-        for centre, direction in wall_runs(proximity, pose, self.proximity_range):
+        if runs is None:
+            runs = wall_runs(proximity, pose, self.proximity_range)
+        for centre, direction in runs:
             if self.theta is None:
                 self.theta = math.atan2(direction[1], direction[0]) % (0.5 * math.pi)
             rot = self._rotation()
