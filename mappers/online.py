@@ -295,8 +295,8 @@ class OnlineMapper:
     within 1 % of the offline BEARING-BA map's MPE on average (2 degrees of bearing noise), and
     as exact (~5e-10 m) on perfect bearings. Masked visibility through a 90-degree view
     (VIEW-BA, ``--env fov_deg=90``): median 6 ms, mean 26 ms, 34x cheaper than a rebuild
-    (890 ms, a loaded machine), the refits (about 3 per run, 0.5-0.9 s each) and refinements (about 0.2 s) most
-    of it. See ``docs/online-and-exploration.md`` for what each change bought.
+    (890 ms, a loaded machine), the refits (about 3 per run, 0.5-0.9 s each) and refinements
+    (about 0.2 s) most of it. See ``docs/online-and-exploration.md`` for what each change bought.
     """
 
     def __init__(self, anchor_ids, anchor_positions, *, sensor: str | None = None,

@@ -118,7 +118,8 @@ class GuttmanTransform:
 
     :func:`weighted_smacof` takes its steps with it; the SMACOF variants
     (:mod:`mappers.smacof_variants`), whose targets change at every step while the weights do
-    not, keep one instead of inverting V again per step.
+    not, keep one instead of inverting V again per step. (The online CAL-SMA rounds keep their
+    own, ``mappers.online._AnchoredGuttman``: faster, without checks, equal to this to rounding.)
 
     Args:
         W: (n, n) symmetric non-negative weights, zero diagonal (checked by the caller).
