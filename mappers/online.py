@@ -101,6 +101,10 @@ _VIEW_REFIT_GROWTH = 2.0
 _FOLD_REFIT_GROWTH = 1.5
 # a refitted method that found nothing to map yet is tried again once the steps have grown by this
 _RETRY_GROWTH = 1.1
+# Guttman updates per round in a full CAL-SMA fit (CAL-SMA's own max_iter is 100): a map of a few
+# dozen steps converges slowly and its fits hit the cap, which made the refits of the first 250
+# steps half of a run's CPU; later fits converge before 30 (docs/online-and-exploration.md)
+_FULL_FIT_MAX_ITER = 30
 
 
 def gram_dissimilarity(gram: np.ndarray, n_columns: int, kind: str) -> np.ndarray:
@@ -285,13 +289,13 @@ class OnlineMapper:
 
     Cost per update (``benchmarks/bench_online.py``: M = 50 objects, updates of 10 steps,
     N = 2,000, CPU time, one BLAS thread; 25 fresh layouts per sensor): visibility (CAL-SMA),
-    median about 1.5 ms, 59x cheaper than rebuilding the map at N = 2,000 with ``build_map``;
-    the mean, the full refits included (5-6 per run: the amortised cost), 22x. Bearing
+    median about 1.9 ms, 65x cheaper than rebuilding the map at N = 2,000 with ``build_map``;
+    the mean, the full refits included (5-6 per run: the amortised cost), 27x. Bearing
     (BEARING-BA): the CAL-SMA update, plus the new steps' resection (O(k M)), plus every
     ``bundle_every`` updates a joint round over all steps (O(N M) for the normal blocks and
     O(N F^2 + F^3) for the Schur system, F the free objects: about 70 ms at N = 2,000, a seventh
-    of a rebuild), plus a full BEARING-BA fit at each CAL-SMA refit: median about 4 ms, 108x
-    cheaper than rebuilding the BEARING-BA map (about 460 ms), mean 14 ms, 33x; its map is
+    of a rebuild), plus a full BEARING-BA fit at each CAL-SMA refit: median about 4-5 ms,
+    110-125x cheaper than rebuilding the BEARING-BA map (about 0.5-0.6 s), mean 34x; its map is
     within 1 % of the offline BEARING-BA map's MPE on average (2 degrees of bearing noise), and
     as exact (~5e-10 m) on perfect bearings. Masked visibility through a 90-degree view
     (VIEW-BA, ``--env fov_deg=90``): median 6 ms, mean 26 ms, 34x cheaper than a rebuild
@@ -499,12 +503,15 @@ class OnlineMapper:
 
     def _estimator(self, k: int, *, warm: bool) -> _OnlineCalSMA:
         """CAL-SMA with the method's parameters: a full fit (no random restarts: a map that
-        still looks folded is refitted later, with more steps), or ``warm_rounds`` rounds whose
-        Guttman updates stop at ``warm_tol``."""
+        still looks folded is refitted later, with more steps; at most ``_FULL_FIT_MAX_ITER``
+        Guttman updates per round), or ``warm_rounds`` rounds whose Guttman updates stop at
+        ``warm_tol``."""
         kw = dict(self._cal)
         kw.pop("n_neighbors", None)
         if warm:
             kw.update(n_rounds=self.warm_rounds, tol=self.warm_tol)
+        else:
+            kw["max_iter"] = _FULL_FIT_MAX_ITER  # (not one of CAL-SMA's registry parameters)
         return _OnlineCalSMA(dissimilarity="precomputed", n_neighbors=k, n_init=0, **kw)
 
     def _start(self, mapped: np.ndarray, D: np.ndarray) -> np.ndarray:

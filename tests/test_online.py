@@ -203,7 +203,9 @@ def test_folded_warm_map_is_refitted_from_scratch():
     result = om.update(X[:, 200:300])  # 300 >= 1.5 x 200 steps: refitted at once
     assert om.n_fold_refits == 1 and om.n_full_fits == 2 and om._last_full == 300
     offline = build_map(X, ids, pts[ids], sensor="visibility")
-    assert np.allclose(result.positions, offline.positions, atol=1e-6)
+    # the refit is CAL-SMA's fit from its deterministic starts, its rounds capped at 30 Guttman
+    # updates (online._FULL_FIT_MAX_ITER; CAL-SMA's own cap is 100): here 1e-5 m from build_map's
+    assert np.allclose(result.positions, offline.positions, atol=1e-4)
 
 
 def test_folded_warm_map_waits_for_growth_before_a_refit():
