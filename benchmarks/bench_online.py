@@ -14,7 +14,8 @@ The offline map is ``build_map``'s default for bearing (BEARING-BA), and the onl
 method for visibility (CAL-SMA, the default for perfect visibility). ``--env`` passes env
 keywords (imperfect sensing, e.g. ``bearing_noise_deg=2``; masked histories are fed with their
 masks, an all-True mask, as noise alone gives, as a complete history; with a limited view, e.g.
-``fov_deg=90``, both maps are the masked default's, refitted on the online mapper's schedule).
+``fov_deg=90``, both maps are the masked default's, VIEW-BA, which the online mapper carries on
+between its refits). A bad ``--env`` item is refused with the experiments' own message.
 
     PYTHONPATH=. python benchmarks/bench_online.py                  # 25 layouts per sensor
     PYTHONPATH=. python benchmarks/bench_online.py --runs 5 --sensors bearing

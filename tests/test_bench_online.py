@@ -1,0 +1,33 @@
+"""benchmarks/bench_online.py end to end on a short run, and its --env checks."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _run(*args: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_online.py"), *args],
+                          capture_output=True, text=True, env=env, cwd=ROOT, timeout=600)
+
+
+def test_a_run_whose_only_checkpoint_is_n_reports_its_goals():
+    # 500 steps: N is the only checkpoint (this used to end in "max() arg is an empty sequence")
+    out = _run("--runs", "1", "--steps", "500", "--sensors", "visibility")
+    assert out.returncode == 0, out.stderr
+    assert "no checkpoint before N" in out.stdout
+    assert "final MPE <= 1.05 x offline (" in out.stdout
+
+
+def test_env_keywords_are_checked_against_the_environment():
+    bad = _run("--runs", "1", "--sensors", "visibility", "--env", "fov=90")
+    assert bad.returncode == 2 and "unknown env keyword 'fov'" in bad.stderr
+    twice = _run("--runs", "1", "--env", "fov_deg=90", "--env", "fov_deg=60")
+    assert twice.returncode == 2 and "'fov_deg' is given twice" in twice.stderr
+    no_value = _run("--runs", "1", "--env", "fov_deg")
+    assert no_value.returncode == 2 and "NAME=VALUE" in no_value.stderr
