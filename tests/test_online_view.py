@@ -102,3 +102,24 @@ def test_a_first_map_that_fails_is_tried_again_after_growth(walk, monkeypatch):
     assert 3 <= len(calls) < 40  # not at each of the 100 updates
     assert all(b >= 1.1 * a for a, b in zip(calls, calls[1:], strict=False))
     assert any("tried again at" in w for ws in notes for w in ws)
+
+
+def test_the_online_example_maps_a_limited_view_and_refuses_a_bad_keyword():
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    script = [sys.executable, str(root / "examples" / "online_map.py")]
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    out = subprocess.run([*script, "--env-kw", "fov_deg=90", "--steps", "700"], cwd=root, env=env,
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.splitlines()
+    assert "no map yet" in lines[0]  # a 90-degree view's first 100 steps place nothing
+    assert lines[-1].startswith("  700 steps: 46 of 46") and lines[-1].endswith("(VIEW-BA)")
+    assert float(lines[-1].split("MPE ")[1].split(" m")[0]) < 0.2
+    bad = subprocess.run([*script, "--env-kw", "fov=90"], cwd=root, env=env,
+                         capture_output=True, text=True, timeout=600)
+    assert bad.returncode == 2 and "'fov'" in bad.stderr
