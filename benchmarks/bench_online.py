@@ -93,8 +93,7 @@ def one_run(hist, steps: int, batch: int, checkpoints: tuple[int, ...], lag: int
     rebuild = time.process_time() - t0
     return {"median": np.median(times), "mean": np.mean(times), "rebuild": rebuild,
             "ratios": ratios, "online": online, "offline": offline, "lagged": lagged,
-            "refits": om.n_full_fits,
-            "fold_refits": om.n_fold_refits, "growth": om.refit_growth}
+            "refits": om.n_full_fits, "fold_refits": om.n_fold_refits, "growth": om.refit_growth}
 
 
 def main() -> None:
@@ -133,8 +132,8 @@ def main() -> None:
                              seed=args.seed, methods=(method,), env_kwargs=env)
         with threadpool_limits(limits=1):
             rows = [one_run(collect_episode(ep), args.steps, args.batch, checkpoints,
-                            lag=args.reference_lag, warm_rounds=args.warm_rounds, refit_growth=args.refit_growth,
-                            warm_tol=args.warm_tol, fold_check_every=args.fold_check_every,
+                            lag=args.reference_lag, warm_rounds=args.warm_rounds,
+                            refit_growth=args.refit_growth, warm_tol=args.warm_tol, fold_check_every=args.fold_check_every,
                             bundle_every=args.bundle_every, bundle_rounds=args.bundle_rounds)
                     for ep in cfg.episodes()]
         med = np.median([r["median"] for r in rows])
@@ -162,8 +161,9 @@ def main() -> None:
             moved = ""
             if lag:  # the offline map K steps before over the checkpoint's, where all three exist
                 both = [r for r in ok if np.isfinite(r["lagged"][j])]
-                moved = (f" {np.mean([r['lagged'][j] for r in both]) / np.mean([r['offline'][j] for r in both]):17.3f}"
-                         if both else f" {'-':>17s}")
+                before = np.mean([r["lagged"][j] for r in both]) if both else np.nan
+                at = np.mean([r["offline"][j] for r in both]) if both else np.nan
+                moved = f" {before / at:17.3f}" if both else f" {'-':>17s}"
             print(f"  {n:6d} {on:10.4g} {off:11.4g} {on / off:10.3f} {np.nanmax(R[:, j]):9.3f}{moved}"
                   f"{'' if len(ok) == len(rows) else f'  ({len(rows) - len(ok)} runs without both maps)'}")
         final, mids = ratios[-1], ratios[:-1]
