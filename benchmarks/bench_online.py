@@ -71,6 +71,12 @@ def one_run(hist, steps: int, batch: int, checkpoints: tuple[int, ...], lag: int
         return mappers.build_map(X[:, :cols], hist.anchor_ids, hist.anchor_positions, method,
                                  sensor=hist.sensor, mask=None if mask is None else mask[:, :cols])
 
+    def offline_mpe(n: int) -> float:
+        try:
+            return _mpe(offline_map(n, reference), hist)
+        except ValueError:  # too few steps to map (a limited view at 500 steps): no ratio
+            return np.nan
+
     for s in range(0, steps, batch):
         cols = slice(s * c, (s + batch) * c)
         t0 = time.process_time()
@@ -80,13 +86,9 @@ def one_run(hist, steps: int, batch: int, checkpoints: tuple[int, ...], lag: int
             reference = current.method
         if s + batch in checkpoints:
             online.append(_mpe(current, hist))
-            for n, out in ((s + batch, offline), (s + batch - lag, lagged if lag else None)):
-                if out is None:
-                    continue
-                try:
-                    out.append(_mpe(offline_map(n, reference), hist))
-                except ValueError:  # too few steps to map (a limited view at 500 steps)
-                    out.append(np.nan)
+            offline.append(offline_mpe(s + batch))
+            if lag:
+                lagged.append(offline_mpe(s + batch - lag))
             ratios.append(online[-1] / offline[-1])
     t0 = time.process_time()
     offline_map(steps, reference)
