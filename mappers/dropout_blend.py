@@ -17,7 +17,29 @@ run 0.071, same layouts; at ``miss_rate = 0.2`` 0.049 against CAL-SMA's 0.053; o
 layouts of ``benchmarks/bench_masked_goals.py`` at 0.5: 0.069 against CAL-SMA's 0.089 and
 ``covis-nonmetric``'s 0.073). An object one of them leaves unplaced takes the other's position;
 one whose two positions lie farther apart than the anchors' spread (a member's failure, not
-noise) keeps CAL-SMA's, with a warning.
+noise) keeps CAL-SMA's, with a warning. When the two maps disagree as a whole (their median
+distance over the objects both place above ``max_disagreement`` times the anchors' spread), the
+map is CAL-SMA's alone, with a warning: ``covis-nonmetric`` has then failed, folded or flung
+far, and half of it is no longer noise that the mean averages out. This holds for walk-ordered
+steps (:func:`mappers.flicker.persistence` at least :data:`WALK_PERSISTENCE`), which CAL-SMA's
+window assumes; on viewpoints drawn at random CAL-SMA is the member that fails (one synthetic
+history: 0.57 m against ``covis-nonmetric``'s 0.05), and the maps are blended as before. Measured through a 90-degree
+view (VIEW-BA starts from this map; mean non-anchor MPE [m] at 500 / 1,000 / 1,500 / 2,000
+steps, without the check -> with it):
+
+- tuning histories (seeds 777 and 4242 of ``bench_online.py``, 50 layouts): VIEW-BA 0.106 /
+  0.070 / 0.043 / 0.043 -> 0.074 / 0.061 / 0.042 / 0.041; the blend itself 0.197 / 0.118 / 0.068
+  / 0.064 -> 0.113 / 0.096 / 0.063 / 0.058;
+- unseen ones (seed 31337, 25 layouts): VIEW-BA 0.113 / 0.085 / 0.050 / 0.041 -> 0.086 / 0.055 /
+  0.042 / 0.041; another simulator's (``bench_view_other_sim.py``'s world, 20 layouts, 500 /
+  1,000 / 2,000): 0.114 / 0.097 / 0.084 -> 0.093 / 0.070 / 0.084.
+
+Above 0.25 CAL-SMA was the better member in 39 of 39 tuning maps, 23 of 23 unseen ones and 26 of
+27 of the other simulator's (covis-nonmetric 0.29 m to 10^19 m off; the exception, both members
+off by 0.4-0.5 m). Below it the members' errors are mixed, and on the MRCLAM runs (real data,
+where CAL-SMA alone is by far the worse member) they disagree by 0.06-0.12, so the check leaves
+those maps as they were; at 0.1 it fired there and cost 0.5 m on Dataset 1.
+The median, not the mean: one object flung far is the guard above's.
 
 A limited field of view is a dropout the mask names: an object out of view reads 0 at steps
 between steps that saw it. The same blend (unobserved entries as 0) is the default for masked
@@ -26,25 +48,34 @@ visibility histories: through a 90-degree view 0.074 m (largest run 0.28) agains
 the 25 fresh ones of ``benchmarks/bench_masked_goals.py`` (``covis-nonmetric``: 0.085, 0.202).
 
 *Assumes*: what CAL-SMA and ``covis-nonmetric`` assume, and that consecutive steps are close
-viewpoints (the window). ``build_map`` picks it for masked visibility histories
-(:data:`mappers.registry.DEFAULT_METHODS`) and for a complete visibility history whose flicker
-rate (:func:`mappers.flicker.flicker_rate`) says it has dropouts
-(:data:`mappers.registry.DROPOUT_DEFAULTS`).
+viewpoints (the window). It was ``build_map``'s default for masked visibility histories and for
+complete ones with dropouts; VIEW-BA and VIS-BA-WALK replaced it there
+(:data:`mappers.registry.DEFAULT_METHODS`, :data:`mappers.registry.DROPOUT_DEFAULTS`). It is
+VIEW-BA's start, and the masked visibility default above
+:data:`mappers.registry.SCALABLE_ABOVE_OBJECTS` objects.
 """
 
 from __future__ import annotations
 
 import warnings
+from numbers import Real
 
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
 from mappers.calibrated import CalibratedSMACOF
-from mappers.flicker import step_runs
+from mappers.flicker import persistence, step_runs
 from mappers.masked import MaskedMapper, MaskedMapWarning
 from mappers.registry import MethodSpec
 
-__all__ = ["DropoutBlend", "smooth_steps"]
+__all__ = ["WALK_PERSISTENCE", "DropoutBlend", "smooth_steps"]
+
+WALK_PERSISTENCE = 1.5
+"""The smallest :func:`mappers.flicker.persistence` of the zero-filled rows at which
+``dropout-blend`` takes its steps for a walk's and, when its members disagree as a whole, keeps
+CAL-SMA's map. Masked walks through a 90-degree view: 1.9-3.5 (median 3.1; 225 histories of 500
+to 2,000 steps), lower than complete ones (4.8-5.3: a turning view changes what is visible);
+another simulator's walk 4.3-5.9; viewpoints drawn at random about 1.1."""
 
 
 def smooth_steps(X, window: int, timeline=None) -> np.ndarray:
@@ -64,14 +95,24 @@ class DropoutBlend:
 
     ``fit_transform(X, mask=None, *, sensor, anchor_ids, anchor_positions, timeline=None)``
     returns the (M, 2) map in the anchors' frame; ``maps_`` holds the two members' maps
-    (``"CAL-SMA"``, ``"covis-nonmetric"``).
+    (``"CAL-SMA"``, ``"covis-nonmetric"``), ``disagreement_`` their median distance over the objects
+    both place as a share of the anchors' spread, and ``blended_`` whether the map is their mean
+    (False: CAL-SMA's alone, the steps walk-ordered (``walk_ordered_``) and the disagreement
+    above ``max_disagreement``; None disables that check).
     """
 
     def __init__(self, *, window: int = 3, n_neighbors: int | None = None, min_co: int = 3,
-                 max_iter: int = 300, random_state=0) -> None:
+                 max_iter: int = 300, max_disagreement: float | None = 0.25,
+                 random_state=0) -> None:
         smooth_steps(np.zeros((1, 1)), window)  # checks window
+        if max_disagreement is not None and (
+                isinstance(max_disagreement, bool) or not isinstance(max_disagreement, Real)
+                or not max_disagreement > 0):
+            raise ValueError(f"max_disagreement must be a number > 0 or None, got "
+                             f"{max_disagreement!r}")
         self.window, self.n_neighbors, self.min_co = int(window), n_neighbors, min_co
         self.max_iter, self.random_state = max_iter, random_state
+        self.max_disagreement = max_disagreement
 
     def fit_transform(self, X, mask=None, *, sensor: str, anchor_ids=None, anchor_positions=None,
                       timeline=None):
@@ -98,14 +139,32 @@ class DropoutBlend:
             "covis-nonmetric": ordinal,
         }
         a, b = self.maps_.values()
+        pos = np.asarray(anchor_positions, dtype=float)
+        spread = float(np.sqrt(np.mean(np.sum((pos - pos.mean(axis=0)) ** 2, axis=1))))
+        gap = np.linalg.norm(a - b, axis=1)
+        both = np.isfinite(gap)
+        self.disagreement_ = float(np.median(gap[both]) / spread) if both.any() else float("nan")
+        # CAL-SMA is the member trusted only where its window is sound: on walk-ordered steps
+        # (on viewpoints drawn at random the averaged rows mix unrelated steps, and it is the
+        # member that fails)
+        self.walk_ordered_ = bool(persistence(X, timeline) >= WALK_PERSISTENCE)
+        self.blended_ = not (self.max_disagreement is not None and self.walk_ordered_
+                             and self.disagreement_ > self.max_disagreement)
+        if not self.blended_:
+            # covis-nonmetric has failed as a whole (folded, or flung far on sparse data): its
+            # half of a mean would be an error, not noise to average out. CAL-SMA is the member
+            # kept: it guards itself against folds (mappers.calibrated.fold_score)
+            warnings.warn(f"dropout-blend: the CAL-SMA and covis-nonmetric maps disagree by "
+                          f"{self.disagreement_:.2f} of the anchors' spread (median; above "
+                          f"max_disagreement = {self.max_disagreement:g}): the map is CAL-SMA's",
+                          MaskedMapWarning, stacklevel=2)
+            return a.copy()
         Y = np.where(np.isnan(a), b, np.where(np.isnan(b), a, 0.5 * (a + b)))
         # covis-nonmetric's lower bounds can fling a weakly tied object kilometres away on very
         # sparse data (N = 300 at miss_rate 0.7); an object whose two positions lie farther
         # apart than the anchors' spread keeps CAL-SMA's
-        pos = np.asarray(anchor_positions, dtype=float)
-        spread = float(np.sqrt(np.mean(np.sum((pos - pos.mean(axis=0)) ** 2, axis=1))))
-        with np.errstate(invalid="ignore"):
-            apart = np.linalg.norm(a - b, axis=1) > spread
+        apart = np.zeros(len(gap), dtype=bool)
+        apart[both] = gap[both] > spread
         if apart.any():
             Y[apart] = a[apart]
             warnings.warn(f"dropout-blend: objects {np.flatnonzero(apart).tolist()} lie farther "
@@ -114,10 +173,10 @@ class DropoutBlend:
         return Y
 
 
-def _dropout_blend(window=3, n_neighbors=None, min_co=3, max_iter=300,
+def _dropout_blend(window=3, n_neighbors=None, min_co=3, max_iter=300, max_disagreement=0.25,
                    random_state=0) -> DropoutBlend:
     return DropoutBlend(window=window, n_neighbors=n_neighbors, min_co=min_co, max_iter=max_iter,
-                        random_state=random_state)
+                        max_disagreement=max_disagreement, random_state=random_state)
 
 
 SPEC = MethodSpec(

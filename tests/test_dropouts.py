@@ -139,6 +139,7 @@ def test_dropout_blend_is_the_mean_of_its_two_anchored_maps():
                           anchor_positions=h.anchor_positions)
     a, b = est.maps_.values()
     assert np.allclose(Y, 0.5 * (a + b))
+    assert est.blended_ and est.disagreement_ < est.max_disagreement
     for member in (a, b):  # both hold the anchors at their positions
         assert np.allclose(member[list(h.anchor_ids)], h.anchor_positions, atol=1e-6)
 
@@ -152,6 +153,9 @@ def test_dropout_blend_refuses_what_it_cannot_map():
         DropoutBlend().fit_transform(X, sensor="visibility")
     with pytest.raises(ValueError, match="window"):
         DropoutBlend(window=0)
+    for bad in (0, -0.1, True, "0.1", float("nan")):
+        with pytest.raises(ValueError, match="max_disagreement"):
+            DropoutBlend(max_disagreement=bad)
 
 
 def test_an_object_flung_away_by_one_member_keeps_the_cal_sma_position(monkeypatch):
@@ -180,3 +184,82 @@ def test_an_object_flung_away_by_one_member_keeps_the_cal_sma_position(monkeypat
     assert np.array_equal(Y[far], est.maps_["CAL-SMA"][far])
     others = np.setdiff1d(np.arange(h.n_objects), [far])
     assert np.allclose(Y[others], 0.5 * (est.maps_["CAL-SMA"][others] + h.object_positions[others]))
+
+
+def _covis_member(monkeypatch, positions):
+    """Replace dropout-blend's covis-nonmetric member by one returning ``positions``."""
+    import mappers.dropout_blend as db
+
+    class Given:
+        def __init__(self, *args, **kwargs):
+            pass
+
+        def fit_transform(self, X, mask=None, **kw):
+            return positions.copy()
+
+    monkeypatch.setattr(db, "MaskedMapper", Given)
+
+
+def test_a_member_that_fails_as_a_whole_leaves_the_map_to_cal_sma(monkeypatch):
+    """When the two maps disagree as a whole (a fold, or a map flung far on sparse data: through
+    a 90-degree view covis-nonmetric's did so on a third of our tuning histories), their mean is
+    no map: dropout-blend returns CAL-SMA's and says so; max_disagreement=None blends anyway."""
+    h = _episode(5, 600, miss_rate=0.3)
+    ids = list(h.anchor_ids)
+    folded = h.object_positions.copy()
+    free = np.setdiff1d(np.arange(h.n_objects), ids)
+    folded[free, 0] *= -1.0  # every free object mirrored across the arena's axis: a fold
+    _covis_member(monkeypatch, folded)
+    est = DropoutBlend()
+    with pytest.warns(UserWarning, match=r"disagree by .* the map is CAL-SMA's"):
+        Y = est.fit_transform(h.matrix, sensor="visibility", anchor_ids=ids,
+                              anchor_positions=h.anchor_positions)
+    assert not est.blended_ and est.disagreement_ > est.max_disagreement
+    assert np.array_equal(Y, est.maps_["CAL-SMA"])
+    loose = DropoutBlend(max_disagreement=None)
+    with pytest.warns(UserWarning, match="farther apart"):  # the per-object guard, still on
+        Y2 = loose.fit_transform(h.matrix, sensor="visibility", anchor_ids=ids,
+                                 anchor_positions=h.anchor_positions)
+    assert loose.blended_
+    cal = loose.maps_["CAL-SMA"]
+    pos = h.anchor_positions
+    spread = np.sqrt(np.mean(np.sum((pos - pos.mean(axis=0)) ** 2, axis=1)))
+    mean = np.linalg.norm(cal - folded, axis=1) <= spread  # the others: the per-object guard's
+    assert mean.sum() > len(ids)
+    assert np.allclose(Y2[mean], 0.5 * (cal[mean] + folded[mean]))
+    assert np.array_equal(Y2[~mean], cal[~mean])
+
+
+def test_the_median_disagreement_ignores_one_flung_object(monkeypatch):
+    """One object flung far is the per-object guard's: the rest is still blended."""
+    h = _episode(5, 600, miss_rate=0.3)
+    near = h.object_positions + 0.01  # agrees with CAL-SMA to a few centimetres
+    far = int(np.setdiff1d(np.arange(h.n_objects), h.anchor_ids)[0])
+    near[far] += 1000.0
+    _covis_member(monkeypatch, near)
+    est = DropoutBlend()
+    with pytest.warns(UserWarning, match=rf"objects \[{far}\]"):
+        est.fit_transform(h.matrix, sensor="visibility", anchor_ids=list(h.anchor_ids),
+                          anchor_positions=h.anchor_positions)
+    assert est.blended_ and est.disagreement_ < 0.1
+
+
+def test_unordered_viewpoints_are_blended_even_when_the_members_disagree():
+    """On viewpoints drawn at random CAL-SMA's window mixes unrelated steps and it is the member
+    that fails: the disagreement check applies to walk-ordered steps only."""
+    rng = np.random.default_rng(0)  # tests/test_mappers_pipeline.py's world: a jittered grid
+    g = np.linspace(-1.0, 1.0, 7)
+    grid = np.array([(x, y) for x in g for y in g])
+    idx = np.concatenate([[0, 6, 42, 48], rng.choice(np.arange(1, 42), 36, replace=False)])
+    P = grid[idx] + rng.uniform(-0.05, 0.05, (40, 2))
+    R = rng.uniform(-1.25, 1.25, (1200, 2))
+    X = (np.linalg.norm(P[:, None] - R[None], axis=2) < 0.55).astype(float)
+    est = DropoutBlend()
+    with pytest.warns(UserWarning, match="folded"):  # CAL-SMA's own fold guard says so too
+        Y = est.fit_transform(X, X > 0, sensor="visibility", anchor_ids=[0, 1, 2, 3],
+                              anchor_positions=P[:4])
+    assert not est.walk_ordered_ and est.blended_
+    assert est.disagreement_ > est.max_disagreement  # the check would have fired on a walk
+    cal, covis = est.maps_.values()
+    assert mean_position_error(covis[4:], P[4:]) < mean_position_error(cal[4:], P[4:])
+    assert mean_position_error(Y[4:], P[4:]) < mean_position_error(cal[4:], P[4:])
