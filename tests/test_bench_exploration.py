@@ -105,3 +105,14 @@ def test_a_history_the_method_cannot_map_scores_nan_not_a_crash(monkeypatch):
     monkeypatch.setattr(bench.mappers, "build_map", refuse)
     value, label = bench._mpe(Hist(), 10)
     assert np.isnan(value) and label is None
+
+
+def test_column_means_skip_layouts_without_a_map_and_keep_an_empty_column_nan(recwarn):
+    """Through a limited view no layout has a map at 250 steps: that column's mean is NaN, and
+    numpy's 'Mean of empty slice' warning is not printed into the benchmark's table."""
+    rows = np.array([[np.nan, 0.1, 0.05, 0.04],
+                     [np.nan, np.nan, 0.07, 0.02]])
+    means = _bench().column_means(rows)
+    assert np.isnan(means[0])
+    assert np.allclose(means[1:], [0.1, 0.06, 0.03])
+    assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)]
