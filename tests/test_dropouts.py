@@ -263,3 +263,19 @@ def test_unordered_viewpoints_are_blended_even_when_the_members_disagree():
     cal, covis = est.maps_.values()
     assert mean_position_error(covis[4:], P[4:]) < mean_position_error(cal[4:], P[4:])
     assert mean_position_error(Y[4:], P[4:]) < mean_position_error(cal[4:], P[4:])
+
+
+def test_a_member_flung_to_infinity_counts_as_disagreeing(monkeypatch):
+    """A member whose free objects lie at infinity (an overflowed solve) is as far off as a map
+    can be: the check keeps CAL-SMA's map, it does not drop those objects from the median."""
+    h = _episode(5, 600, miss_rate=0.3)
+    ids = list(h.anchor_ids)
+    flung = h.object_positions.copy()
+    flung[np.setdiff1d(np.arange(h.n_objects), ids)] = np.inf
+    _covis_member(monkeypatch, flung)
+    est = DropoutBlend()
+    with pytest.warns(UserWarning, match="the map is CAL-SMA's"):
+        Y = est.fit_transform(h.matrix, sensor="visibility", anchor_ids=ids,
+                              anchor_positions=h.anchor_positions)
+    assert not est.blended_ and est.disagreement_ == np.inf
+    assert np.array_equal(Y, est.maps_["CAL-SMA"]) and np.all(np.isfinite(Y))
