@@ -94,7 +94,7 @@ def main(argv=None) -> None:
             for r in range(args.runs):
                 seed = args.seed + r
                 h = episode(sensor, seed, args.steps, **kw)
-                masked = h.mask is not None and not h.mask.all()
+                masked = h.partly_observed
                 before = BEFORE[sensor] if masked else "CAL-SMA"
                 labels = {f"before ({before})": before, "default": None}
                 for extra in args.methods or ():

@@ -64,7 +64,7 @@ def one_run(hist, steps: int, batch: int, checkpoints: tuple[int, ...], lag: int
     reference = None  # bearing: build_map's default (BEARING-BA); visibility: the online method
     X = hist.matrix
     # an env with noise only reports an all-True mask: a complete history
-    mask = hist.mask if hist.masked and not hist.mask.all() else None
+    mask = hist.mask if hist.partly_observed else None
 
     def offline_map(n: int, method):
         cols = n * c

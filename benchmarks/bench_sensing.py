@@ -84,7 +84,7 @@ def _task(panel: str, value: Any, run: int, steps: int, seed: int,
                       steps, tuple(sorted(kwargs.items())))
     with threadpool_limits(1):  # one BLAS thread per map, as the protocol
         history = collect_episode(episode)
-        masked = history.mask is not None and not history.mask.all()
+        masked = history.partly_observed
         from mappers import default_method
 
         default = default_method(history)  # what build_map picks (a flickering history: dropouts)

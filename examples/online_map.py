@@ -37,7 +37,7 @@ def main() -> None:
     history = collect(env, POLICIES[args.policy](env, seed=args.seed), args.steps, seed=args.seed)
     env.close()
     # a sensing limit masks the history (noise alone reports an all-True mask: nothing to pass)
-    mask = history.mask if history.masked and not history.mask.all() else None
+    mask = history.mask if history.partly_observed else None
     # replay the history in batches of 10 steps, as a robot would send them
     online = mappers.OnlineMapper(history.anchor_ids, history.anchor_positions,
                                   sensor=history.sensor)

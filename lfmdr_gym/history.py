@@ -257,6 +257,17 @@ class History:
         return self.__dict__["_mask"] is not None
 
     @property
+    def partly_observed(self) -> bool:
+        """Whether some entry went unobserved: a mask that is not all True (a limited view or
+        range). Noise alone or a miss rate give a mask that is all True, and the mappers treat
+        such a history as complete (``build_map`` and :class:`mappers.OnlineMapper` drop an
+        all-True mask), so ``history.mask if history.partly_observed else None`` is the mask to
+        pass them column by column. Works at any size (the sparse mask is counted)."""
+        self._single("partly_observed")
+        mask = self.sparse_mask
+        return mask is not None and mask.count_nonzero() < mask.shape[0] * mask.shape[1]
+
+    @property
     def sparse_mask(self):
         """The mask as a bool ``scipy.sparse.csr_array`` (None without one): works at any size."""
         self._single("sparse_mask")

@@ -47,6 +47,9 @@ def test_a_fused_history_holds_one_matrix_per_sensor():
     np.testing.assert_array_equal(head.robot_poses, h.robot_poses[:10])
     with pytest.raises(ValueError, match=r"History.parts\[sensor\].sparse"):
         _ = h.sparse
+    with pytest.raises(ValueError, match=r"History.parts\[sensor\].partly_observed"):
+        _ = h.partly_observed
+    assert rng_part.partly_observed  # a 120-degree camera out to 2 m
 
 
 @pytest.mark.parametrize("mask", [True, False])

@@ -282,3 +282,18 @@ def test_collect_accepts_numpy_integer_seeds_and_sb3_models():
     a = collect("LFMDR-Visibility-v0", Model(), 20, seed=np.int64(4))
     b = collect("LFMDR-Visibility-v0", steer, 20, seed=4)
     assert a.meta["seed"] == 4 and np.array_equal(a.matrix, b.matrix)
+
+
+@pytest.mark.parametrize("compact", [False, True])
+def test_partly_observed_says_whether_a_mask_hides_anything(compact):
+    """A limited view leaves entries unobserved; noise alone reports a mask that is all True,
+    which the mappers treat as complete; a perfect history has no mask. The same answer from a
+    compact (sparse) history."""
+    def episode(**sensing):
+        env = gym.make("LFMDR-Visibility-v0", max_episode_steps=60, **sensing)
+        return collect(env, RandomWalkPolicy.for_env(env), 60, seed=3, compact=compact)
+
+    perfect, noisy, limited = episode(), episode(miss_rate=0.3), episode(fov_deg=90)
+    assert not perfect.masked and not perfect.partly_observed
+    assert noisy.masked and noisy.mask.all() and not noisy.partly_observed
+    assert limited.masked and not limited.mask.all() and limited.partly_observed
