@@ -31,6 +31,7 @@ import mappers
 from lfmdr_gym import POLICIES, collect, env_id_for
 from lfmdr_gym.experiments.env_settings import check_env_kwargs, parse_env_kwargs
 from lfmdr_gym.experiments.episodes import derived_seed, make_env
+from lfmdr_gym.experiments.scoring import mpe_nonanchor
 
 STEPS = (250, 500, 1000, 2000)
 
@@ -51,9 +52,7 @@ def _mpe(hist, n: int, method: str | None = None) -> tuple[float, str | None]:
             if "anchors remain" not in str(exc):
                 raise
             return float("nan"), None
-    truth = hist.object_positions
-    keep = np.setdiff1d(np.arange(len(truth)), [*hist.anchor_ids, *m.unmapped])
-    return mappers.mean_position_error(m.positions[keep], truth[keep]), m.method
+    return mpe_nonanchor(m.positions, m.unmapped, hist), m.method
 
 
 def column_means(rows: np.ndarray) -> np.ndarray:

@@ -33,6 +33,7 @@ from threadpoolctl import threadpool_limits
 
 import lfmdr_gym  # noqa: F401 - registers the envs
 import mappers
+from lfmdr_gym.experiments.scoring import mpe_nonanchor
 from lfmdr_gym.history import History
 from lfmdr_gym.policies import RandomWalkPolicy
 from lfmdr_gym.recording import collect
@@ -70,8 +71,7 @@ def score(hist: History, method: str | None, **params) -> tuple[float, float]:
         t0 = time.process_time()
         m = mappers.build_map(hist, hist.anchor_ids, hist.anchor_positions, method, **params)
         cpu = time.process_time() - t0
-    keep = np.setdiff1d(np.arange(hist.n_objects), [*hist.anchor_ids, *m.unmapped])
-    return mappers.mean_position_error(m.positions[keep], hist.object_positions[keep]), cpu
+    return mpe_nonanchor(m.positions, m.unmapped, hist), cpu
 
 
 def main(argv=None) -> None:

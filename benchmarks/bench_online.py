@@ -41,17 +41,15 @@ from threadpoolctl import threadpool_limits
 import mappers
 from lfmdr_gym.experiments.env_settings import check_env_kwargs, parse_env_kwargs
 from lfmdr_gym.experiments.protocol import ProtocolConfig, collect_episode
+from lfmdr_gym.experiments.scoring import mpe_nonanchor
 from mappers.sensors import COLUMNS_PER_STEP
 
 GOAL_SPEEDUP, GOAL_FINAL, GOAL_CHECKPOINT = 20.0, 1.05, 1.1
 
 
 def _mpe(result, hist) -> float:
-    truth = hist.object_positions
-    keep = np.setdiff1d(np.arange(len(truth)), [*hist.anchor_ids, *result.unmapped])
-    if keep.size == 0:  # nothing mapped yet (a limited view's first steps)
-        return np.nan
-    return mappers.mean_position_error(result.positions[keep], truth[keep])
+    """NaN when nothing is mapped yet (a limited view's first steps)."""
+    return mpe_nonanchor(result.positions, result.unmapped, hist)
 
 
 def one_run(hist, steps: int, batch: int, checkpoints: tuple[int, ...], lag: int = 0,

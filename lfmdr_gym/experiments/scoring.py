@@ -15,7 +15,7 @@ import numpy as np
 
 from lfmdr_gym.history import History
 
-__all__ = ["evaluate", "map_history", "score_map"]
+__all__ = ["evaluate", "map_history", "mpe_nonanchor", "score_map"]
 
 
 def score_map(positions: np.ndarray, unmapped: Sequence[int], history: History) -> dict[str, float]:
@@ -24,18 +24,25 @@ def score_map(positions: np.ndarray, unmapped: Sequence[int], history: History) 
 
     truth = history.object_positions
     unmapped = [int(i) for i in unmapped]
-    non_anchor = sorted(set(unmapped) | {int(i) for i in history.anchor_ids})
     nan = float("nan")
     mapped = history.n_objects - len(unmapped)
     return {
         "mpe": mean_position_error(positions, truth, exclude=unmapped) if mapped else nan,
         "moe": mean_orientation_error(positions, truth, exclude=unmapped) if mapped >= 3 else nan,
-        "mpe_nonanchor": (
-            mean_position_error(positions, truth, exclude=non_anchor)
-            if history.n_objects > len(non_anchor) else nan
-        ),
+        "mpe_nonanchor": mpe_nonanchor(positions, unmapped, history),
         "unmapped": len(unmapped),
     }
+
+
+def mpe_nonanchor(positions: np.ndarray, unmapped: Sequence[int], history: History) -> float:
+    """MPE [m] over the mapped non-anchor objects of a map of ``history`` (the figure the
+    benchmarks report); NaN when none is mapped (the first steps through a limited view)."""
+    from mappers import mean_position_error
+
+    non_anchor = sorted({int(i) for i in unmapped} | {int(i) for i in history.anchor_ids})
+    if history.n_objects <= len(non_anchor):
+        return float("nan")
+    return mean_position_error(positions, history.object_positions, exclude=non_anchor)
 
 
 def map_history(history: History, method: str | None, params: Mapping[str, Any] | None = None) -> Any:
