@@ -100,9 +100,8 @@ class DropoutBlend:
     returns the (M, 2) map in the anchors' frame; ``maps_`` holds the two members' maps
     (``"CAL-SMA"``, ``"covis-nonmetric"``), ``disagreement_`` their median distance over the
     objects both place as a share of the anchors' spread, and ``blended_`` whether the map is
-    their mean
-    (False: CAL-SMA's alone, the steps walk-ordered (``walk_ordered_``) and the disagreement
-    above ``max_disagreement``; None disables that check).
+    their mean (False: CAL-SMA's alone, the steps being walk-ordered (``walk_ordered_``) and
+    the disagreement above ``max_disagreement``; None disables that check).
     """
 
     def __init__(self, *, window: int = 3, n_neighbors: int | None = None, min_co: int = 3,
