@@ -136,7 +136,8 @@ def main() -> None:
         with threadpool_limits(limits=1):
             rows = [one_run(collect_episode(ep), args.steps, args.batch, checkpoints,
                             lag=args.reference_lag, warm_rounds=args.warm_rounds,
-                            refit_growth=args.refit_growth, warm_tol=args.warm_tol, fold_check_every=args.fold_check_every,
+                            refit_growth=args.refit_growth, warm_tol=args.warm_tol,
+                            fold_check_every=args.fold_check_every,
                             bundle_every=args.bundle_every, bundle_rounds=args.bundle_rounds)
                     for ep in cfg.episodes()]
         med = np.median([r["median"] for r in rows])
@@ -167,7 +168,8 @@ def main() -> None:
                 before = np.mean([r["lagged"][j] for r in both]) if both else np.nan
                 at = np.mean([r["offline"][j] for r in both]) if both else np.nan
                 moved = f" {before / at:17.3f}" if both else f" {'-':>17s}"
-            print(f"  {n:6d} {on:10.4g} {off:11.4g} {on / off:10.3f} {np.nanmax(R[:, j]):9.3f}{moved}"
+            print(f"  {n:6d} {on:10.4g} {off:11.4g} {on / off:10.3f} "
+                  f"{np.nanmax(R[:, j]):9.3f}{moved}"
                   f"{'' if len(ok) == len(rows) else f'  ({len(rows) - len(ok)} runs without both maps)'}")
         final, mids = ratios[-1], ratios[:-1]
         mid_goal = ("no checkpoint before N" if not mids

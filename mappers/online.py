@@ -301,7 +301,8 @@ class OnlineMapper:
     within 1 % of the offline BEARING-BA map's MPE on average (2 degrees of bearing noise), and
     as exact (~5e-10 m) on perfect bearings. Masked visibility through a 90-degree view
     (VIEW-BA, ``--env fov_deg=90``): median 8 ms, mean 45 ms, 25x cheaper than a rebuild
-    (1.15 s, a loaded machine), the refits (about 7 per run, 0.5-1.1 s each) most of it. See ``docs/online-and-exploration.md`` for what each change bought.
+    (1.15 s, a loaded machine), the refits (about 7 per run, 0.5-1.1 s each) most of it. See
+    ``docs/online-and-exploration.md`` for what each change bought.
     """
 
     def __init__(self, anchor_ids, anchor_positions, *, sensor: str | None = None,

@@ -9,14 +9,14 @@ radius, between updates instead:
 
 - *refits*: VIEW-BA over the whole history (:func:`mappers.pipeline.build_map`'s own fit, so the
   map is the offline one of those steps), on :class:`~mappers.online.OnlineMapper`'s schedule
-  (every 1.25x growth of the steps by default), and whenever an object is seen for the first time since the
-  last one (it has no place yet);
+  (every 1.25x growth of the steps by default), and whenever an object is seen for the first
+  time since the last one (it has no place yet);
 - *refinements* (due only when refits are sparser than every 1.25x: ``OnlineMapper``'s
   ``refit_growth`` above its VIEW-BA default, 1.25): whenever the steps have grown by a quarter
   since the last refit or refinement, VIEW-BA over the whole history from the current objects
-  instead of a start map (:meth:`OnlineView.refine`): the view's width, the radius and every viewpoint found afresh,
-  then its rounds; about a third of a refit, whose start map (``dropout-blend``) is most of its
-  cost and does not shrink with the steps;
+  instead of a start map (:meth:`OnlineView.refine`): the view's width, the radius and every
+  viewpoint found afresh, then its rounds; about a third of a refit, whose start map
+  (``dropout-blend``) is most of its cost and does not shrink with the steps;
 - *new steps*: each new step's viewpoint is searched on VIEW-BA's grid of candidates over the
   current objects and refined by its Newton steps, the objects fixed: O(k M G) for k new steps
   and G candidates;
