@@ -28,6 +28,7 @@ from types import MappingProxyType
 from typing import Any
 
 import numpy as np
+import scipy.sparse as sp
 
 from lfmdr_gym import compact
 from lfmdr_gym.atomic import atomic_write
@@ -262,10 +263,15 @@ class History:
         range). Noise alone or a miss rate give a mask that is all True, and the mappers treat
         such a history as complete (``build_map`` and :class:`mappers.OnlineMapper` drop an
         all-True mask), so ``history.mask if history.partly_observed else None`` is the mask to
-        pass them column by column. Works at any size (the sparse mask is counted)."""
+        pass them column by column. Works at any size: a sparse mask's stored True entries are
+        counted in place, a dense one is read as it is (no copy in either form)."""
         self._single("partly_observed")
-        mask = self.sparse_mask
-        return mask is not None and mask.count_nonzero() < mask.shape[0] * mask.shape[1]
+        mask = self.__dict__["_mask"]
+        if mask is None:
+            return False
+        if sp.issparse(mask):
+            return mask.count_nonzero() < mask.shape[0] * mask.shape[1]
+        return not np.all(mask)
 
     @property
     def sparse_mask(self):
