@@ -60,7 +60,7 @@ def simulate_camera(history, fov_deg: float, max_range: float | None, sigma_bear
     ``fov_deg / 2`` of the heading and nearer than ``max_range`` (None: any distance); no
     occlusion. Readings get independent Gaussian noise: ``sigma_range`` [m] on the range,
     ``sigma_bearing_deg`` on the bearing (a negative range is reflected). Returns ``({"range": R, "bearing": B}, masks)`` in the
-    layout of :mod:`mappers.sensors` (unsensed entries 0 and False).
+    layout of :mod:`mappers.core.sensors` (unsensed entries 0 and False).
     """
     P, poses = history.object_positions, history.robot_poses
     rel = P[:, None, :] - poses[None, :, :2]

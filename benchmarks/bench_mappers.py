@@ -35,7 +35,7 @@ from mappers import (
     mean_orientation_error,
     mean_position_error,
 )
-from mappers.graph import connected_knn_graph
+from mappers.core.graph import connected_knn_graph
 
 ENV_IDS = {"visibility": "LFMDR-Visibility-v0", "bearing": "LFMDR-Bearing-v0", "range": "LFMDR-Range-v0"}
 

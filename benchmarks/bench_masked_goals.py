@@ -18,7 +18,7 @@ an object is observed inside the field of view centred on the heading and within
 (centre to centre); bearing noise is Gaussian on the angle; with ``miss_rate`` each visible entry
 reads 0 with that probability and stays observed, so such a history's mask is True everywhere:
 it is a complete history to the mapper, which is not told the miss rate but reads it from the
-history's flicker (:mod:`mappers.flicker`) and then maps with ``dropout-blend``.
+history's flicker (:mod:`mappers.core.flicker`) and then maps with ``dropout-blend``.
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ For each run and sensor (4 corner anchors, all 5 robots, scores over the 11 non-
   unweighted SMACOF from classical MDS, affine fit to the anchors);
 * ``masked-euclidean`` (bearing, range): RMS history difference over co-observed bins only,
   weighted SMACOF over the pairs that have it (the masked form of the paper's recipe);
-* each masked method (mappers/masked.py) that suits the sensor, with its default settings;
+* each masked method (mappers/masked/pair_maps.py) that suits the sensor, with its default settings;
 * ``<method> LOO``: the method with the setting chosen *without* the run (lowest mean MPE over
   the other runs in a small grid), i.e. a score on a run the setting was not tuned on.
 

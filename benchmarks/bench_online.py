@@ -43,7 +43,7 @@ import mappers
 from lfmdr_gym.experiments.env_settings import check_env_kwargs, parse_env_kwargs
 from lfmdr_gym.experiments.protocol import ProtocolConfig, collect_episode
 from lfmdr_gym.experiments.scoring import mpe_nonanchor
-from mappers.sensors import COLUMNS_PER_STEP
+from mappers.core.sensors import COLUMNS_PER_STEP
 
 GOAL_SPEEDUP, GOAL_FINAL, GOAL_CHECKPOINT = 20.0, 1.05, 1.1
 

@@ -68,7 +68,7 @@ def run_method(path: str, method: str) -> dict:
     """Map the saved history with ``method``; time, peak memory, MPE and MOE (non-anchors)."""
     import mappers
     from lfmdr_gym.history import History
-    from mappers.scores import (
+    from mappers.core.scores import (
         mean_orientation_error,
         mean_position_error,
         sampled_orientation_error,

@@ -21,7 +21,7 @@ import time
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from mappers.scores import _moe_bruteforce, mean_orientation_error
+from mappers.core.scores import _moe_bruteforce, mean_orientation_error
 
 
 def brute_moe(est: np.ndarray, truth: np.ndarray) -> float:

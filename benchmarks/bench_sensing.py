@@ -112,7 +112,7 @@ def _is_default(row: dict[str, Any]) -> bool:
     """Whether ``row``'s method is the one ``build_map`` picks for its history by default."""
     from mappers import DEFAULT_METHODS
 
-    if row.get("default"):  # recorded since the flicker routing (mappers.flicker)
+    if row.get("default"):  # recorded since the flicker routing (mappers.core.flicker)
         return row["method"] == row["default"]
     return row["method"] == DEFAULT_METHODS[(row["sensor"], row["kind"] == "masked")]
 

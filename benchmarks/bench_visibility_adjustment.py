@@ -6,7 +6,7 @@ For each setting (complete perfect visibility, ``miss_rate=0.5``, a 90-degree vi
 ``"VIS-BA"`` (its CPU time includes drawing its start map: the default's, or the map of the
 default it replaced when the default is a VIS-BA), and prints the mean and the largest MPE over
 the runs [m] and the median CPU time per map. ``--walk`` adds VIS-BA with the walk's continuity
-prior: VIS-BA-WALK's parameters (:data:`mappers.visibility_adjustment.WALK_SPEC`) but VIS-BA's
+prior: VIS-BA-WALK's parameters (``METHODS["VIS-BA-WALK"].defaults``) but VIS-BA's
 start (the default's map, or the map of the default it replaced: ``dropout-blend`` for a
 flickering or masked history, CAL-SMA for a perfect one).
 
@@ -24,7 +24,7 @@ from bench_masked_goals import episode, score
 from threadpoolctl import threadpool_limits
 
 from lfmdr_gym.atomic import atomic_write
-from mappers.visibility_adjustment import WALK_SPEC
+from mappers import METHODS
 
 SETTINGS = (
     ("visibility, perfect (360 deg)", {}),
@@ -48,7 +48,7 @@ def main(argv=None) -> None:
     print(f"{args.runs} runs from seed {args.seed}, N = {args.steps}; MPE [m] mean / max run; "
           "CPU s per map (median, one BLAS thread)")
     lines = [("setting", "seed", "method", "mpe", "cpu_s")]
-    walk = {**WALK_SPEC.defaults, "start": None}
+    walk = {**METHODS["VIS-BA-WALK"].defaults, "start": None}
     runs = {"default (start)": (None, {}), "VIS-BA": ("VIS-BA", {}),
             "VIS-BA + walk": ("VIS-BA", walk)}  # label -> (method, its parameters)
     with threadpool_limits(limits=1):

@@ -28,7 +28,7 @@ others = np.setdiff1d(np.arange(len(objects)), anchors)
 print(f"{'method':12s} {'MPE [m]':>8s} {'MOE [%]':>8s} {'time [s]':>9s}   (non-anchor objects)")
 for label in methods_for("visibility", masked=False):
     if METHODS[label].takes_masks:
-        continue  # the masked methods are for histories with gaps (mappers/masked.py)
+        continue  # the masked methods are for histories with gaps (mappers/masked/pair_maps.py)
     start = time.perf_counter()
     result = build_map(histories, anchors, objects[anchors], method=label)
     seconds = time.perf_counter() - start

@@ -21,7 +21,7 @@ from lfmdr_gym.env import LFMDREnv
 from lfmdr_gym.history import History
 from lfmdr_gym.policies import POLICIES, RandomWalkPolicy, as_policy
 from lfmdr_gym.recording import collect, collect_vector
-from mappers.sensors import FUSED_SENSORS, SENSORS, check_sensor
+from mappers.core.sensors import FUSED_SENSORS, SENSORS, check_sensor
 
 __all__ = ["ENV_IDS", "POLICIES", "PRESETS", "History", "LFMDREnv", "RandomWalkPolicy", "as_policy", "collect",
            "collect_vector", "env_id_for"]

@@ -80,7 +80,7 @@ def _method_list(values: Sequence[str] | None) -> list[str] | None:
 
 def _add_sensor_option(p: argparse.ArgumentParser, what: str, fused: Sequence[str] = ()) -> None:
     """--sensor (also spelled --mode, its older name); ``fused``: fused sets also accepted."""
-    from mappers.sensors import SENSORS
+    from mappers.core.sensors import SENSORS
 
     p.add_argument("--sensor", "--mode", dest="sensor", required=True,
                    choices=(*SENSORS, *fused), help=what)

@@ -14,7 +14,7 @@ from lfmdr_gym.grid import CellGrid
 from lfmdr_gym.imperfect import SensingLimits
 from lfmdr_gym.render import HumanViewer, available_render_modes, draw_frame, human_rendering_error
 from lfmdr_gym.world import World, check_int, check_real
-from mappers.sensors import SENSORS, check_sensor, sensors_of
+from mappers.core.sensors import SENSORS, check_sensor, sensors_of
 
 __all__ = ["LFMDREnv", "OBSERVATION_TYPES", "observation_factory"]
 

@@ -1,13 +1,13 @@
 """Observation histories: the per-object matrix a mapper takes, plus the ground truth that scores it.
 
 A :class:`History` is what one episode (or one logged run) leaves behind. Its ``matrix`` has one
-row per object and, per step, ``columns_per_step`` columns (:data:`mappers.sensors.COLUMNS_PER_STEP`:
+row per object and, per step, ``columns_per_step`` columns (:data:`mappers.core.sensors.COLUMNS_PER_STEP`:
 1 for visibility (0/1) and range, 2 for bearing (cos, sin)). Columns are in step order, so the
 first ``n`` steps of a history are its first ``n * columns_per_step`` columns (:meth:`History.head`).
 
 A *fused* history holds several sensors' histories of the same objects over the same steps (a
 camera's range and bearing, or visibility and bearing of one walk): its ``sensor`` names the set
-(:data:`mappers.sensors.FUSED_SENSORS`, e.g. ``"range-bearing"``), its ``matrix`` is a mapping
+(:data:`mappers.core.sensors.FUSED_SENSORS`, e.g. ``"range-bearing"``), its ``matrix`` is a mapping
 sensor -> matrix and its ``mask`` (if any) is keyed the same way; :attr:`History.parts` gives each
 sensor's history on its own. ``build_map`` maps it with the default of the set.
 
@@ -32,8 +32,8 @@ import scipy.sparse as sp
 
 from lfmdr_gym import compact
 from lfmdr_gym.atomic import atomic_write
-from mappers.align import check_anchor_ids
-from mappers.sensors import (
+from mappers.core.align import check_anchor_ids
+from mappers.core.sensors import (
     COLUMNS_PER_STEP,
     FUSED_SENSORS,
     check_timeline,

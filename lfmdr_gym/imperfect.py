@@ -22,7 +22,7 @@ import numpy as np
 
 from lfmdr_gym import sensors
 from lfmdr_gym.world import check_real
-from mappers.sensors import sensors_of
+from mappers.core.sensors import sensors_of
 
 __all__ = ["LIMIT_DEFAULTS", "SensingLimits"]
 

@@ -20,7 +20,7 @@ import numpy as np
 from lfmdr_gym.compact import COMPACT_ABOVE_BYTES, CompactSteps
 from lfmdr_gym.history import History
 from lfmdr_gym.world import check_int
-from mappers.sensors import COLUMNS_PER_STEP, FUSED_SENSORS, SENSORS
+from mappers.core.sensors import COLUMNS_PER_STEP, FUSED_SENSORS, SENSORS
 
 __all__ = ["collect", "collect_vector"]
 

@@ -5,7 +5,7 @@ data as well as the simulator. Every method is a :class:`MethodSpec` in :data:`M
 :func:`build_map` picks one by what it accepts (sensor; complete or masked history).
 
 The names below are loaded on first use (PEP 562), so that importing the package, or only its
-sensor vocabulary (:mod:`mappers.sensors`, which the world uses), does not load scikit-learn
+sensor vocabulary (:mod:`mappers.core.sensors`, which the world uses), does not load scikit-learn
 and cvxpy.
 """
 
@@ -15,43 +15,46 @@ import importlib
 from typing import Any
 
 _LAZY: dict[str, str] = {
-    "COLUMNS_PER_STEP": "mappers.sensors",
-    "SENSORS": "mappers.sensors",
-    "infer_sensor": "mappers.sensors",
-    "DEFAULT_METHODS": "mappers.registry",
-    "METHODS": "mappers.registry",
-    "MappingError": "mappers.registry",
-    "MethodSpec": "mappers.registry",
-    "methods_for": "mappers.registry",
-    "register_method": "mappers.registry",
-    "resolve_method": "mappers.registry",
+    "COLUMNS_PER_STEP": "mappers.core.sensors",
+    "SENSORS": "mappers.core.sensors",
+    "infer_sensor": "mappers.core.sensors",
+    "METHODS": "mappers.catalog",
+    "MappingError": "mappers.catalog",
+    "MethodSpec": "mappers.catalog",
+    "methods_for": "mappers.catalog",
+    "register_method": "mappers.catalog",
+    "resolve_method": "mappers.catalog",
+    "DEFAULTS": "mappers.defaults",
+    "DEFAULT_METHODS": "mappers.defaults",
+    "choose_method": "mappers.defaults",
+    "localisation_free": "mappers.defaults",
     "Map": "mappers.pipeline",
+    "MapWarning": "mappers.pipeline",
     "build_map": "mappers.pipeline",
     "default_method": "mappers.pipeline",
-    "apply_affine": "mappers.align",
-    "fit_affine": "mappers.align",
-    "mean_orientation_error": "mappers.scores",
-    "mean_position_error": "mappers.scores",
-    "sampled_orientation_error": "mappers.scores",
-    "GraphRepairWarning": "mappers.graph",
-    "LaplacianEigenmap": "mappers.methods",
-    "LocallyLinear": "mappers.methods",
+    "apply_affine": "mappers.core.align",
+    "fit_affine": "mappers.core.align",
+    "mean_orientation_error": "mappers.core.scores",
+    "mean_position_error": "mappers.core.scores",
+    "sampled_orientation_error": "mappers.core.scores",
+    "GraphRepairWarning": "mappers.core.graph",
+    "flicker_rate": "mappers.core.flicker",
+    "LaplacianEigenmap": "mappers.paper",
+    "LocallyLinear": "mappers.paper",
+    "MaximumVarianceUnfolding": "mappers.paper",
     "WeightedSMACOF": "mappers.smacof",
     "weighted_smacof": "mappers.smacof",
-    "MaximumVarianceUnfolding": "mappers.mvu",
     "CalibratedSMACOF": "mappers.calibrated",
     "FoldWarning": "mappers.calibrated",
-    "ClassicalUnfolding": "mappers.unfolding",
+    "ClassicalUnfolding": "mappers.calibrated",
     "MaskedMap": "mappers.masked",
     "MaskedMapWarning": "mappers.masked",
     "masked_embedding": "mappers.masked",
-    "CovisEnsemble": "mappers.ensemble",
-    "DROPOUT_DEFAULTS": "mappers.registry",
-    "flicker_rate": "mappers.flicker",
-    "DropoutBlend": "mappers.dropout_blend",
-    "VisibilityAdjustment": "mappers.visibility_adjustment",
+    "CovisEnsemble": "mappers.masked",
+    "DropoutBlend": "mappers.masked",
+    "BearingAdjustment": "mappers.viewpoints",
+    "VisibilityAdjustment": "mappers.viewpoints",
     "OnlineMapper": "mappers.online",
-    "BearingAdjustment": "mappers.bearing_adjustment",
 }
 
 __all__ = sorted(_LAZY)

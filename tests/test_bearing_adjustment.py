@@ -1,4 +1,4 @@
-"""BEARING-BA (mappers/bearing_adjustment.py): bearing-only bundle adjustment of a bearing map."""
+"""BEARING-BA (mappers/viewpoints/bearing.py): bearing-only bundle adjustment of a bearing map."""
 
 from __future__ import annotations
 
@@ -7,11 +7,13 @@ import pytest
 from synthetic_camera import camera_bearings
 from threadpoolctl import threadpool_limits
 
-import mappers.bearing_adjustment as ba
+import mappers.viewpoints.bearing as ba
+from mappers.viewpoints import engine
 from mappers import build_map
-from mappers.bearing_adjustment import BearingAdjustment, BearingAdjustmentWarning
+from mappers.catalog import methods_for, resolve_method
+from mappers.defaults import DEFAULT_METHODS
 from mappers.pipeline import default_method
-from mappers.registry import DEFAULT_METHODS, methods_for, resolve_method
+from mappers.viewpoints.bearing import BearingAdjustment, BearingAdjustmentWarning
 
 
 @pytest.fixture(autouse=True)
@@ -149,6 +151,6 @@ def test_bad_input_is_a_clear_value_error():
 
 def test_wrapped_residuals_stay_in_minus_pi_pi():
     a = np.array([-7.0, -np.pi, 0.0, 3.5, 10.0])
-    w = ba._wrap(a)
+    w = engine.wrap_angles(a)
     assert np.all((w >= -np.pi) & (w < np.pi))
     assert np.allclose(np.exp(1j * w), np.exp(1j * a))

@@ -9,7 +9,12 @@ import pytest
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from mappers import METHODS, build_map, mean_orientation_error, mean_position_error
-from mappers.calibrated import CalibratedSMACOF, FoldWarning, fold_score, history_dissimilarity
+from mappers.calibrated.cal_sma import (
+    CalibratedSMACOF,
+    FoldWarning,
+    fold_score,
+    history_dissimilarity,
+)
 
 HALF = 1.25
 
@@ -84,7 +89,7 @@ def test_meets_anchors_exactly(world):
 def test_better_than_unweighted_cosine_smacof(world):
     """The calibration must improve on plain SMACOF of the same dissimilarity + affine fit."""
     from mappers import apply_affine, fit_affine, weighted_smacof
-    from mappers.smacof import classical_mds
+    from mappers.smacof.weighted import classical_mds
 
     pts, ids, _ = world
     X = _histories(pts, "visibility", 1500, np.random.default_rng(3))
@@ -243,7 +248,7 @@ def test_rejects_bad_histories(world):
         build_map(X, ids, pts[ids], method="CAL-SMA", sigma2=0.5)
 
 
-@pytest.mark.filterwarnings("ignore::mappers.calibrated.FoldWarning")
+@pytest.mark.filterwarnings("ignore::mappers.calibrated.cal_sma.FoldWarning")
 @parametrize_with_checks([CalibratedSMACOF(n_rounds=1, n_init=0, max_iter=10)])
 def test_sklearn_compatible(estimator, check):
     check(estimator)

@@ -87,12 +87,12 @@ def test_compact_argument_is_checked():
 
 def test_build_map_maps_a_history_beyond_the_budget_without_the_dense_matrix(monkeypatch):
     from lfmdr_gym import compact
-    from mappers import pipeline
+    from mappers import fitting
 
     h = collect("LFMDR-Visibility-v0", RandomWalkPolicy(seed=0), 600, seed=8,
                 make_kwargs={"anchors": "random", "n_anchors": 6}, compact=True)
     monkeypatch.setattr(compact, "MAX_DENSE_BYTES", 1024)  # far below this history's 240 kB
-    monkeypatch.setattr(pipeline, "DENSE_BUDGET_BYTES", 1024)
+    monkeypatch.setattr(fitting, "DENSE_BUDGET_BYTES", 1024)
     with pytest.raises(DenseTooLargeError, match="History.sparse"):
         h.matrix  # noqa: B018
     built = mappers.build_map(h, h.anchor_ids, h.anchor_positions, method="CAL-SMA-SPARSE")

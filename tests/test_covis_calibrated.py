@@ -1,5 +1,5 @@
-"""Masked bearing and visibility maps from co-observation: covis-angle (mappers/masked.py),
-covis-cal and covis-auto (mappers/covis_calibrated.py)."""
+"""Masked bearing and visibility maps from co-observation: covis-angle (mappers/masked/pair_maps.py),
+covis-cal and covis-auto (mappers/masked/covis_auto.py)."""
 
 from __future__ import annotations
 
@@ -9,10 +9,11 @@ from synthetic_camera import camera_bearings
 from threadpoolctl import threadpool_limits
 
 from mappers import build_map
-from mappers.coobservation import angle_covisibility_dissimilarity
-from mappers.covis_calibrated import CovisAuto, CovisCalibrated, co_observation_coefficient
-from mappers.masked import masked_embedding
-from mappers.registry import DEFAULT_METHODS, resolve_method
+from mappers.catalog import resolve_method
+from mappers.defaults import DEFAULT_METHODS
+from mappers.masked.coobservation import angle_covisibility_dissimilarity
+from mappers.masked.covis_auto import CovisAuto, CovisCalibrated, co_observation_coefficient
+from mappers.masked.pair_maps import masked_embedding
 
 
 @pytest.fixture(autouse=True)

@@ -7,10 +7,13 @@ import scipy.sparse as sp
 import mappers
 from lfmdr_gym.policies import RandomWalkPolicy
 from lfmdr_gym.recording import collect
-from mappers.coobservation import angle_covisibility_dissimilarity, covisibility_dissimilarity
-from mappers.covis_sparse import sparse_co_observation
-from mappers.scores import mean_position_error
-from mappers.sensors import step_observations
+from mappers.core.scores import mean_position_error
+from mappers.core.sensors import step_observations
+from mappers.masked.coobservation import (
+    angle_covisibility_dissimilarity,
+    covisibility_dissimilarity,
+)
+from mappers.masked.covis_sparse import sparse_co_observation
 
 
 @pytest.fixture(scope="module")
@@ -67,9 +70,9 @@ def test_covis_sparse_maps_as_well_as_the_dense_default(limited):
 
 
 def test_large_masked_bearing_default_is_covis_sparse():
-    spec = mappers.registry.resolve_method(None, "bearing", masked=True, n_objects=1000)
+    spec = mappers.catalog.resolve_method(None, "bearing", masked=True, n_objects=1000)
     assert spec.label == "covis-sparse" and spec.sparse
-    assert mappers.registry.resolve_method(None, "bearing", masked=True, n_objects=50).label == "BEARING-BA"
+    assert mappers.catalog.resolve_method(None, "bearing", masked=True, n_objects=50).label == "BEARING-BA"
 
 
 def test_a_dense_masked_method_gets_the_sparse_history_densified(limited):

@@ -1,6 +1,6 @@
-"""Dropouts read from the data: the flicker rate (mappers/flicker.py), dropout-blend
-(mappers/dropout_blend.py) and build_map's routing of flickering visibility histories (to
-VIS-BA-WALK, mappers/visibility_adjustment.py)."""
+"""Dropouts read from the data: the flicker rate (mappers/core/flicker.py), dropout-blend
+(mappers/masked/dropout_blend.py) and build_map's routing of flickering visibility histories (to
+VIS-BA-WALK, mappers/viewpoints/visibility.py)."""
 
 from __future__ import annotations
 
@@ -13,14 +13,14 @@ import lfmdr_gym  # noqa: F401 - registers the envs
 from lfmdr_gym.policies import RandomWalkPolicy
 from lfmdr_gym.recording import collect
 from mappers import build_map, default_method, mean_position_error
-from mappers.dropout_blend import DropoutBlend, smooth_steps
-from mappers.flicker import (
+from mappers.core.flicker import (
     FLICKER_THRESHOLD,
     MIN_PERSISTENCE,
     flicker_rate,
     persistence,
     step_runs,
 )
+from mappers.masked.dropout_blend import DropoutBlend, smooth_steps
 
 
 @pytest.fixture(autouse=True)
@@ -161,7 +161,7 @@ def test_dropout_blend_refuses_what_it_cannot_map():
 def test_an_object_flung_away_by_one_member_keeps_the_cal_sma_position(monkeypatch):
     """covis-nonmetric can fling a weakly tied object kilometres away on very sparse data; the
     blend then keeps CAL-SMA's position for it, and says so."""
-    import mappers.dropout_blend as db
+    import mappers.masked.dropout_blend as db
 
     h = _episode(5, 600, miss_rate=0.3)
     ids = list(h.anchor_ids)
@@ -188,7 +188,7 @@ def test_an_object_flung_away_by_one_member_keeps_the_cal_sma_position(monkeypat
 
 def _covis_member(monkeypatch, positions):
     """Replace dropout-blend's covis-nonmetric member by one returning ``positions``."""
-    import mappers.dropout_blend as db
+    import mappers.masked.dropout_blend as db
 
     class Given:
         def __init__(self, *args, **kwargs):

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from mappers import DEFAULT_METHODS, METHODS, MethodSpec, build_map, methods_for, register_method
-from mappers.law_of_cosines import frame_values, pooled_frame_distances
-from mappers.range_bearing import LawOfCosinesSMACOF, RigidityWarning
-from mappers.registry import _METHODS, resolve_method
-from mappers.sensors import check_sensor_set, sensor_name
+from mappers.catalog import _METHODS, resolve_method
+from mappers.core.sensors import check_sensor_set, sensor_name
+from mappers.fused.law_of_cosines import frame_values, pooled_frame_distances
+from mappers.fused.loc_sma import LawOfCosinesSMACOF, RigidityWarning
 
 RB = frozenset({"range", "bearing"})
 
@@ -151,8 +151,8 @@ def test_a_cluster_tied_to_one_anchor_is_not_placed_but_warned():
 
 
 def test_vb_sma_blends_the_fused_map_with_the_bearing_only_map():
-    from mappers.calibrated import CalibratedSMACOF
-    from mappers.visibility_bearing import VisibilityBearingSMACOF
+    from mappers.calibrated.cal_sma import CalibratedSMACOF
+    from mappers.fused.vb_sma import VisibilityBearingSMACOF
 
     rng = np.random.default_rng(4)
     P, anchors = grid_layout(5, 0.4, seed=4)

@@ -1,5 +1,5 @@
 """Fused defaults refined by bundle adjustment: VB-SMA's ``refine`` (bearing-only, the bearing
-part) and LOC-SMA's ``refine`` (range and angle residuals, mappers/range_bearing_adjustment.py)."""
+part) and LOC-SMA's ``refine`` (range and angle residuals, mappers/viewpoints/range_bearing.py)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import pytest
 from threadpoolctl import threadpool_limits
 
 from mappers import build_map, mean_position_error
-from mappers.range_bearing import LawOfCosinesSMACOF
-from mappers.range_bearing_adjustment import RangeBearingAdjustment
-from mappers.visibility_bearing import VisibilityBearingSMACOF
+from mappers.fused.loc_sma import LawOfCosinesSMACOF
+from mappers.fused.vb_sma import VisibilityBearingSMACOF
+from mappers.viewpoints.range_bearing import RangeBearingAdjustment
 
 
 @pytest.fixture(autouse=True)

@@ -14,7 +14,7 @@ from mappers import (
     mean_position_error,
     register_method,
 )
-from mappers.registry import _METHODS
+from mappers.catalog import _METHODS
 
 LABELS = ["LPCA", "SMA(UNWGT)", "SMA(WGT)", "KPCA(GAUS)", "KPCA(POLY)", "ISOMAP", "LLE", "LEM", "HLLE", "SDE"]
 

@@ -6,7 +6,7 @@ import scipy.sparse as sp
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from mappers import GraphRepairWarning, MaximumVarianceUnfolding, apply_affine, fit_affine
-from mappers.mvu import mvu_constraint_matrix
+from mappers.paper.mvu import mvu_constraint_matrix
 
 
 def _curled(n=40, seed=0):

@@ -15,7 +15,7 @@ from mappers import (
     mean_position_error,
     register_method,
 )
-from mappers.registry import _METHODS
+from mappers.catalog import _METHODS
 
 
 def world(n_objects=40, n_steps=1200, seed=0, sensor="visibility"):
@@ -131,9 +131,9 @@ def test_infer_sensor_of_a_sparse_history_reads_the_stored_values_only(monkeypat
     for dense, expected in cases:
         assert infer_sensor(sp.csr_array(dense)) == expected
     B, _, _ = world(sensor="bearing", n_steps=300)
-    from mappers.pipeline import _inputs  # build_map's input check, where the sensor is inferred
+    from mappers.fitting import check_inputs  # build_map's input check, where the sensor is inferred
 
-    assert _inputs(sp.csr_array(B), None, None, None)[2] == "bearing"
+    assert check_inputs(sp.csr_array(B), None, None, None)[2] == "bearing"
 
 
 def test_mask_all_true_is_no_mask():

@@ -5,8 +5,9 @@ import itertools
 import numpy as np
 import pytest
 
-from mappers import apply_affine, fit_affine, mean_orientation_error, mean_position_error, scores
-from mappers.scores import _moe_bruteforce, _moe_fast
+from mappers import apply_affine, fit_affine, mean_orientation_error, mean_position_error
+from mappers.core import scores
+from mappers.core.scores import _moe_bruteforce, _moe_fast
 
 
 def test_mpe_hand_example():
@@ -263,14 +264,14 @@ def test_fit_affine_bad_input(src, dst, match):
     ],
 )
 def test_check_anchors_rejects_bad_anchors(ids, pos, match):
-    from mappers.align import check_anchors
+    from mappers.core.align import check_anchors
 
     with pytest.raises(ValueError, match=match):
         check_anchors(ids, pos, 5)
 
 
 def test_check_anchors_returns_int64_ids_and_float_positions():
-    from mappers.align import check_anchors
+    from mappers.core.align import check_anchors
 
     ids, pos = check_anchors(np.array([4, 0, 2], dtype=np.int32), [[0, 0], [1, 0], [0, 1]], 5)
     assert ids.dtype == np.int64 and ids.tolist() == [4, 0, 2]
@@ -278,7 +279,7 @@ def test_check_anchors_returns_int64_ids_and_float_positions():
 
 
 def test_sampled_orientation_error_brackets_the_exact_one():
-    from mappers.scores import mean_orientation_error, sampled_orientation_error
+    from mappers.core.scores import mean_orientation_error, sampled_orientation_error
 
     rng = np.random.default_rng(4)
     truth = rng.uniform(0, 1, (300, 2))

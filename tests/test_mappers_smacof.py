@@ -5,7 +5,7 @@ import pytest
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from mappers import WeightedSMACOF, weighted_smacof
-from mappers.smacof import classical_mds, raw_stress
+from mappers.smacof.weighted import classical_mds, raw_stress
 
 
 def _points(n=30, seed=0):
@@ -67,7 +67,7 @@ def test_equal_weights_closed_form_matches_pinv():
 def test_guttman_transform_kept_across_targets_matches_a_fresh_one(kind):
     # the SMACOF variants keep one GuttmanTransform while their targets change: each of its
     # steps must be the step weighted_smacof takes from scratch, bit for bit
-    from mappers.smacof import GuttmanTransform, euclidean_distance_matrix
+    from mappers.smacof.weighted import GuttmanTransform, euclidean_distance_matrix
 
     rng = np.random.default_rng(3)
     P = _points()
@@ -171,7 +171,7 @@ def test_sklearn_estimator_checks(estimator, check):
 def test_euclidean_distance_matrix_matches_sklearn():
     from sklearn.metrics import pairwise_distances
 
-    from mappers.smacof import euclidean_distance_matrix
+    from mappers.smacof.weighted import euclidean_distance_matrix
 
     X = np.random.default_rng(3).normal(size=(25, 4))
     D = euclidean_distance_matrix(X)

@@ -1,4 +1,4 @@
-"""Masked (missing-data) mapping: mappers/masked.py, mappers/coobservation.py, the SMACOF
+"""Masked (missing-data) mapping: mappers/masked/pair_maps.py, mappers/masked/coobservation.py, the SMACOF
 variants and the covisibility ensemble."""
 
 from __future__ import annotations
@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mappers.coobservation import covisibility_dissimilarity, range_pair_distances
-from mappers.masked import MASKED_METHODS, masked_embedding
-from mappers.sensors import step_observations
-from mappers.smacof_variants import nonmetric_smacof
+from mappers.core.sensors import step_observations
+from mappers.masked.coobservation import covisibility_dissimilarity, range_pair_distances
+from mappers.masked.pair_maps import MASKED_METHODS, masked_embedding
+from mappers.smacof.variants import nonmetric_smacof
 
 
 def _corners(P: np.ndarray) -> np.ndarray:
@@ -178,7 +178,7 @@ def test_build_map_maps_masked_histories_with_the_masked_methods():
 
 
 def test_range_bounds_bracket_the_truth_and_map_well():
-    from mappers.coobservation import range_pair_bounds
+    from mappers.masked.coobservation import range_pair_bounds
 
     P, seen, r, _ = _simulate(fov=0.6, seed=9)
     upper = range_pair_bounds(r, seen, fov=1.2, upper_quantile=0.0)
@@ -197,7 +197,7 @@ def test_range_bounds_bracket_the_truth_and_map_well():
 
 
 def test_bounded_smacof_has_no_stress_inside_the_intervals():
-    from mappers.smacof_variants import bounded_smacof
+    from mappers.smacof.variants import bounded_smacof
 
     rng = np.random.default_rng(10)
     P = rng.uniform(0, 3, size=(8, 2))
@@ -213,7 +213,7 @@ def test_bounded_smacof_has_no_stress_inside_the_intervals():
 
 
 def test_ensemble_is_the_mean_of_its_members_and_no_worse_than_them_on_average():
-    from mappers.ensemble import ensemble_embedding
+    from mappers.masked.ensemble import ensemble_embedding
 
     P, seen, _, _ = _simulate(n_obj=14, n_steps=3000, seed=11)
     anchors = _corners(P)
@@ -247,7 +247,7 @@ def test_ensemble_is_the_mean_of_its_members_and_no_worse_than_them_on_average()
 
 
 def test_power_link_smacof_recovers_a_layout_from_a_power_of_its_distances():
-    from mappers.smacof_variants import power_link_smacof
+    from mappers.smacof.variants import power_link_smacof
 
     rng = np.random.default_rng(12)
     P = rng.uniform(0, 5, size=(12, 2))
@@ -331,7 +331,7 @@ def test_no_group_with_two_anchors_is_a_clear_error():
 
 
 def test_window_steps_merges_ticks_per_robot_and_never_across_robots():
-    from mappers.ensemble import window_steps
+    from mappers.masked.ensemble import window_steps
 
     # two robots; robot 0 at ticks 0, 1, 2, 5 and robot 1 at ticks 0, 3
     timeline = np.array([[0, 0], [0, 1], [0, 2], [0, 5], [1, 0], [1, 3]])

@@ -1,4 +1,4 @@
-"""Tests of the online mapper (mappers.online, issue 14)."""
+"""Tests of the online mapper (mappers.online.mapper, issue 14)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from mappers import OnlineMapper, build_map, mean_position_error
-from mappers.calibrated import CalibratedSMACOF, history_dissimilarity
-from mappers.online import _OnlineCalSMA, gram_dissimilarity
+from mappers.calibrated.cal_sma import CalibratedSMACOF, history_dissimilarity
+from mappers.online.mapper import _OnlineCalSMA, gram_dissimilarity
 
 HALF = 1.25
 
@@ -112,7 +112,7 @@ def test_online_bearing_tracks_bearing_ba(noise_deg):
 
 def test_online_bearing_keeps_cal_sma_when_refinement_fails(monkeypatch):
     """BEARING-BA's guard: a refit that is not kept leaves the CAL-SMA map, with the warning."""
-    from mappers.bearing_adjustment import BearingAdjustment
+    from mappers.viewpoints.bearing import BearingAdjustment
 
     real = BearingAdjustment._refine
 
@@ -171,11 +171,11 @@ def _fold(om, ids):
 
 
 def test_fold_check_runs_every_k_warm_updates(monkeypatch):
-    import mappers.online
+    import mappers.online.mapper
 
     calls = []
-    real = mappers.online.fold_score
-    monkeypatch.setattr(mappers.online, "fold_score",
+    real = mappers.online.mapper.fold_score
+    monkeypatch.setattr(mappers.online.mapper, "fold_score",
                         lambda *a, **k: calls.append(1) or real(*a, **k))
     pts, ids, rng = _world(3)
     X = _histories(pts, "visibility", 600, rng)

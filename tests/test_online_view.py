@@ -1,5 +1,5 @@
 """The online map of masked visibility histories: VIEW-BA carried on between its refits
-(mappers/online_view.py, mappers/online.py)."""
+(mappers/online/view_cone.py, mappers/online/mapper.py)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from threadpoolctl import threadpool_limits
 
 import lfmdr_gym  # noqa: F401 - registers the envs
-import mappers.online as online
+import mappers.online.mapper as online
 from lfmdr_gym.policies import RandomWalkPolicy
 from lfmdr_gym.recording import collect
 from mappers import OnlineMapper, build_map, mean_position_error

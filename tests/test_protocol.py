@@ -227,7 +227,7 @@ def test_a_method_registered_in_this_process_reaches_the_worker_processes(tmp_pa
     """register_method in the user's script (the registry is per process): the protocol ships
     the spec to its workers, so jobs=2 gives the rows of jobs=1, not 'unknown method' errors."""
     from mappers import MethodSpec, WeightedSMACOF, register_method
-    from mappers.registry import _METHODS
+    from mappers.catalog import _METHODS
 
     def knn_smacof(*, n_neighbors: int = 6):  # a local function: workers cannot import it
         return WeightedSMACOF(n_neighbors=n_neighbors)

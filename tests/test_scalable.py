@@ -9,12 +9,13 @@ import scipy.sparse as sp
 import mappers
 from lfmdr_gym.policies import RandomWalkPolicy
 from lfmdr_gym.recording import collect
-from mappers.calibrated import history_dissimilarity
-from mappers.graph import informative_pairs, knn_mask
-from mappers.registry import DENSE_MAX_OBJECTS, SCALABLE_ABOVE_OBJECTS, resolve_method
-from mappers.scores import mean_position_error
-from mappers.smacof import weighted_smacof
-from mappers.sparse_stress import candidate_pairs, knn_pairs, sparse_smacof
+from mappers.calibrated.cal_sma import history_dissimilarity
+from mappers.catalog import resolve_method
+from mappers.core.graph import informative_pairs, knn_mask
+from mappers.core.scores import mean_position_error
+from mappers.defaults import DENSE_MAX_OBJECTS, SCALABLE_ABOVE_OBJECTS
+from mappers.smacof.sparse_stress import candidate_pairs, knn_pairs, sparse_smacof
+from mappers.smacof.weighted import weighted_smacof
 
 
 @pytest.fixture(scope="module")

@@ -1,5 +1,5 @@
-"""VIEW-BA, the view-cone adjustment of masked visibility maps (mappers/view_adjustment.py and
-its compiled loops, mappers/view_kernels.py)."""
+"""VIEW-BA, the view-cone adjustment of masked visibility maps (mappers/viewpoints/view_cone.py and
+its compiled loops, mappers/viewpoints/view_cone_kernels.py)."""
 
 from __future__ import annotations
 
@@ -13,8 +13,9 @@ from threadpoolctl import threadpool_limits
 import lfmdr_gym  # noqa: F401 - registers the envs
 from lfmdr_gym.policies import RandomWalkPolicy
 from lfmdr_gym.recording import collect
-from mappers import build_map, mean_position_error, view_kernels
-from mappers.view_adjustment import (
+from mappers import build_map, mean_position_error
+from mappers.viewpoints import view_cone_kernels as view_kernels
+from mappers.viewpoints.view_cone import (
     ViewAdjustment,
     ViewAdjustmentWarning,
     estimate_fov,
@@ -212,8 +213,9 @@ def test_a_mask_that_is_not_a_view_cone_keeps_the_start_map():
 
 
 def test_many_objects_go_to_dropout_blend_and_view_ba_refuses_too_many(monkeypatch):
-    from mappers import view_adjustment
-    from mappers.registry import SCALABLE_ABOVE_OBJECTS, resolve_method
+    from mappers.catalog import resolve_method
+    from mappers.defaults import SCALABLE_ABOVE_OBJECTS
+    from mappers.viewpoints import view_cone as view_adjustment
 
     assert resolve_method(None, "visibility", masked=True).label == "VIEW-BA"
     assert resolve_method(None, "visibility", masked=True,

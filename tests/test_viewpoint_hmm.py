@@ -1,4 +1,4 @@
-"""The continuity prior of VIS-BA: forward-backward over grid cells (mappers/viewpoint_hmm.py)
+"""The continuity prior of VIS-BA: forward-backward over grid cells (mappers/viewpoints/walk_prior.py)
 and VisibilityAdjustment(continuity=True) on walks with dropouts."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from threadpoolctl import threadpool_limits
 
-from mappers.viewpoint_hmm import forward_backward, gaussian_taps
-from mappers.visibility_adjustment import VisibilityAdjustment
+from mappers.viewpoints.visibility import VisibilityAdjustment
+from mappers.viewpoints.walk_prior import forward_backward, gaussian_taps
 
 
 @pytest.fixture(autouse=True)
@@ -165,7 +165,7 @@ def test_bad_continuity_parameters_are_refused():
 
 def test_vis_ba_walk_is_registered_and_maps_a_walk():
     from mappers import build_map
-    from mappers.registry import methods_for
+    from mappers.catalog import methods_for
 
     assert "VIS-BA-WALK" in methods_for("visibility", masked=False)
     assert "VIS-BA-WALK" in methods_for("visibility", masked=True)

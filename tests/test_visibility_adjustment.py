@@ -1,4 +1,4 @@
-"""VIS-BA (mappers/visibility_adjustment.py): a visibility map refined by estimating viewpoints."""
+"""VIS-BA (mappers/viewpoints/visibility.py): a visibility map refined by estimating viewpoints."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import pytest
 from threadpoolctl import threadpool_limits
 
 from mappers import build_map
-from mappers.registry import methods_for
-from mappers.visibility_adjustment import (
+from mappers.catalog import methods_for
+from mappers.viewpoints.visibility import (
     VisibilityAdjustment,
     VisibilityAdjustmentWarning,
     visibility_bits,
@@ -108,10 +108,15 @@ def test_build_map_with_vis_ba():
 
 def test_as_the_default_it_refines_the_former_default(monkeypatch):
     """Were VIS-BA the complete visibility default, its start map would not recurse into it."""
-    from mappers.registry import DEFAULT_METHODS
+    import dataclasses
+    from types import MappingProxyType
+
+    from mappers import defaults
 
     P, X, ids, _ = _threshold(n_steps=400)
-    monkeypatch.setitem(DEFAULT_METHODS, ("visibility", False), "VIS-BA")
+    row = dataclasses.replace(defaults.DEFAULTS[("visibility", False)], method="VIS-BA")
+    monkeypatch.setattr(defaults, "DEFAULTS",
+                        MappingProxyType({**defaults.DEFAULTS, ("visibility", False): row}))
     m = build_map(X, ids, P[ids], sensor="visibility")
     assert m.method == "VIS-BA" and np.all(np.isfinite(m.positions))
 

@@ -35,9 +35,9 @@ import numpy as np
 
 from lfmdr_gym.history import History
 from lfmdr_gym.world import check_real
-from mappers.align import check_anchor_ids
-from mappers.coobservation import co_observation_components
-from mappers.sensors import COLUMNS_PER_STEP, check_sensor
+from mappers.core.align import check_anchor_ids
+from mappers.core.sensors import COLUMNS_PER_STEP, check_sensor
+from mappers.masked.coobservation import co_observation_components
 
 __all__ = [
     "DEFAULT_BIN_WIDTH",

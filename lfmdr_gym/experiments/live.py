@@ -38,7 +38,7 @@ def online_episode(env_id: str, steps: int, *, seed: int | None = 0, policy: str
     from lfmdr_gym.policies import POLICIES, as_policy
     from lfmdr_gym.render import draw_map
     from lfmdr_gym.world import check_int
-    from mappers.sensors import FUSED_SENSORS
+    from mappers.core.sensors import FUSED_SENSORS
 
     if ENV_IDS.get(env_id) in FUSED_SENSORS:
         raise ValueError(f"online mapping (mappers.OnlineMapper) takes one sensor's histories; "

@@ -28,7 +28,7 @@ from lfmdr_gym.datasets.mrclam import (
     load_mrclam,
 )
 from lfmdr_gym.history import History
-from mappers.sensors import check_sensor_set, sensor_name
+from mappers.core.sensors import check_sensor_set, sensor_name
 
 __all__ = ["DEFAULT_METHOD", "ENSEMBLE_BIN_WIDTHS", "FUSED_BIN_WIDTH", "METHOD_ALIASES", "MRCLAMMap", "map_mrclam_run"]
 

@@ -113,7 +113,7 @@ def default_params(method: str) -> dict[str, Any]:
     """``method``'s default for each parameter its grid sweeps: the spec's default (the paper's
     optimum) or else the factory's own keyword default, so the label names a real value."""
     spec = _methods()[method]
-    signature = inspect.signature(spec.factory).parameters
+    signature = inspect.signature(spec.load()).parameters
     out: dict[str, Any] = {}
     for name in sorted(spec.grid):
         if name in spec.defaults:

@@ -45,7 +45,7 @@ from lfmdr_gym.experiments.scoring import evaluate
 from lfmdr_gym.experiments.store import RESULTS, ResultStore, ensure_writable_dir
 from lfmdr_gym.history import History, HistoryFileError
 from lfmdr_gym.world import check_int
-from mappers.sensors import check_sensor
+from mappers.core.sensors import check_sensor
 
 __all__ = ["DEFAULT_EVERY", "ProtocolConfig", "ProtocolSummary", "Unit", "run_protocol",
            "write_report"]

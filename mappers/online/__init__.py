@@ -1,0 +1,22 @@
+"""Online maps: the map of a robot still moving, updated as its histories grow.
+"""
+
+from __future__ import annotations
+
+from mappers.online.bearing import (
+    OnlineBundle,
+)
+from mappers.online.mapper import (
+    OnlineMapper,
+    gram_dissimilarity,
+)
+from mappers.online.view_cone import (
+    OnlineView,
+)
+
+__all__ = [
+    "OnlineBundle",
+    "OnlineMapper",
+    "OnlineView",
+    "gram_dissimilarity",
+]

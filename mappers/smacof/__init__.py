@@ -1,0 +1,42 @@
+"""Stress majorisation (SMACOF): weighted, with other links between dissimilarity and distance, and on a sparse graph of pairs.
+
+scikit-learn's ``smacof`` takes no weights; these are written here (de Leeuw 1977; the paper's eq. 6).
+"""
+
+from __future__ import annotations
+
+from mappers.smacof.sparse_stress import (
+    candidate_pairs,
+    knn_pairs,
+    landmark_mds,
+    sparse_smacof,
+)
+from mappers.smacof.variants import (
+    bounded_smacof,
+    nonmetric_smacof,
+    power_link_smacof,
+)
+from mappers.smacof.weighted import (
+    GuttmanTransform,
+    WeightedSMACOF,
+    classical_mds,
+    euclidean_distance_matrix,
+    raw_stress,
+    weighted_smacof,
+)
+
+__all__ = [
+    "GuttmanTransform",
+    "WeightedSMACOF",
+    "bounded_smacof",
+    "candidate_pairs",
+    "classical_mds",
+    "euclidean_distance_matrix",
+    "knn_pairs",
+    "landmark_mds",
+    "nonmetric_smacof",
+    "power_link_smacof",
+    "raw_stress",
+    "sparse_smacof",
+    "weighted_smacof",
+]
