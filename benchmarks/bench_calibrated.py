@@ -12,8 +12,8 @@ N steps with the random-walk agent and maps them with
 It prints mean / max MPE over the non-anchor objects [m], mean MOE [%], the CPU time per map
 (one BLAS thread), and how many maps carried a FoldWarning, then the goals.
 
-    PYTHONPATH=. python benchmarks/bench_calibrated.py               # both sensors, both seed sets
-    PYTHONPATH=. python benchmarks/bench_calibrated.py --sensors bearing --fresh-seed 777
+    python benchmarks/bench_calibrated.py               # both sensors, both seed sets
+    python benchmarks/bench_calibrated.py --sensors bearing --fresh-seed 777
 """
 
 from __future__ import annotations
