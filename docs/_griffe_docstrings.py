@@ -1,13 +1,19 @@
-"""A griffe extension for the API pages: docstring sections written as prose stay prose.
+"""A griffe extension for the API pages: the project's docstrings read as they were written.
 
-Some of the project's docstrings list fitted attributes (or parameters) as running text under a
+Two habits of the docstrings that griffe's Google parser and Markdown do not expect are eased
+here, before the docstrings are parsed; the source files are not changed.
+
+**reST roles.** ``:class:`History```, ``:func:`~mappers.scores.fold_score``` and the like are
+shown as inline code (``History``, ``fold_score``) instead of their raw markup.
+
+**Sections written as prose.** Some docstrings list fitted attributes (or parameters) as running text under a
 Google section header, for instance ``Attributes:`` followed by ``embedding_ (M, 2);
 stress_ ...`` over several lines at one indentation. griffe's Google parser reads each such
 line as an item ``name: description``: it drops the lines without a colon, makes a name of the
 words before a colon inside the text, and crashes on a line that starts with a reST role
 (``:func:``). This extension rewrites such a section, before it is parsed, as a paragraph headed
 by the section's name, so the API pages show the text as written. Sections whose items all have
-the ``name (type): description`` form are left to the parser. The source files are not changed.
+the ``name (type): description`` form are left to the parser.
 
 Loaded by ``mkdocs.yml`` (``plugins.mkdocstrings.handlers.python.options.extensions``).
 """
@@ -24,6 +30,19 @@ _HEADER = re.compile(r"^(?P<indent>\s*)(?P<name>" + "|".join(SECTIONS) + r"):\s*
 # an item: one or more names (``a, b``, ``*args``, ``x.y`` for exceptions), an optional
 # parenthesised type, then a colon
 _ITEM = re.compile(r"^[*\w.]+(, [*\w.]+)*( \([^)]*\))?:(\s|$)")
+# a reST role: :func:`target`, :class:`~pkg.mod.Name`, :meth:`title <target>`
+_ROLE = re.compile(r":(?:py:)?(?:class|func|meth|mod|data|attr|obj|exc|const):`~?([^`<]*?)(?: <[^`]*>)?`")
+
+
+def _inline_roles(text: str) -> str:
+    """reST roles as inline code; a leading ``~`` keeps only the last dotted name."""
+
+    def code(match: re.Match[str]) -> str:
+        target = match[1].strip()
+        short = match[0].split("`", 1)[1].startswith("~")
+        return f"`{target.rsplit('.', 1)[-1] if short else target}`"
+
+    return _ROLE.sub(code, text)
 
 
 def _prose_sections(text: str) -> str:
@@ -57,9 +76,9 @@ def _prose_sections(text: str) -> str:
     return "\n".join(out)
 
 
-class ProseSections(griffe.Extension):
-    """Rewrite docstring sections that are prose under a section header (see the module)."""
+class ReadableDocstrings(griffe.Extension):
+    """Ease the docstrings' reST roles and prose sections (see the module)."""
 
     def on_object(self, *, obj: griffe.Object, **kwargs: Any) -> None:
         if obj.docstring is not None and obj.docstring.value:
-            obj.docstring.value = _prose_sections(obj.docstring.value)
+            obj.docstring.value = _prose_sections(_inline_roles(obj.docstring.value))
