@@ -194,7 +194,8 @@ def protocol_section(root: Path) -> list[str]:
         "",
         "5 layouts x 5 start poses, N = 2000 steps of the random walk (paper §4.1). Each method "
         "at its best grid value by mean MPE at N, picked on these runs as the paper does (so "
-        "CAL-SMA's best value is listed too; the README's tables give it at its defaults); mean ± "
+        "CAL-SMA's best value is listed too; [The paper, reproduced](paper.md) gives it at its "
+        "defaults); mean ± "
         "sample std over the runs. MPE over the mapped objects (anchors included, as in the "
         "paper), MOE over all triangles of mapped objects.",
         "",
