@@ -19,8 +19,8 @@ measured in the same run. Every run is timed twice: wall-clock time and the proc
 the process waited for a core, so the CPU-time rates are the fairer absolute figures; the ratios
 are computed per repeat (each repeat runs every case once, round robin) and their median printed.
 
-    PYTHONPATH=. python benchmarks/bench_env.py            # full run (1-3 minutes)
-    PYTHONPATH=. python benchmarks/bench_env.py --quick    # fewer steps and repeats
+    python benchmarks/bench_env.py            # full run (1-3 minutes)
+    python benchmarks/bench_env.py --quick    # fewer steps and repeats
 """
 
 from __future__ import annotations

@@ -8,11 +8,11 @@ non-anchor objects [m] per policy and number of steps, then the goal: the best p
 after 500 steps at least as good as the random walk's after 2,000. ``--plot FILE`` draws the
 figure (matplotlib, the ``plots`` extra).
 
-    PYTHONPATH=. python benchmarks/bench_exploration.py --plot docs/exploration.png  # 25 layouts
-    PYTHONPATH=. python benchmarks/bench_exploration.py --runs 5 --sensors visibility
-    PYTHONPATH=. python benchmarks/bench_exploration.py --runs 6 --seed 5000 --policies rl \
+    python benchmarks/bench_exploration.py --plot docs/exploration.png  # 25 layouts
+    python benchmarks/bench_exploration.py --runs 5 --sensors visibility
+    python benchmarks/bench_exploration.py --runs 6 --seed 5000 --policies rl \
         --rl-model /tmp/m.npz   # a model of one's own, on layouts for tuning
-    PYTHONPATH=. python benchmarks/bench_exploration.py --sensors bearing \
+    python benchmarks/bench_exploration.py --sensors bearing \
         --policies random-walk even --env bearing_noise_deg=2   # imperfect sensing
 
 ``--env KEY=VALUE`` (repeatable) passes env keywords (noise; a limited view, whose masked

@@ -2,10 +2,10 @@
 
 Run from the project root:
 
-    PYTHONPATH=. python benchmarks/bench_mappers.py              # all sections, 5 seeds
-    PYTHONPATH=. python benchmarks/bench_mappers.py --quick      # 2 seeds, SDE at M=50,100
-    PYTHONPATH=. python benchmarks/bench_mappers.py --sections sde --sde-sizes 50 100 200
-    PYTHONPATH=. python benchmarks/bench_mappers.py --sections range   # UNFOLD vs SMACOF on ranges
+    python benchmarks/bench_mappers.py              # all sections, 5 seeds
+    python benchmarks/bench_mappers.py --quick      # 2 seeds, SDE at M=50,100
+    python benchmarks/bench_mappers.py --sections sde --sde-sizes 50 100 200
+    python benchmarks/bench_mappers.py --sections range   # UNFOLD vs SMACOF on ranges
 
 Histories come from the simulator (``lfmdr_gym.collect`` with a random walk, M objects, N =
 2000 steps) when lfmdr_gym is importable, otherwise from a numpy-only stand-in (random walk

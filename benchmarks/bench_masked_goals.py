@@ -10,8 +10,8 @@ start pose and walk), applies the sensor setting, and maps each history with
 
 printing the mean and the largest MPE over the runs [m] and the median CPU time per map.
 
-    PYTHONPATH=. python benchmarks/bench_masked_goals.py                   # 25 runs from seed 1000
-    PYTHONPATH=. python benchmarks/bench_masked_goals.py --runs 5 --seed 0 --methods CAL-SMA-M
+    python benchmarks/bench_masked_goals.py                   # 25 runs from seed 1000
+    python benchmarks/bench_masked_goals.py --runs 5 --seed 0 --methods CAL-SMA-M
 
 The settings are the env's sensing keywords (``gym.make("LFMDR-Bearing-v0", fov_deg=90, ...)``):
 an object is observed inside the field of view centred on the heading and within ``max_range``

@@ -17,13 +17,13 @@ masks, an all-True mask, as noise alone gives, as a complete history; with a lim
 ``fov_deg=90``, both maps are the masked default's, VIEW-BA, which the online mapper carries on
 between its refits). A bad ``--env`` item is refused with the experiments' own message.
 
-    PYTHONPATH=. python benchmarks/bench_online.py                  # 25 layouts per sensor
-    PYTHONPATH=. python benchmarks/bench_online.py --runs 5 --sensors bearing
-    PYTHONPATH=. python benchmarks/bench_online.py --runs 8 --seed 777 --warm-rounds 2   # variants
-    PYTHONPATH=. python benchmarks/bench_online.py --runs 8 --seed 777 --warm-tol 1e-6 --fold-check-every 1
-    PYTHONPATH=. python benchmarks/bench_online.py --runs 8 --sensors bearing --env bearing_noise_deg=2
-    PYTHONPATH=. python benchmarks/bench_online.py --runs 8 --sensors visibility --env fov_deg=90
-    PYTHONPATH=. python benchmarks/bench_online.py --sensors visibility --env fov_deg=90 --reference-lag 100
+    python benchmarks/bench_online.py                  # 25 layouts per sensor
+    python benchmarks/bench_online.py --runs 5 --sensors bearing
+    python benchmarks/bench_online.py --runs 8 --seed 777 --warm-rounds 2   # variants
+    python benchmarks/bench_online.py --runs 8 --seed 777 --warm-tol 1e-6 --fold-check-every 1
+    python benchmarks/bench_online.py --runs 8 --sensors bearing --env bearing_noise_deg=2
+    python benchmarks/bench_online.py --runs 8 --sensors visibility --env fov_deg=90
+    python benchmarks/bench_online.py --sensors visibility --env fov_deg=90 --reference-lag 100
 
 ``--reference-lag K`` also maps offline K steps before each checkpoint and prints that map's mean
 MPE over the checkpoint's: how far the reference itself moves in K steps (for VIEW-BA through a

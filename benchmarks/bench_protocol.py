@@ -1,7 +1,7 @@
 """Wall time of the paper's full protocol (both tables), as ``lfmdr reproduce`` runs it.
 
-    PYTHONPATH=. python benchmarks/bench_protocol.py            # full: 2 x 25 runs, N=2000, --jobs 2
-    PYTHONPATH=. python benchmarks/bench_protocol.py --quick    # 1 x 2 runs, N=400: a smoke test
+    python benchmarks/bench_protocol.py            # full: 2 x 25 runs, N=2000, --jobs 2
+    python benchmarks/bench_protocol.py --quick    # 1 x 2 runs, N=400: a smoke test
 
 Each mode runs into a fresh temporary directory (nothing resumed), episodes collected included.
 Prints the wall time per mode and in total, the CPU time of the main process and its workers

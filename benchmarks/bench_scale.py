@@ -8,10 +8,10 @@ case runs in its own subprocess, so its peak resident memory (``resource.getrusa
 ru_maxrss) is its own; the import baseline (the RSS before the work) is printed beside it. A
 method that refuses a size prints its reason; one that runs past ``--timeout`` is reported as such.
 
-    PYTHONPATH=. python benchmarks/bench_scale.py                  # M = 50, 200, 1000
-    PYTHONPATH=. python benchmarks/bench_scale.py --full           # and M = 10,000 (~5 CPU-min)
-    PYTHONPATH=. python benchmarks/bench_scale.py --sensor bearing --max-range 1.5  # masked
-    PYTHONPATH=. python benchmarks/bench_scale.py --full --plot docs/scale.png --json scale.json
+    python benchmarks/bench_scale.py                  # M = 50, 200, 1000
+    python benchmarks/bench_scale.py --full           # and M = 10,000 (~5 CPU-min)
+    python benchmarks/bench_scale.py --sensor bearing --max-range 1.5  # masked
+    python benchmarks/bench_scale.py --full --plot docs/scale.png --json scale.json
 
 ``--plot`` draws CPU time and peak memory against M for collect and each method (log-log; a
 method that cannot run at a size has no point there), ``--json`` keeps every row.

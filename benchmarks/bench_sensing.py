@@ -18,8 +18,8 @@ Writes ``sensing.csv`` (one row per setting, run and method: mean non-anchor MPE
 objects, seconds per map) and ``sensing.png`` (mean non-anchor MPE with the spread over runs)
 into ``--out``, and prints the table of means.
 
-    PYTHONPATH=. python benchmarks/bench_sensing.py --jobs 2               # docs/results/sensing
-    PYTHONPATH=. python benchmarks/bench_sensing.py --runs 2 --steps 1000 --out /tmp/sensing
+    python benchmarks/bench_sensing.py --jobs 2               # docs/results/sensing
+    python benchmarks/bench_sensing.py --runs 2 --steps 1000 --out /tmp/sensing
 """
 
 from __future__ import annotations

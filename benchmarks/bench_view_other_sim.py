@@ -14,7 +14,7 @@ masked visibility default before (``dropout-blend``) and with ``VIEW-BA``:
 
 It prints the mean non-anchor MPE [m] (largest run) and the median CPU seconds per map.
 
-    PYTHONPATH=. python benchmarks/bench_view_other_sim.py            # 10 layouts, seeds 0..9
+    python benchmarks/bench_view_other_sim.py            # 10 layouts, seeds 0..9
 """
 
 from __future__ import annotations

@@ -10,8 +10,8 @@ prior: VIS-BA-WALK's parameters (``METHODS["VIS-BA-WALK"].defaults``) but VIS-BA
 start (the default's map, or the map of the default it replaced: ``dropout-blend`` for a
 flickering or masked history, CAL-SMA for a perfect one).
 
-    PYTHONPATH=. python benchmarks/bench_visibility_adjustment.py --runs 20 --seed 100   # tuning
-    PYTHONPATH=. python benchmarks/bench_visibility_adjustment.py --runs 25 --seed 1000  # fresh
+    python benchmarks/bench_visibility_adjustment.py --runs 20 --seed 100   # tuning
+    python benchmarks/bench_visibility_adjustment.py --runs 25 --seed 1000  # fresh
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """CAL-SMA, the calibrated anchored mapper, on one episode per sensor.
 
-    PYTHONPATH=. python examples/calibrated_map.py [--steps 2000] [--seed 0] [--plot map.png]
+    python examples/calibrated_map.py [--steps 2000] [--seed 0] [--plot map.png]
 
 Collects a random-walk episode, maps it with CAL-SMA (``build_map``'s default for visibility,
 and the start of its bearing default BEARING-BA) and with

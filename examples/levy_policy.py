@@ -28,7 +28,7 @@ What it is not good at, measured the same way:
 
 Run it to reproduce the table (about 4 s for the default 8 seeds; 8 s for 24):
 
-    PYTHONPATH=. python examples/levy_policy.py [--seeds 8] [--first-seed 0] [--steps 1000]
+    python examples/levy_policy.py [--seeds 8] [--first-seed 0] [--steps 1000]
 """
 
 from __future__ import annotations
@@ -160,7 +160,7 @@ def arena_coverage(history: History, n_steps: int, arena_size: float = 2.5,
 
 def map_error(history: History, method: str = "SMA(WGT)") -> float:
     """Mean position error [m] of the mapped non-anchor objects."""
-    m = mappers.build_map(history.matrix, history.anchor_ids, history.anchor_positions,
+    m = mappers.build_map(history, history.anchor_ids, history.anchor_positions,
                           method=method)
     skip = set(history.anchor_ids.tolist()) | set(m.unmapped)
     return mappers.mean_position_error(m.positions, history.object_positions, exclude=sorted(skip))

@@ -6,7 +6,7 @@ objects in front of it, near enough, with some noise. The env reports which obje
 (``obs["observed"]``); ``collect`` turns that into the history's mask and ``build_map`` maps a
 masked history with the default for masked histories.
 
-    PYTHONPATH=. python examples/limited_camera.py [--steps 2000] [--seed 3] [--out limited_camera.png]
+    python examples/limited_camera.py [--steps 2000] [--seed 3] [--out limited_camera.png]
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ object within 0.55 m (paper §4.3, without occlusion); the four corner objects a
 No simulator needed: numpy makes the histories, ``mappers`` does the rest. Run from the project
 root:
 
-    PYTHONPATH=. python examples/map_synthetic.py
+    python examples/map_synthetic.py
 """
 
 import time

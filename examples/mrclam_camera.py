@@ -6,7 +6,7 @@ noise measured from the real robots' logs (``lfmdr_gym.camera.CAMERA_PRESET``; h
 docs/fused-sensing.md). ``collect`` records both into one fused History; ``build_map`` maps it
 with the range-bearing default (LOC-SMA), and ``History.parts`` gives each sensor alone.
 
-    PYTHONPATH=. python examples/mrclam_camera.py [--steps 2000] [--seed 3] [--out mrclam_camera.npz]
+    python examples/mrclam_camera.py [--steps 2000] [--seed 3] [--out mrclam_camera.npz]
 """
 
 from __future__ import annotations

@@ -5,8 +5,8 @@ The coverage policy explores; after every 10 steps the new columns of the histor
 With a limited view (``--env-kw fov_deg=90``) the history is masked: the columns go with their
 mask, and the online map is VIEW-BA's, carried on between its refits.
 
-    PYTHONPATH=. python examples/online_map.py [--env LFMDR-Bearing-v0] [--steps 1000]
-    PYTHONPATH=. python examples/online_map.py --env-kw fov_deg=90 --steps 1500 --policy even
+    python examples/online_map.py [--env LFMDR-Bearing-v0] [--steps 1000]
+    python examples/online_map.py --env-kw fov_deg=90 --steps 1500 --policy even
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Quickstart: one episode of the paper's random walk, recorded, saved, mapped and scored.
 
-    PYTHONPATH=. python examples/quickstart.py [--steps 2000] [--seed 0] [--out history.npz]
+    python examples/quickstart.py [--steps 2000] [--seed 0] [--out history.npz]
 """
 
 from __future__ import annotations
@@ -40,15 +40,19 @@ def main(argv: list[str] | None = None) -> History:
     assert np.array_equal(History.load(path).matrix, history.matrix)
 
     # The mapper sees the histories and the anchors only; ground truth is used to score.
-    for method in ("SMA(WGT)", None):  # None: the best method for this kind of history
+    # Pass the History itself, not history.matrix: build_map then also reads its sensor, its
+    # mask (what a limited sensor did not see) and its timeline.
+    for method in ("SMA(WGT)", None):  # None: the default for this kind of history
         result = mappers.build_map(
-            history.matrix, history.anchor_ids, history.anchor_positions, method=method
+            history, history.anchor_ids, history.anchor_positions, method=method
         )
         mpe = mappers.mean_position_error(
             result.positions, history.object_positions, exclude=history.anchor_ids
         )
         moe = mappers.mean_orientation_error(result.positions, history.object_positions)
         print(f"{result.method:>10}: MPE {mpe:.3f} m (non-anchor objects), MOE {moe:.2f} %")
+        for note in result.warnings:  # repairs and degradations worth knowing
+            print(f"{'':>10}  note: {note}")
     return history
 
 
