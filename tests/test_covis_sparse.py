@@ -5,8 +5,8 @@ import pytest
 import scipy.sparse as sp
 
 import mappers
-from lfmdr_gym.policies import RandomWalkPolicy
-from lfmdr_gym.recording import collect
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
+from lfmdr_gym.histories.recording import collect
 from mappers.coobservation import angle_covisibility_dissimilarity, covisibility_dissimilarity
 from mappers.covis_sparse import sparse_co_observation
 from mappers.scores import mean_position_error

@@ -9,8 +9,8 @@ import pytest
 import lfmdr_gym
 from lfmdr_gym import POLICIES, collect
 from lfmdr_gym.cli import main
-from lfmdr_gym.exploration import CoveragePolicy
-from lfmdr_gym.policies import check_policy
+from lfmdr_gym.exploration.coverage import CoveragePolicy
+from lfmdr_gym.exploration.random_walk import check_policy
 
 GEOMETRY = {"max_turn", "step_length", "world", "robot_radius", "object_radius", "unwrapped",
             "observation_space", "action_space", "single_action_space",

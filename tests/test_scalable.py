@@ -7,8 +7,8 @@ import pytest
 import scipy.sparse as sp
 
 import mappers
-from lfmdr_gym.policies import RandomWalkPolicy
-from lfmdr_gym.recording import collect
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
+from lfmdr_gym.histories.recording import collect
 from mappers.calibrated import history_dissimilarity
 from mappers.graph import informative_pairs, knn_mask
 from mappers.registry import DENSE_MAX_OBJECTS, SCALABLE_ABOVE_OBJECTS, resolve_method

@@ -3,7 +3,7 @@
     python -m lfmdr_gym.datasets.camera_model [RUN_DIR ...]   (default: the runs
         ../shared/data/mrclam/MRCLAM_Dataset* beside the project)
 
-The figures behind :data:`lfmdr_gym.camera.CAMERA_PRESET` (``LFMDR-Camera-v0``). The runs hold the
+The figures behind :data:`lfmdr_gym.sim.camera.CAMERA_PRESET` (``LFMDR-Camera-v0``). The runs hold the
 landmarks' motion-capture ground truth but not the robots' poses, so the geometry a measurement is
 checked against comes from the image itself: every camera image that read three or more
 landmarks fixes the robot's pose (x, y, heading) by a robust least-squares fit of its own ranges

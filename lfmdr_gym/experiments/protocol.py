@@ -43,8 +43,8 @@ from lfmdr_gym.experiments.params import (
 from lfmdr_gym.experiments.reproducibility import write_environment
 from lfmdr_gym.experiments.scoring import evaluate
 from lfmdr_gym.experiments.store import RESULTS, ResultStore, ensure_writable_dir
-from lfmdr_gym.history import History, HistoryFileError
-from lfmdr_gym.world import check_int
+from lfmdr_gym.histories.history import History, HistoryFileError
+from lfmdr_gym.sim.world import check_int
 from mappers.sensors import check_sensor
 
 __all__ = ["DEFAULT_EVERY", "ProtocolConfig", "ProtocolSummary", "Unit", "run_protocol",

@@ -21,15 +21,15 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from lfmdr_gym import kernels
-from lfmdr_gym.world import check_int, check_real
+from lfmdr_gym.sim import kernels
+from lfmdr_gym.sim.world import check_int, check_real
 
 __all__ = ["POLICIES", "Policy", "PredictPolicy", "RandomWalkPolicy", "as_policy", "check_policy"]
 
 
 @runtime_checkable
 class Policy(Protocol):
-    """What :func:`~lfmdr_gym.history.collect` drives the robot with.
+    """What :func:`~lfmdr_gym.histories.history.collect` drives the robot with.
 
     ``policy(observation)`` returns the action: shape (1,) for one observation, or (B, 1) for a
     batch of B observations from a vector env. A policy that keeps state or randomness should also
@@ -294,7 +294,7 @@ class RandomWalkPolicy:
         """Index of the first safe draw in ``turns``, else of the first free one, else -1.
 
         The decision of :meth:`_plan` for one ring (n,) and its draws (T,), made lazily, draw by
-        draw, by the compiled :func:`lfmdr_gym.kernels.first_choice` (the policy runs once per
+        draw, by the compiled :func:`lfmdr_gym.sim.kernels.first_choice` (the policy runs once per
         env step; usually the first draw settles it). Only readings nearer than ``need +
         step_length + robot_radius`` can block a move or spoil the one after it.
         """
@@ -376,31 +376,31 @@ class RandomWalkPolicy:
 
 
 def _coverage(env: Any, **kwargs: Any) -> Any:
-    from lfmdr_gym.exploration import CoveragePolicy
+    from lfmdr_gym.exploration.coverage import CoveragePolicy
 
     return CoveragePolicy.for_env(env, **kwargs)
 
 
 def _coverage_scan(env: Any, **kwargs: Any) -> Any:
-    from lfmdr_gym.exploration import CoveragePolicy
+    from lfmdr_gym.exploration.coverage import CoveragePolicy
 
     return CoveragePolicy.for_env(env, **{"correct_drift": True, **kwargs})
 
 
 def _spread(env: Any, **kwargs: Any) -> Any:
-    from lfmdr_gym.spread import SpreadPolicy
+    from lfmdr_gym.exploration.spread import SpreadPolicy
 
     return SpreadPolicy.for_env(env, **kwargs)
 
 
 def _even(env: Any, **kwargs: Any) -> Any:
-    from lfmdr_gym.even import EvenPolicy
+    from lfmdr_gym.exploration.even import EvenPolicy
 
     return EvenPolicy.for_env(env, **kwargs)
 
 
 def _rl(env: Any, **kwargs: Any) -> Any:
-    from lfmdr_gym.rl_policy import MLPExplorationPolicy
+    from lfmdr_gym.exploration.rl import MLPExplorationPolicy
 
     return MLPExplorationPolicy.for_env(env, **kwargs)
 
@@ -419,17 +419,17 @@ and object radii, the room's size) and spaces; the policy then sees observations
 
 - ``"random-walk"``: the paper's agent (:class:`RandomWalkPolicy`).
 - ``"coverage"``: even coverage from a dead-reckoned visit memory
-  (:class:`lfmdr_gym.exploration.CoveragePolicy`).
+  (:class:`lfmdr_gym.exploration.coverage.CoveragePolicy`).
 - ``"coverage-scan"``: the same with its dead reckoning corrected from the proximity rings
-  (``correct_drift=True``, :mod:`lfmdr_gym.scan_match`).
+  (``correct_drift=True``, :mod:`lfmdr_gym.exploration.scan_match`).
 - ``"rl"``: a PPO agent trained on the coverage reward, run in numpy from the shipped weights
-  (:class:`lfmdr_gym.rl_policy.MLPExplorationPolicy`; ``examples/train_rl_policy.py``).
+  (:class:`lfmdr_gym.exploration.rl.MLPExplorationPolicy`; ``examples/train_rl_policy.py``).
 - ``"spread"``: viewpoints spread evenly at the scale of the step (a kernel density of the
   drift-corrected dead-reckoned viewpoints, three-move look-ahead, a pull toward unvisited
-  seen-free ground; :class:`lfmdr_gym.spread.SpreadPolicy`).
+  seen-free ground; :class:`lfmdr_gym.exploration.spread.SpreadPolicy`).
 - ``"even"``: plans of three moves that keep the coverage of the room even (the room placed
   from the walls the ring sees, which also correct the dead reckoning; the moves simulated
-  among cylinders fitted to every ring hit so far; :class:`lfmdr_gym.even.EvenPolicy`); the
+  among cylinders fitted to every ring hit so far; :class:`lfmdr_gym.exploration.even.EvenPolicy`); the
   fastest mapper of these.
 """
 

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import pymunk
 
-from lfmdr_gym.grid import sample_separated
+from lfmdr_gym.sim.grid import sample_separated
 
 __all__ = ["ANCHOR_CHOICES", "Layout", "World", "wrap_angle"]
 
@@ -255,7 +255,7 @@ class World:
 
     def _sample_dense(self, rng: np.random.Generator, n: int, a: float,
                       budget: int) -> tuple[np.ndarray, int]:
-        """:func:`~lfmdr_gym.grid.sample_separated` checking each batch against every accepted
+        """:func:`~lfmdr_gym.sim.grid.sample_separated` checking each batch against every accepted
         point at once (fastest for small M)."""
         s2 = self.min_separation**2
         pts = np.empty((n, 2))

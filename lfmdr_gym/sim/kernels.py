@@ -14,7 +14,7 @@ matrix product went through BLAS, which may fuse a multiply and an add (these lo
 operation). Every history recorded before is recorded again bit for bit
 (``tests/test_trajectory_identity.py``); the sensors are tested against brute-force geometry
 (``tests/test_sensors.py``) and the random walk's choice against its vectorised reference,
-:meth:`lfmdr_gym.policies.RandomWalkPolicy._plan` (``tests/test_policies.py``).
+:meth:`lfmdr_gym.exploration.random_walk.RandomWalkPolicy._plan` (``tests/test_policies.py``).
 """
 
 from __future__ import annotations
@@ -136,7 +136,7 @@ def _first_choice(proximity, turns, ray_x, ray_y, probe_c, probe_s, obstacle_rad
                  robot_radius, step, margin, plan_ahead):  # pragma: no cover - compiled
     """Index of the first safe draw in ``turns``, else of the first free one, else -1.
 
-    The random walk's decision (:meth:`lfmdr_gym.policies.RandomWalkPolicy._plan` is the
+    The random walk's decision (:meth:`lfmdr_gym.exploration.random_walk.RandomWalkPolicy._plan` is the
     vectorised reference): each proximity reading p on ray k is modelled as an obstacle centred
     at ``(p + obstacle_radius) * ray_k``; a draw is free when the disc can advance ``step +
     margin`` after the turn, and safe when it is free and, from where the move ends, some probe

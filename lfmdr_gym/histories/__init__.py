@@ -1,0 +1,1 @@
+"""Observation histories: the History a mapper takes, how an episode is recorded into one, and its compact storage."""
