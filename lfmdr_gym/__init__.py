@@ -17,10 +17,9 @@ from typing import Any
 from gymnasium.envs.registration import register, registry
 
 from lfmdr_gym.env import LFMDREnv
-from lfmdr_gym.exploration.random_walk import POLICIES, RandomWalkPolicy, as_policy
-from lfmdr_gym.histories.history import History
-from lfmdr_gym.histories.recording import collect, collect_vector
-from lfmdr_gym.sim.camera import CAMERA_PRESET
+from lfmdr_gym.exploration import POLICIES, RandomWalkPolicy, as_policy
+from lfmdr_gym.histories import History, collect, collect_vector
+from lfmdr_gym.sim import CAMERA_PRESET
 from mappers.sensors import FUSED_SENSORS, SENSORS, check_sensor
 
 __all__ = ["ENV_IDS", "POLICIES", "PRESETS", "History", "LFMDREnv", "RandomWalkPolicy", "as_policy", "collect",

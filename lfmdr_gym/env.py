@@ -9,11 +9,12 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from lfmdr_gym.checks import check_int, check_real
 from lfmdr_gym.render import HumanViewer, available_render_modes, draw_frame, human_rendering_error
 from lfmdr_gym.sim import sensors
 from lfmdr_gym.sim.grid import CellGrid
 from lfmdr_gym.sim.sensing_limits import SensingLimits
-from lfmdr_gym.sim.world import World, check_int, check_real
+from lfmdr_gym.sim.world import World
 from mappers.sensors import SENSORS, check_sensor, sensors_of
 
 __all__ = ["LFMDREnv", "OBSERVATION_TYPES", "observation_factory"]

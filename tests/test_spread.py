@@ -8,7 +8,7 @@ import pytest
 
 import lfmdr_gym  # noqa: F401 - registers the env ids
 from lfmdr_gym import POLICIES, collect
-from lfmdr_gym.exploration.random_walk import check_policy
+from lfmdr_gym.exploration.contract import check_policy
 from lfmdr_gym.exploration.spread import SpreadPolicy
 
 

@@ -100,7 +100,7 @@ def test_bad_arguments_raise_naming_them(kwargs, name):
 
 
 def test_check_real_states_the_bounds():
-    from lfmdr_gym.sim.world import check_real
+    from lfmdr_gym.checks import check_real
 
     with pytest.raises(ValueError, match=r"x must be > 0, got 0"):
         check_real("x", 0, low=0.0, low_open=True)

@@ -33,8 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from lfmdr_gym.checks import check_real
 from lfmdr_gym.histories.history import History
-from lfmdr_gym.sim.world import check_real
 from mappers.align import check_anchor_ids
 from mappers.coobservation import co_observation_components
 from mappers.sensors import COLUMNS_PER_STEP, check_sensor

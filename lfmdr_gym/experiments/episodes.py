@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
+from lfmdr_gym.checks import check_int
 from lfmdr_gym.experiments.store import ensure_writable_dir
 from lfmdr_gym.histories.history import History
-from lfmdr_gym.sim.world import check_int
 
 __all__ = ["Episode", "collect_episode", "collect_history", "derived_seed", "describe_history"]
 
@@ -105,7 +105,7 @@ def collect_history(
 
     if env_kwargs and env_id in ENV_IDS:
         env_kwargs, _ = check_env_kwargs(ENV_IDS[env_id], env_kwargs)
-    from lfmdr_gym.exploration.random_walk import POLICIES
+    from lfmdr_gym.exploration import POLICIES
     from lfmdr_gym.histories.recording import collect
 
     if policy not in POLICIES:

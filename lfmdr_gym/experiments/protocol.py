@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from lfmdr_gym.checks import check_int
 from lfmdr_gym.experiments.engine import check_jobs, engine_name, parallel, worker_context
 from lfmdr_gym.experiments.env_settings import check_env_kwargs
 from lfmdr_gym.experiments.episodes import Episode, collect_episode, derived_seed
@@ -44,7 +45,6 @@ from lfmdr_gym.experiments.reproducibility import write_environment
 from lfmdr_gym.experiments.scoring import evaluate
 from lfmdr_gym.experiments.store import RESULTS, ResultStore, ensure_writable_dir
 from lfmdr_gym.histories.history import History, HistoryFileError
-from lfmdr_gym.sim.world import check_int
 from mappers.sensors import check_sensor
 
 __all__ = ["DEFAULT_EVERY", "ProtocolConfig", "ProtocolSummary", "Unit", "run_protocol",

@@ -31,9 +31,9 @@ from typing import Any
 
 import numpy as np
 
+from lfmdr_gym.checks import check_real
 from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
 from lfmdr_gym.exploration.scan_match import contact, matched_advance
-from lfmdr_gym.sim.world import check_real
 
 __all__ = ["CoveragePolicy"]
 

@@ -48,11 +48,11 @@ from typing import Any
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
+from lfmdr_gym.checks import check_int, check_real
+from lfmdr_gym.exploration.contract import base_env
 from lfmdr_gym.exploration.coverage import CoveragePolicy
 from lfmdr_gym.exploration.obstacles import ObstacleMap, advance, ring_hits
-from lfmdr_gym.exploration.random_walk import base_env
 from lfmdr_gym.exploration.walls import WallFrame, wall_runs
-from lfmdr_gym.sim.world import check_int, check_real
 
 __all__ = ["EvenPolicy"]
 

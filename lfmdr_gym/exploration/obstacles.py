@@ -24,7 +24,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from lfmdr_gym.sim.world import check_real
+from lfmdr_gym.checks import check_real
 
 __all__ = ["ObstacleMap", "advance", "ring_hits"]
 

@@ -34,8 +34,8 @@ from typing import Any
 
 import numpy as np
 
+from lfmdr_gym.checks import check_int, check_real
 from lfmdr_gym.exploration.coverage import CoveragePolicy
-from lfmdr_gym.sim.world import check_int, check_real
 
 __all__ = ["SpreadPolicy"]
 

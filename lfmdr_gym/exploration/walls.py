@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from lfmdr_gym.sim.world import check_int, check_real
+from lfmdr_gym.checks import check_int, check_real
 
 __all__ = ["WallFrame", "wall_runs"]
 

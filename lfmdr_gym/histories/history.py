@@ -476,12 +476,3 @@ History.matrix = property(_matrix_get, _matrix_set, doc="The (M, D) float64 matr
 # ``mask`` likewise: kept as stored (dense or sparse); reading it gives the dense bool array (of a
 # fused history: a read-only mapping sensor -> its part's mask).
 History.mask = property(_mask_get, _mask_set, doc="The (M, D) bool mask or None (History.sparse_mask).")
-
-
-def __getattr__(name: str):
-    # collect() and collect_vector() live in lfmdr_gym.histories.recording; older code imports them here
-    if name in ("collect", "collect_vector"):
-        from lfmdr_gym.histories import recording
-
-        return getattr(recording, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -17,9 +17,10 @@ from typing import Any
 
 import numpy as np
 
+from lfmdr_gym.checks import check_int
+from lfmdr_gym.exploration.contract import PredictPolicy, as_policy
 from lfmdr_gym.histories.compact import COMPACT_ABOVE_BYTES, CompactSteps
 from lfmdr_gym.histories.history import History
-from lfmdr_gym.sim.world import check_int
 from mappers.sensors import COLUMNS_PER_STEP, FUSED_SENSORS, SENSORS
 
 __all__ = ["collect", "collect_vector"]
@@ -203,8 +204,7 @@ def _env_from(env: Any, make_kwargs: dict[str, Any] | None) -> Iterator[Any]:
         return
     import gymnasium as gym
 
-    import lfmdr_gym  # noqa: F401  (registers the LFMDR ids)
-
+    # The LFMDR ids are registered: importing this module ran lfmdr_gym/__init__.py first.
     made = gym.make(env, **(make_kwargs or {}))
     try:
         yield made
@@ -237,9 +237,9 @@ def collect(
 
     ``env`` is a Gymnasium env with a dict observation (one sensor entry, or the entries of a
     fused set such as ``"range"`` and ``"bearing"``, which give a fused History, plus, for
-    :class:`~lfmdr_gym.exploration.random_walk.RandomWalkPolicy`, ``"proximity"``) and the ground truth in
+    :class:`~lfmdr_gym.RandomWalkPolicy`, ``"proximity"``) and the ground truth in
     ``info``, or an env id (made with ``make_kwargs`` and closed afterwards). ``policy`` is anything
-    :func:`~lfmdr_gym.exploration.random_walk.as_policy` accepts; its ``reset(seed=...)`` is called with a seed
+    :func:`~lfmdr_gym.exploration.contract.as_policy` accepts; its ``reset(seed=...)`` is called with a seed
     derived from ``seed``, so one seed fixes layout, start pose and walk. The observation after
     each move is column (or column pair) t of the matrix; the reset observation is not a move and
     is not recorded. Raises ValueError if the episode ends before ``n_steps`` moves.
@@ -249,8 +249,6 @@ def collect(
     None (default) does so only when the float64 matrix would exceed
     :data:`~lfmdr_gym.histories.compact.COMPACT_ABOVE_BYTES`, so small histories are as before.
     """
-    from lfmdr_gym.exploration.random_walk import as_policy
-
     n_steps = check_int("n_steps", n_steps, low=1)
     seed = _check_seed(seed)
     pol = as_policy(policy)
@@ -395,7 +393,6 @@ def collect_vector(
     """
     from gymnasium.vector import AutoresetMode
 
-    from lfmdr_gym.exploration.random_walk import PredictPolicy, as_policy
 
     n_steps = check_int("n_steps", n_steps, low=1)
     seed = _check_seed(seed)
