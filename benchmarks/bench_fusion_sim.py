@@ -18,11 +18,11 @@ walk's true poses and layout:
   history mapped as collected (``LOC-SMA``) and each of its parts alone (masked defaults:
   ``range-quantile`` for range, ``BEARING-BA`` for bearing);
 * ``vis-bearing``: the walk's own bearing history and the visibility bits of the same poses
-  (:func:`lfmdr_gym.sim.sensors.visibility`, the env's defaults), each alone (its default: ``CAL-SMA``
-  for visibility, ``BEARING-BA`` for bearing) and fused
-  (``VB-SMA``, and VB-SMA without its blend with the bearing-only map, ``bearing_share=0``);
-  the ratio fused / better-alone per run, for both; ``vis-bearing paper`` is VB-SMA without
-  its bundle adjustment (``refine=False``, the blend alone);
+  (:func:`lfmdr_gym.sim.sensors.visibility`, the env's defaults), each alone (its default:
+  ``CAL-SMA`` for visibility, ``BEARING-BA`` for bearing) and fused (``VB-SMA``, and VB-SMA without
+  its blend with the bearing-only map, ``bearing_share=0``); the ratio fused / better-alone per run,
+  for both; ``vis-bearing paper`` is VB-SMA without its bundle adjustment (``refine=False``, the
+  blend alone);
 * ``vis-bearing-noisy`` (not in the default sections): the same with 10 degrees of Gaussian
   noise on the bearings, where the better single sensor is not exact.
 

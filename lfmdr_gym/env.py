@@ -138,17 +138,18 @@ class LFMDREnv(gym.Env):
 
     ## Imperfect sensing
 
-    All off by default (the paper's perfect sensors); see :class:`lfmdr_gym.sim.sensing_limits.SensingLimits`.
-    ``fov_deg`` (field of view centred on the heading, in (0, 360]) and ``max_range`` (centre to
-    centre) limit every sensor; ``bearing_noise_deg`` (Gaussian, std of the bearing angle),
-    ``range_noise`` (Gaussian, std in metres), ``miss_rate`` / ``false_rate`` (a visible object
-    reported not visible / an invisible one reported visible, each entry independently, rates in
-    [0, 1)) and ``line_of_sight`` (occlusion for bearing and range: an object hidden behind
-    another is not measured; visibility has its own ``occlusion``) apply to their sensor only.
-    With any of them on, the observation gains ``"observed"``; entries not observed read 0. For
-    visibility, ``observed`` marks where the camera looked (inside the view and range), not what
-    it saw. Noise and dropouts are drawn from a generator seeded from the reset seed, apart from
-    ``np_random``: the same seed and actions give the same trajectory with or without them.
+    All off by default (the paper's perfect sensors); see
+    :class:`lfmdr_gym.sim.sensing_limits.SensingLimits`. ``fov_deg`` (field of view centred on the
+    heading, in (0, 360]) and ``max_range`` (centre to centre) limit every sensor;
+    ``bearing_noise_deg`` (Gaussian, std of the bearing angle), ``range_noise`` (Gaussian, std in
+    metres), ``miss_rate`` / ``false_rate`` (a visible object reported not visible / an invisible
+    one reported visible, each entry independently, rates in [0, 1)) and ``line_of_sight``
+    (occlusion for bearing and range: an object hidden behind another is not measured; visibility
+    has its own ``occlusion``) apply to their sensor only. With any of them on, the observation
+    gains ``"observed"``; entries not observed read 0. For visibility, ``observed`` marks where the
+    camera looked (inside the view and range), not what it saw. Noise and dropouts are drawn from a
+    generator seeded from the reset seed, apart from ``np_random``: the same seed and actions give
+    the same trajectory with or without them.
 
     ## Action Space
 

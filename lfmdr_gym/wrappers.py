@@ -42,8 +42,8 @@ class MappingRewardWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     ## Observation Space
 
     ``Box(-1, 1, (n,), float32)`` with n = n_rays + 30 (n_rays + 28 without presence): the features of
-    :class:`~lfmdr_gym.exploration.agent_view.AgentView` (proximity ring, novelty of the dead-reckoned cells
-    around, dead-reckoned pose, presence summary).
+    :class:`~lfmdr_gym.exploration.agent_view.AgentView` (proximity ring, novelty of the
+    dead-reckoned cells around, dead-reckoned pose, presence summary).
 
     ## Action Space
 

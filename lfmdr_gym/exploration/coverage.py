@@ -13,14 +13,14 @@ It knows only what it senses and what it did, never the pose or the layout in ``
   (the full step when the way is clear; the room before the obstacle otherwise);
 - each candidate turn is scored by the visit counts of the cells one and two steps ahead along
   it, counting only points the proximity ring reports free, nearer cells weighing more; the
-  best-scored candidate that passes :class:`~lfmdr_gym.exploration.random_walk.RandomWalkPolicy`'s collision
-  check is taken.
+  best-scored candidate that passes :class:`~lfmdr_gym.exploration.random_walk.RandomWalkPolicy`'s
+  collision check is taken.
 
 Dead reckoning drifts on moves the physics cuts short (an object hidden between two rays).
 With ``correct_drift=True`` (registered as ``"coverage-scan"``) each move is re-reckoned once the
 ring after it is known: made in full unless it ended in contact, else the advance a scan match
-of the two rings gives (:mod:`lfmdr_gym.exploration.scan_match`). It maps visibility better and bearing no
-better (``docs/online-and-exploration.md``), so the default stays off.
+of the two rings gives (:mod:`lfmdr_gym.exploration.scan_match`). It maps visibility better and
+bearing no better (``docs/online-and-exploration.md``), so the default stays off.
 """
 
 from __future__ import annotations

@@ -188,9 +188,9 @@ class RandomWalkPolicy:
         """Index of the first safe draw in ``turns``, else of the first free one, else -1.
 
         The decision of :meth:`_plan` for one ring (n,) and its draws (T,), made lazily, draw by
-        draw, by the compiled :func:`lfmdr_gym.exploration.random_walk_kernel.first_choice` (the policy runs once per
-        env step; usually the first draw settles it). Only readings nearer than ``need +
-        step_length + robot_radius`` can block a move or spoil the one after it.
+        draw, by the compiled :func:`lfmdr_gym.exploration.random_walk_kernel.first_choice` (the
+        policy runs once per env step; usually the first draw settles it). Only readings nearer than
+        ``need + step_length + robot_radius`` can block a move or spoil the one after it.
         """
         ray_x, ray_y = self._ray_parts(proximity.size)
         return random_walk_kernel.first_choice(

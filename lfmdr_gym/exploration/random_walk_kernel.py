@@ -60,13 +60,13 @@ def _first_choice(proximity, turns, ray_x, ray_y, probe_c, probe_s, obstacle_rad
                  robot_radius, step, margin, plan_ahead):  # pragma: no cover - compiled
     """Index of the first safe draw in ``turns``, else of the first free one, else -1.
 
-    The random walk's decision (:meth:`lfmdr_gym.exploration.random_walk.RandomWalkPolicy._plan` is the
-    vectorised reference): each proximity reading p on ray k is modelled as an obstacle centred
-    at ``(p + obstacle_radius) * ray_k``; a draw is free when the disc can advance ``step +
-    margin`` after the turn, and safe when it is free and, from where the move ends, some probe
-    heading (``probe_c``, ``probe_s``: the cosine and sine of each probe turn) is free too, or
-    there is room for two steps straight on. Only readings nearer than ``need + step +
-    robot_radius`` can change either answer, so the others are left out.
+    The random walk's decision (:meth:`lfmdr_gym.exploration.random_walk.RandomWalkPolicy._plan` is
+    the vectorised reference): each proximity reading p on ray k is modelled as an obstacle centred
+    at ``(p + obstacle_radius) * ray_k``; a draw is free when the disc can advance ``step + margin``
+    after the turn, and safe when it is free and, from where the move ends, some probe heading
+    (``probe_c``, ``probe_s``: the cosine and sine of each probe turn) is free too, or there is room
+    for two steps straight on. Only readings nearer than ``need + step + robot_radius`` can change
+    either answer, so the others are left out.
     """
     need = step + margin
     rr2 = (robot_radius + obstacle_radius) ** 2

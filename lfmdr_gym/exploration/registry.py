@@ -58,7 +58,8 @@ policies ``lfmdr collect --policy NAME`` offers. A factory reads only the env's 
 limit, step length, robot and object radii, the room's size) and spaces; the policy then sees
 observations only (:func:`~lfmdr_gym.exploration.contract.check_policy`).
 
-- ``"random-walk"``: the paper's agent (:class:`lfmdr_gym.exploration.random_walk.RandomWalkPolicy`).
+- ``"random-walk"``: the paper's agent
+  (:class:`lfmdr_gym.exploration.random_walk.RandomWalkPolicy`).
 - ``"coverage"``: even coverage from a dead-reckoned visit memory
   (:class:`lfmdr_gym.exploration.coverage.CoveragePolicy`).
 - ``"coverage-scan"``: the same with its dead reckoning corrected from the proximity rings

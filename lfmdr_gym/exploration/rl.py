@@ -6,8 +6,8 @@ hidden layers) with :func:`export_sb3`. :class:`MLPExplorationPolicy` reads that
 computes the deterministic action with numpy alone (``tanh(W h + b)`` per hidden layer, a linear
 output clipped to [-1, 1], as SB3's ``predict(..., deterministic=True)`` does for a Gaussian
 policy on a Box(-1, 1) action space), so the registered ``"rl"`` policy needs neither torch
-nor SB3. Its features and the shield come from the same :class:`~lfmdr_gym.exploration.agent_view.AgentView`
-as in training.
+nor SB3. Its features and the shield come from the same
+:class:`~lfmdr_gym.exploration.agent_view.AgentView` as in training.
 
 File format (``.npz``, loaded with ``allow_pickle=False``): ``weight_0``, ``bias_0``, ... per
 layer (weights as (out, in), as torch stores them) and ``config``, a JSON string with the
@@ -131,8 +131,8 @@ class MLPExplorationPolicy:
         model: path of a model file; None for the shipped one.
         seed: accepted for the registry's interface; the policy is deterministic.
 
-    Sees observations only: its state is the :class:`~lfmdr_gym.exploration.agent_view.AgentView` memory of
-    this episode and the turn it made last; :meth:`reset` forgets both.
+    Sees observations only: its state is the :class:`~lfmdr_gym.exploration.agent_view.AgentView`
+    memory of this episode and the turn it made last; :meth:`reset` forgets both.
     """
 
     def __init__(self, config: ViewConfig, model: str | os.PathLike | None = None, *,

@@ -287,8 +287,8 @@ class History:
 
     def dense(self, max_bytes: int | None = None) -> np.ndarray:
         """The (M, D) float64 matrix; for a compact history built once (cached) if it needs at most
-        ``max_bytes`` (default :data:`lfmdr_gym.histories.compact.MAX_DENSE_BYTES`), else DenseTooLargeError.
-        A fused history gives a read-only mapping sensor -> matrix."""
+        ``max_bytes`` (default :data:`lfmdr_gym.histories.compact.MAX_DENSE_BYTES`), else
+        DenseTooLargeError. A fused history gives a read-only mapping sensor -> matrix."""
         if self.fused:
             return MappingProxyType({n: p.dense(max_bytes) for n, p in self.parts.items()})
         data = self.__dict__["_data"]

@@ -4,8 +4,8 @@
 sub-env of a Gymnasium vector env and copes with each autoreset mode. Both record, per move,
 the mapping sensor's reading, the robot's true pose (for scoring only) and whether the move was
 blocked; the reset observation is not a move and is never recorded. An env with imperfect
-sensing (:mod:`lfmdr_gym.sim.sensing_limits`) also reports which objects it measured (``"observed"``):
-that becomes the history's mask, True on every column of a measured object's step.
+sensing (:mod:`lfmdr_gym.sim.sensing_limits`) also reports which objects it measured
+(``"observed"``): that becomes the history's mask, True on every column of a measured object's step.
 """
 
 from __future__ import annotations
@@ -239,15 +239,16 @@ def collect(
     fused set such as ``"range"`` and ``"bearing"``, which give a fused History, plus, for
     :class:`~lfmdr_gym.RandomWalkPolicy`, ``"proximity"``) and the ground truth in
     ``info``, or an env id (made with ``make_kwargs`` and closed afterwards). ``policy`` is anything
-    :func:`~lfmdr_gym.exploration.contract.as_policy` accepts; its ``reset(seed=...)`` is called with a seed
-    derived from ``seed``, so one seed fixes layout, start pose and walk. The observation after
-    each move is column (or column pair) t of the matrix; the reset observation is not a move and
-    is not recorded. Raises ValueError if the episode ends before ``n_steps`` moves.
+    :func:`~lfmdr_gym.exploration.contract.as_policy` accepts; its ``reset(seed=...)`` is called
+    with a seed derived from ``seed``, so one seed fixes layout, start pose and walk. The
+    observation after each move is column (or column pair) t of the matrix; the reset observation is
+    not a move and is not recorded. Raises ValueError if the episode ends before ``n_steps`` moves.
 
     ``compact``: record the history in compact form (visibility and range sparse, bearing
-    float32, a masked history's matrix and mask both sparse; see :mod:`lfmdr_gym.histories.compact`);
-    None (default) does so only when the float64 matrix would exceed
-    :data:`~lfmdr_gym.histories.compact.COMPACT_ABOVE_BYTES`, so small histories are as before.
+    float32, a masked history's matrix and mask both sparse; see
+    :mod:`lfmdr_gym.histories.compact`); None (default) does so only when the float64 matrix would
+    exceed :data:`~lfmdr_gym.histories.compact.COMPACT_ABOVE_BYTES`, so small histories are as
+    before.
     """
     n_steps = check_int("n_steps", n_steps, low=1)
     seed = _check_seed(seed)
