@@ -140,7 +140,7 @@ def _write_csv(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
 
 def _write_map(out: Path, positions: np.ndarray, history: History, title: str) -> Path:
     """``map.csv`` (object, estimate, truth, anchor flag) and ``map.png``; returns the figure."""
-    from lfmdr_gym.experiments import figures
+    import lfmdr_gym.experiments.figures as figures
 
     anchors = {int(i) for i in history.anchor_ids}
     with atomic_write(out / "map.csv") as fh:

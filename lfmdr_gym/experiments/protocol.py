@@ -408,7 +408,7 @@ def run_protocol(
 
 def write_report(config: ProtocolConfig, out: Path, rows: Sequence[Mapping[str, Any]]) -> list[Path]:
     """Table (md + csv), MPE-versus-N curves and example maps of the first run, from the rows."""
-    from lfmdr_gym.experiments import figures
+    import lfmdr_gym.experiments.figures as figures
 
     defaults = {m: param_label(default_params(m)) for m in config.methods}
     files = figures.write_table(rows, out, sensor=config.sensor, n_steps=config.steps,

@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
+import lfmdr_gym.exploration.random_walk_kernel as random_walk_kernel
 from lfmdr_gym.checks import check_int, check_real
-from lfmdr_gym.exploration import random_walk_kernel
 from lfmdr_gym.exploration.contract import base_env
 
 __all__ = ["RandomWalkPolicy"]

@@ -30,8 +30,8 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+import lfmdr_gym.histories.compact as compact
 from lfmdr_gym.atomic import atomic_write
-from lfmdr_gym.histories import compact
 from mappers.align import check_anchor_ids
 from mappers.sensors import (
     COLUMNS_PER_STEP,

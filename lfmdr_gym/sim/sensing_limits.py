@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
+import lfmdr_gym.sim.sensors as sensors
 from lfmdr_gym.checks import check_real
-from lfmdr_gym.sim import sensors
 from mappers.sensors import sensors_of
 
 __all__ = ["LIMIT_DEFAULTS", "SensingLimits"]

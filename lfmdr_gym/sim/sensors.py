@@ -19,7 +19,7 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import ArrayLike
 
-from lfmdr_gym.sim import kernels
+import lfmdr_gym.sim.kernels as kernels
 
 __all__ = [
     "bearing",
