@@ -34,8 +34,8 @@ import gymnasium as gym
 import numpy as np
 
 import lfmdr_gym  # noqa: F401  (registers the ids)
-from lfmdr_gym.policies import RandomWalkPolicy
-from lfmdr_gym.recording import collect
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
+from lfmdr_gym.histories.recording import collect
 
 ARENA = 2.5
 BIG_ARENA = 2.5 * math.sqrt(10.0)  # 10x the area for 10x the objects: same density

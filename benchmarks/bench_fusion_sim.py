@@ -14,15 +14,15 @@ walk's true poses and layout:
 * ``camera360``: a 360-degree view without range limit, 5 deg / 5 cm noise, fused vs range
   alone (``UNFOLD``) and bearing alone (``BEARING-BA``);
 * ``camera-env``: a walk of ``LFMDR-Camera-v0`` itself (the MRCLAM camera's field of view,
-  range limit and noise, line of sight on; :data:`lfmdr_gym.camera.CAMERA_PRESET`), its fused
+  range limit and noise, line of sight on; :data:`lfmdr_gym.sim.camera.CAMERA_PRESET`), its fused
   history mapped as collected (``LOC-SMA``) and each of its parts alone (masked defaults:
   ``range-quantile`` for range, ``BEARING-BA`` for bearing);
 * ``vis-bearing``: the walk's own bearing history and the visibility bits of the same poses
-  (:func:`lfmdr_gym.sensors.visibility`, the env's defaults), each alone (its default: ``CAL-SMA``
-  for visibility, ``BEARING-BA`` for bearing) and fused
-  (``VB-SMA``, and VB-SMA without its blend with the bearing-only map, ``bearing_share=0``);
-  the ratio fused / better-alone per run, for both; ``vis-bearing paper`` is VB-SMA without
-  its bundle adjustment (``refine=False``, the blend alone);
+  (:func:`lfmdr_gym.sim.sensors.visibility`, the env's defaults), each alone (its default:
+  ``CAL-SMA`` for visibility, ``BEARING-BA`` for bearing) and fused (``VB-SMA``, and VB-SMA without
+  its blend with the bearing-only map, ``bearing_share=0``); the ratio fused / better-alone per run,
+  for both; ``vis-bearing paper`` is VB-SMA without its bundle adjustment (``refine=False``, the
+  blend alone);
 * ``vis-bearing-noisy`` (not in the default sections): the same with 10 degrees of Gaussian
   noise on the bearings, where the better single sensor is not exact.
 
@@ -47,8 +47,8 @@ import numpy as np
 
 import lfmdr_gym  # noqa: F401  (registers the env ids)
 from lfmdr_gym import collect
-from lfmdr_gym.policies import RandomWalkPolicy
-from lfmdr_gym.sensors import visibility
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
+from lfmdr_gym.sim.sensors import visibility
 from mappers import build_map, mean_position_error
 
 
@@ -78,7 +78,7 @@ def simulate_camera(history, fov_deg: float, max_range: float | None, sigma_bear
 
 
 def visibility_history(history, radius: float, visual_angle: float) -> np.ndarray:
-    """(M, N) visibility bits of the walk's poses (:func:`lfmdr_gym.sensors.visibility`, with
+    """(M, N) visibility bits of the walk's poses (:func:`lfmdr_gym.sim.sensors.visibility`, with
     occlusion), as ``LFMDR-Visibility-v0`` would have sensed them."""
     return np.stack([visibility(pose, history.object_positions, radius, visual_angle)
                      for pose in history.robot_poses], axis=1).astype(float)

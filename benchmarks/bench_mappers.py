@@ -85,7 +85,7 @@ def histories(sensor: str, m: int = 50, n_steps: int = 2000, seed: int = 0):
     arena = 2.5 * np.sqrt(m / 50)  # same object density as the paper's M = 50 in 2.5 m
     try:
         from lfmdr_gym import collect
-        from lfmdr_gym.policies import RandomWalkPolicy
+        from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
     except ImportError:
         return (*_synthetic(sensor, m, n_steps, seed, arena), "synthetic")
     h = collect(

@@ -34,9 +34,9 @@ from threadpoolctl import threadpool_limits
 import lfmdr_gym  # noqa: F401 - registers the envs
 import mappers
 from lfmdr_gym.experiments.scoring import mpe_nonanchor
-from lfmdr_gym.history import History
-from lfmdr_gym.policies import RandomWalkPolicy
-from lfmdr_gym.recording import collect
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
+from lfmdr_gym.histories.history import History
+from lfmdr_gym.histories.recording import collect
 
 # (name, sensor, env keywords, goal mean MPE [m], figure the issue measured before [m])
 SETTINGS = (

@@ -47,8 +47,8 @@ def _rss_mb() -> float:
 
 def run_collect(m: int, path: str, sensor: str, max_range: float | None, seed: int) -> dict:
     """Collect one history at M = m and save it to ``path`` (compact above 64 MiB)."""
-    from lfmdr_gym.policies import RandomWalkPolicy
-    from lfmdr_gym.recording import collect
+    from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
+    from lfmdr_gym.histories.recording import collect
 
     n = STEPS[m]
     kwargs = {"n_objects": m, "arena_size": 2.5 * math.sqrt(m / 50), "anchors": "random",
@@ -67,7 +67,7 @@ def run_collect(m: int, path: str, sensor: str, max_range: float | None, seed: i
 def run_method(path: str, method: str) -> dict:
     """Map the saved history with ``method``; time, peak memory, MPE and MOE (non-anchors)."""
     import mappers
-    from lfmdr_gym.history import History
+    from lfmdr_gym.histories.history import History
     from mappers.core.scores import (
         mean_orientation_error,
         mean_position_error,

@@ -2,7 +2,7 @@
 
 The paper's sensors are perfect; its §5.1 names noise and missing observations as the open
 question. This sweep walks the random-walk agent through ``--runs`` fresh layouts (one start
-pose each, N = ``--steps``) per sensing setting (:mod:`lfmdr_gym.imperfect`) and maps every
+pose each, N = ``--steps``) per sensing setting (:mod:`lfmdr_gym.sim.sensing_limits`) and maps every
 history with each method that accepts it: the methods for masked histories and, when the
 history is complete (noise alone), the sensor's default for complete ones. Five panels, each
 varying one setting from the paper's world:

@@ -19,7 +19,7 @@ import lfmdr_gym  # noqa: F401  (registers the env ids)
 import mappers
 from lfmdr_gym import collect
 from lfmdr_gym.atomic import atomic_savefig
-from lfmdr_gym.policies import RandomWalkPolicy
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
 
 
 def main(argv: list[str] | None = None) -> dict[str, float]:

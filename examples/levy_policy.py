@@ -5,9 +5,10 @@ steps (Pareto, P(run >= n) = (min_run / n) ** (mu - 1), capped at ``max_run``), 
 heading at random among the directions its proximity ring reports open and turns toward it, by
 at most ``max_turn`` a step. A run that an obstacle obstructs ends early: the robot takes the
 random walk's collision-checked step instead and re-orients. It uses only the observation's
-``"proximity"`` ring (no pose) and reuses :class:`~lfmdr_gym.policies.RandomWalkPolicy`'s
-collision check, so it meets the same policy contract (callable on one observation or a batch,
-``reset(seed=None)``, ``for_env(env)``) and plugs into ``collect``.
+``"proximity"`` ring (no pose) and reuses
+:class:`~lfmdr_gym.exploration.random_walk.RandomWalkPolicy`'s collision check, so it meets the same
+policy contract (callable on one observation or a batch, ``reset(seed=None)``, ``for_env(env)``) and
+plugs into ``collect``.
 
 What it is good at, measured with this script (1000 steps; the same layout and start for both
 policies, paired by seed; medians): with the visibility sensor, a better map. The SMA(WGT) map's
@@ -43,7 +44,7 @@ import numpy as np
 import lfmdr_gym  # noqa: F401  (registers the ids)
 import mappers
 from lfmdr_gym import History, collect
-from lfmdr_gym.policies import RandomWalkPolicy
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
 
 
 class LevyWalkPolicy(RandomWalkPolicy):
@@ -51,8 +52,9 @@ class LevyWalkPolicy(RandomWalkPolicy):
 
     Args:
         max_turn, step_length, robot_radius, margin, obstacle_radius, plan_ahead, n_tries, seed:
-            as for :class:`~lfmdr_gym.policies.RandomWalkPolicy` (its collision check is used
-            here unchanged; ``n_tries`` random fallback draws are tried when the run is blocked).
+            as for :class:`~lfmdr_gym.exploration.random_walk.RandomWalkPolicy` (its collision check
+            is used here unchanged; ``n_tries`` random fallback draws are tried when the run is
+            blocked).
         jitter: largest random heading change on a straight run [rad], in [0, max_turn].
         mu: tail exponent of the run-length law, > 1 (smaller = longer runs; 2 is the
             classic Lévy-flight foraging optimum).

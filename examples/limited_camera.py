@@ -19,7 +19,7 @@ import gymnasium as gym
 import lfmdr_gym  # noqa: F401  (registers the env ids)
 import mappers
 from lfmdr_gym import History, collect
-from lfmdr_gym.policies import RandomWalkPolicy
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
 
 CAMERA = {"fov_deg": 90.0, "max_range": 1.5, "bearing_noise_deg": 2.0}
 

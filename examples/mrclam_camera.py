@@ -2,7 +2,7 @@
 bearing fused, and from each alone.
 
 ``LFMDR-Camera-v0`` observes the range and bearing of the objects in a 67.7-degree view, with the
-noise measured from the real robots' logs (``lfmdr_gym.camera.CAMERA_PRESET``; how:
+noise measured from the real robots' logs (``lfmdr_gym.sim.camera.CAMERA_PRESET``; how:
 docs/fused-sensing.md). ``collect`` records both into one fused History; ``build_map`` maps it
 with the range-bearing default (LOC-SMA), and ``History.parts`` gives each sensor alone.
 
@@ -16,7 +16,7 @@ import argparse
 import lfmdr_gym
 import mappers
 from lfmdr_gym import History, collect
-from lfmdr_gym.camera import CAMERA_PRESET
+from lfmdr_gym.sim.camera import CAMERA_PRESET
 
 
 def main(argv: list[str] | None = None) -> History:

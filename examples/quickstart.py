@@ -13,7 +13,7 @@ import numpy as np
 import lfmdr_gym  # noqa: F401  (registers LFMDR-Visibility-v0, LFMDR-Bearing-v0, LFMDR-Range-v0)
 import mappers
 from lfmdr_gym import History, collect
-from lfmdr_gym.policies import RandomWalkPolicy
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
 
 
 def main(argv: list[str] | None = None) -> History:

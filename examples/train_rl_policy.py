@@ -4,7 +4,7 @@ Needs the ``rl`` extra: ``pip install -e ".[rl]"`` (it pins torch 2.13.0, whose 
 what our machines resolve it to; elsewhere install a CPU torch first). It trains PPO (an MLP actor-critic, tanh, 64 x 64) on
 :class:`lfmdr_gym.wrappers.MappingRewardWrapper` around both sensors' envs (episodes of 500
 steps, fresh layouts each), then exports the actor to a small ``.npz`` that
-:class:`lfmdr_gym.rl_policy.MLPExplorationPolicy` runs in numpy — the registered ``"rl"``
+:class:`lfmdr_gym.exploration.rl.MLPExplorationPolicy` runs in numpy — the registered ``"rl"``
 policy reads the copy shipped in ``lfmdr_gym/models/``. Finally it checks that the numpy
 forward pass gives SB3's deterministic actions on the last observations.
 
@@ -73,7 +73,7 @@ def train(cfg: TrainConfig, out: str | os.PathLike, *, verbose: int = 0):
         from stable_baselines3 import PPO
     except ImportError as exc:
         raise SystemExit("training needs the rl extra: pip install -e '.[rl]'") from exc
-    from lfmdr_gym.rl_policy import export_sb3, load_mlp, mlp_forward
+    from lfmdr_gym.exploration.rl import export_sb3, load_mlp, mlp_forward
 
     torch.set_num_threads(1)
     venv = make_vec_env(cfg)

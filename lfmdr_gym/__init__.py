@@ -16,11 +16,10 @@ from typing import Any
 
 from gymnasium.envs.registration import register, registry
 
-from lfmdr_gym.camera import CAMERA_PRESET
 from lfmdr_gym.env import LFMDREnv
-from lfmdr_gym.history import History
-from lfmdr_gym.policies import POLICIES, RandomWalkPolicy, as_policy
-from lfmdr_gym.recording import collect, collect_vector
+from lfmdr_gym.exploration import POLICIES, RandomWalkPolicy, as_policy
+from lfmdr_gym.histories import History, collect, collect_vector
+from lfmdr_gym.sim import CAMERA_PRESET
 from mappers.core.sensors import FUSED_SENSORS, SENSORS, check_sensor
 
 __all__ = ["ENV_IDS", "POLICIES", "PRESETS", "History", "LFMDREnv", "RandomWalkPolicy", "as_policy", "collect",
@@ -38,7 +37,7 @@ ENV_IDS: dict[str, str] = {
 """Registered id -> sensor (or fused set): LFMDR-Visibility-v0, LFMDR-Bearing-v0,
 LFMDR-Range-v0; LFMDR-RangeBearing-v0 and LFMDR-VisibilityBearing-v0 (both observations every
 step); LFMDR-Camera-v0, the range-bearing env preset to the MRCLAM robots' camera
-(:data:`lfmdr_gym.camera.CAMERA_PRESET`)."""
+(:data:`lfmdr_gym.sim.camera.CAMERA_PRESET`)."""
 
 PRESETS: dict[str, Mapping[str, Any]] = {"LFMDR-Camera-v0": CAMERA_PRESET}
 """Registered id -> the env keywords it sets beyond its sensor (overridable in ``gym.make``)."""

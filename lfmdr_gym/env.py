@@ -9,11 +9,12 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from lfmdr_gym import sensors
-from lfmdr_gym.grid import CellGrid
-from lfmdr_gym.imperfect import SensingLimits
+from lfmdr_gym.checks import check_int, check_real
 from lfmdr_gym.render import HumanViewer, available_render_modes, draw_frame, human_rendering_error
-from lfmdr_gym.world import World, check_int, check_real
+from lfmdr_gym.sim import sensors
+from lfmdr_gym.sim.grid import CellGrid
+from lfmdr_gym.sim.sensing_limits import SensingLimits
+from lfmdr_gym.sim.world import World
 from mappers.core.sensors import SENSORS, check_sensor, sensors_of
 
 __all__ = ["LFMDREnv", "OBSERVATION_TYPES", "observation_factory"]
@@ -112,7 +113,7 @@ class LFMDREnv(gym.Env):
     - ``"visibility"``: ``MultiBinary(M)`` (int8). Object j is visible iff its horizontal visual
       angle ``2 asin(r / d_j)`` exceeds ``visual_angle_deg`` (d below 0.550 m by default) and, with
       ``occlusion``, the segment from the robot's centre to the object's centre passes no nearer
-      than r to another object's centre (see :func:`lfmdr_gym.sensors.visibility`).
+      than r to another object's centre (see :func:`lfmdr_gym.sim.sensors.visibility`).
     - ``"bearing"``: ``Box(-1, 1, (M, 2), float32)``: ``[cos theta, sin theta]`` of each object's
       bearing relative to the heading, counter-clockwise positive (left is ``sin > 0``).
     - ``"range"``: ``Box(0, high, (M,), float32)``: distance from the robot's centre to each
@@ -137,17 +138,18 @@ class LFMDREnv(gym.Env):
 
     ## Imperfect sensing
 
-    All off by default (the paper's perfect sensors); see :class:`lfmdr_gym.imperfect.SensingLimits`.
-    ``fov_deg`` (field of view centred on the heading, in (0, 360]) and ``max_range`` (centre to
-    centre) limit every sensor; ``bearing_noise_deg`` (Gaussian, std of the bearing angle),
-    ``range_noise`` (Gaussian, std in metres), ``miss_rate`` / ``false_rate`` (a visible object
-    reported not visible / an invisible one reported visible, each entry independently, rates in
-    [0, 1)) and ``line_of_sight`` (occlusion for bearing and range: an object hidden behind
-    another is not measured; visibility has its own ``occlusion``) apply to their sensor only.
-    With any of them on, the observation gains ``"observed"``; entries not observed read 0. For
-    visibility, ``observed`` marks where the camera looked (inside the view and range), not what
-    it saw. Noise and dropouts are drawn from a generator seeded from the reset seed, apart from
-    ``np_random``: the same seed and actions give the same trajectory with or without them.
+    All off by default (the paper's perfect sensors); see
+    :class:`lfmdr_gym.sim.sensing_limits.SensingLimits`. ``fov_deg`` (field of view centred on the
+    heading, in (0, 360]) and ``max_range`` (centre to centre) limit every sensor;
+    ``bearing_noise_deg`` (Gaussian, std of the bearing angle), ``range_noise`` (Gaussian, std in
+    metres), ``miss_rate`` / ``false_rate`` (a visible object reported not visible / an invisible
+    one reported visible, each entry independently, rates in [0, 1)) and ``line_of_sight``
+    (occlusion for bearing and range: an object hidden behind another is not measured; visibility
+    has its own ``occlusion``) apply to their sensor only. With any of them on, the observation
+    gains ``"observed"``; entries not observed read 0. For visibility, ``observed`` marks where the
+    camera looked (inside the view and range), not what it saw. Noise and dropouts are drawn from a
+    generator seeded from the reset seed, apart from ``np_random``: the same seed and actions give
+    the same trajectory with or without them.
 
     ## Action Space
 
@@ -178,7 +180,7 @@ class LFMDREnv(gym.Env):
     ```python
     gymnasium.make("LFMDR-Visibility-v0")   # or LFMDR-Bearing-v0, LFMDR-Range-v0,
     # LFMDR-RangeBearing-v0, LFMDR-VisibilityBearing-v0, LFMDR-Camera-v0 (the range-bearing
-    # env with the MRCLAM camera's keywords, lfmdr_gym.camera.CAMERA_PRESET)
+    # env with the MRCLAM camera's keywords, lfmdr_gym.sim.camera.CAMERA_PRESET)
     LFMDREnv(sensor="visibility", n_objects=50, arena_size=2.5, object_diameter=0.048,
              robot_radius=0.05, step_length=0.2, max_turn=pi/4, visual_angle_deg=5.0,
              occlusion=True, anchors="corners", n_anchors=4, object_clearance=0.15,
@@ -284,7 +286,7 @@ class LFMDREnv(gym.Env):
         self._key = names[0] if not self._fused else next(s for s in names if s != "bearing")
         self._obs_type = self._obs_types[self._key]
         range_type = self._obs_types.get("range")
-        # Imperfect sensing (lfmdr_gym.imperfect): built only when a limit is on.
+        # Imperfect sensing (lfmdr_gym.sim.sensing_limits): built only when a limit is on.
         self._limits = (SensingLimits(sensor, self.world.n_objects, self.world.object_radius,
                                       range_high=getattr(range_type or self._obs_type, "high", 1.0),
                                       **limits)

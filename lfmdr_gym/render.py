@@ -13,7 +13,7 @@ import sys
 import numpy as np
 from numpy.typing import ArrayLike
 
-from lfmdr_gym.sensors import ray_directions
+from lfmdr_gym.sim.sensors import ray_directions
 
 __all__ = ["HumanViewer", "draw_frame", "draw_map", "human_rendering_error"]
 

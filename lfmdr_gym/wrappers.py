@@ -23,7 +23,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from lfmdr_gym.agent_view import AgentView, ViewConfig
+from lfmdr_gym.exploration.agent_view import AgentView, ViewConfig
 
 __all__ = ["REWARDS", "MappingRewardWrapper"]
 
@@ -42,14 +42,14 @@ class MappingRewardWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     ## Observation Space
 
     ``Box(-1, 1, (n,), float32)`` with n = n_rays + 30 (n_rays + 28 without presence): the features of
-    :class:`~lfmdr_gym.agent_view.AgentView` (proximity ring, novelty of the dead-reckoned cells
-    around, dead-reckoned pose, presence summary).
+    :class:`~lfmdr_gym.exploration.agent_view.AgentView` (proximity ring, novelty of the
+    dead-reckoned cells around, dead-reckoned pose, presence summary).
 
     ## Action Space
 
     ``Box(-1, 1, (1,), float32)``: the wished heading change as a fraction of the env's
     ``max_turn``. The turn made is the nearest that passes the random walk's collision check
-    (:meth:`~lfmdr_gym.agent_view.AgentView.turn_for`); ``info["turn"]`` reports it.
+    (:meth:`~lfmdr_gym.exploration.agent_view.AgentView.turn_for`); ``info["turn"]`` reports it.
 
     ## Rewards
 

@@ -9,10 +9,10 @@ import pytest
 import scipy.sparse as sp
 
 import mappers
-from lfmdr_gym.compact import DenseTooLargeError
-from lfmdr_gym.history import History
-from lfmdr_gym.policies import RandomWalkPolicy
-from lfmdr_gym.recording import collect
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
+from lfmdr_gym.histories.compact import DenseTooLargeError
+from lfmdr_gym.histories.history import History
+from lfmdr_gym.histories.recording import collect
 
 DATA = Path(__file__).parent / "data"
 
@@ -86,7 +86,7 @@ def test_compact_argument_is_checked():
 
 
 def test_build_map_maps_a_history_beyond_the_budget_without_the_dense_matrix(monkeypatch):
-    from lfmdr_gym import compact
+    from lfmdr_gym.histories import compact
     from mappers import fitting
 
     h = collect("LFMDR-Visibility-v0", RandomWalkPolicy(seed=0), 600, seed=8,

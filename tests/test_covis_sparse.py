@@ -5,8 +5,8 @@ import pytest
 import scipy.sparse as sp
 
 import mappers
-from lfmdr_gym.policies import RandomWalkPolicy
-from lfmdr_gym.recording import collect
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
+from lfmdr_gym.histories.recording import collect
 from mappers.core.scores import mean_position_error
 from mappers.core.sensors import step_observations
 from mappers.masked.coobservation import (

@@ -10,8 +10,8 @@ import pytest
 from threadpoolctl import threadpool_limits
 
 import lfmdr_gym  # noqa: F401 - registers the envs
-from lfmdr_gym.policies import RandomWalkPolicy
-from lfmdr_gym.recording import collect
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
+from lfmdr_gym.histories.recording import collect
 from mappers import build_map, default_method, mean_position_error
 from mappers.core.flicker import (
     FLICKER_THRESHOLD,

@@ -13,8 +13,8 @@ from gymnasium.utils.env_checker import check_env
 from gymnasium.utils.passive_env_checker import env_render_passive_checker
 
 import lfmdr_gym
-from lfmdr_gym import sensors
 from lfmdr_gym.env import LFMDREnv
+from lfmdr_gym.sim import sensors
 
 ENV_IDS = sorted(i for i in gym.registry if i.startswith("LFMDR-"))
 SENSOR_OF = {"LFMDR-Visibility-v0": "visibility", "LFMDR-Bearing-v0": "bearing", "LFMDR-Range-v0": "range",

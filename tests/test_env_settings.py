@@ -11,7 +11,7 @@ from lfmdr_gym.cli import main
 from lfmdr_gym.experiments.env_settings import check_env_kwargs, parse_env_kwargs
 from lfmdr_gym.experiments.protocol import ProtocolConfig, run_protocol
 from lfmdr_gym.experiments.store import SettingsMismatchError
-from lfmdr_gym.history import History
+from lfmdr_gym.histories.history import History
 from mappers import METHODS
 
 LIMITED = {"fov_deg": 90, "max_range": 1.5, "bearing_noise_deg": 2}

@@ -11,9 +11,9 @@ import pytest
 
 import lfmdr_gym  # noqa: F401 - registers the env ids
 from lfmdr_gym import POLICIES, collect
-from lfmdr_gym.even import EvenPolicy
-from lfmdr_gym.policies import check_policy
-from lfmdr_gym.walls import WallFrame, wall_runs
+from lfmdr_gym.exploration.contract import check_policy
+from lfmdr_gym.exploration.even import EvenPolicy
+from lfmdr_gym.exploration.walls import WallFrame, wall_runs
 
 RAYS = 32
 RANGE = 0.5

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -9,8 +12,8 @@ import pytest
 import lfmdr_gym
 from lfmdr_gym import POLICIES, collect
 from lfmdr_gym.cli import main
-from lfmdr_gym.exploration import CoveragePolicy
-from lfmdr_gym.policies import check_policy
+from lfmdr_gym.exploration.contract import check_policy
+from lfmdr_gym.exploration.coverage import CoveragePolicy
 
 GEOMETRY = {"max_turn", "step_length", "world", "robot_radius", "object_radius", "unwrapped",
             "observation_space", "action_space", "single_action_space",
@@ -75,6 +78,38 @@ def test_check_policy_catches_a_policy_that_breaks_the_contract():
     with pytest.raises(AssertionError, match="outside"):
         check_policy(lambda obs: np.array([3.0]), env, n_steps=5)
     env.close()
+
+
+@pytest.mark.parametrize("name", list(POLICIES))
+def test_every_registered_entry_point_names_a_policy_class(name):
+    spec = POLICIES[name]
+    assert spec.name == name
+    module, _, attr = spec.entry_point.partition(":")
+    assert module.startswith("lfmdr_gym.exploration.") and attr
+    assert callable(spec.load().for_env)
+
+
+def test_registered_keywords_are_defaults_a_caller_overrides():
+    env = gym.make("LFMDR-Visibility-v0")
+    assert POLICIES["coverage-scan"](env).correct_drift is True
+    assert POLICIES["coverage-scan"](env, correct_drift=False).correct_drift is False
+    assert POLICIES["coverage"](env).correct_drift is False
+    env.close()
+
+
+def test_the_registry_imports_a_policy_only_when_it_is_asked_for():
+    # A fresh interpreter: ``import lfmdr_gym`` loads the random walk but none of the other
+    # policies; asking the registry for one imports its module then.
+    code = (
+        "import sys\n"
+        "import lfmdr_gym\n"
+        "others = ['coverage', 'spread', 'even', 'rl', 'agent_view']\n"
+        "loaded = [m for m in others if 'lfmdr_gym.exploration.' + m in sys.modules]\n"
+        "assert not loaded, loaded\n"
+        "assert lfmdr_gym.POLICIES['even'].load().__name__ == 'EvenPolicy'\n"
+        "assert 'lfmdr_gym.exploration.even' in sys.modules\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
 
 
 def test_coverage_dead_reckons_its_moves_and_counts_visits():

@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 import lfmdr_gym
-from lfmdr_gym import History, RandomWalkPolicy, collect, collect_vector, sensors
-from lfmdr_gym.camera import CAMERA_PRESET
+from lfmdr_gym import History, RandomWalkPolicy, collect, collect_vector
 from lfmdr_gym.env import LFMDREnv
+from lfmdr_gym.sim import sensors
+from lfmdr_gym.sim.camera import CAMERA_PRESET
 from mappers import build_map
 
 

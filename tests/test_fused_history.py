@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from lfmdr_gym.cli import main
-from lfmdr_gym.history import History, HistoryFileError
+from lfmdr_gym.histories.history import History, HistoryFileError
 from mappers import build_map
 
 M, N = 12, 200
@@ -157,8 +157,8 @@ def test_a_compact_masked_fused_recording_keeps_sparse_masks_through_a_file(tmp_
     import gymnasium as gym
 
     import lfmdr_gym  # noqa: F401
-    from lfmdr_gym.policies import RandomWalkPolicy
-    from lfmdr_gym.recording import collect
+    from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
+    from lfmdr_gym.histories.recording import collect
 
     env = gym.make("LFMDR-RangeBearing-v0", fov_deg=90, max_range=1.5)
     small = collect(env, RandomWalkPolicy.for_env(env), 300, seed=3, compact=True)

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from lfmdr_gym.env import LFMDREnv
-from lfmdr_gym.grid import CellGrid, sample_separated
-from lfmdr_gym.policies import RandomWalkPolicy
-from lfmdr_gym.world import GRID_SAMPLER_MIN_OBJECTS, World
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
+from lfmdr_gym.sim.grid import CellGrid, sample_separated
+from lfmdr_gym.sim.world import GRID_SAMPLER_MIN_OBJECTS, World
 
 
 @pytest.mark.parametrize("n_objects", [50, 400])

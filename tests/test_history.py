@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 
 import lfmdr_gym  # noqa: F401  (registers the ids)
-from lfmdr_gym import history as history_module
-from lfmdr_gym.history import History, HistoryFileError, collect, collect_vector
-from lfmdr_gym.policies import RandomWalkPolicy
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
+from lfmdr_gym.histories import history as history_module
+from lfmdr_gym.histories.history import History, HistoryFileError
+from lfmdr_gym.histories.recording import collect, collect_vector
 
 
 def steer(obs):

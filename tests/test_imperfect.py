@@ -11,8 +11,9 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import lfmdr_gym  # noqa: F401  (registers the ids)
-from lfmdr_gym import recording, sensors
 from lfmdr_gym.env import LFMDREnv
+from lfmdr_gym.histories import recording
+from lfmdr_gym.sim import sensors
 
 EVERY_LIMIT = {
     "visibility": dict(fov_deg=90.0, max_range=0.45, miss_rate=0.2, false_rate=0.05),

@@ -124,7 +124,7 @@ def test_loader_filters_and_counts(tmp_path):
     assert any("[10, 11] were never observed" in m for m in said)
     assert any("falls apart" in m for m in said)
     assert h.meta["warnings"] == said
-    from lfmdr_gym.history import History
+    from lfmdr_gym.histories.history import History
 
     back = History.load(h.save(tmp_path / "tiny.npz"))
     assert back.meta == h.meta and np.array_equal(back.matrix, h.matrix)

@@ -10,8 +10,8 @@ from threadpoolctl import threadpool_limits
 
 import lfmdr_gym  # noqa: F401 - registers the envs
 import mappers.online.mapper as online
-from lfmdr_gym.policies import RandomWalkPolicy
-from lfmdr_gym.recording import collect
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
+from lfmdr_gym.histories.recording import collect
 from mappers import OnlineMapper, build_map, mean_position_error
 
 

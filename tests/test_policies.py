@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 import lfmdr_gym  # noqa: F401  (registers the ids)
-from lfmdr_gym.policies import Policy, PredictPolicy, RandomWalkPolicy, as_policy
+from lfmdr_gym.exploration.contract import Policy, PredictPolicy, as_policy
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
 
 
 class FakeModel:

@@ -15,8 +15,8 @@ from gymnasium.utils.env_checker import check_env
 
 import lfmdr_gym
 from lfmdr_gym import POLICIES, collect
-from lfmdr_gym.agent_view import AgentView, ViewConfig
-from lfmdr_gym.rl_policy import MLPExplorationPolicy, load_mlp, mlp_forward
+from lfmdr_gym.exploration.agent_view import AgentView, ViewConfig
+from lfmdr_gym.exploration.rl import MLPExplorationPolicy, load_mlp, mlp_forward
 from lfmdr_gym.wrappers import MappingRewardWrapper
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -220,7 +220,7 @@ def test_full_training_run(tmp_path):
 
 
 def _ring(pose, objects, n_rays=32, max_range=0.5):
-    from lfmdr_gym.sensors import proximity
+    from lfmdr_gym.sim.sensors import proximity
 
     return proximity(pose, objects, 0.024, 1.25, n_rays, max_range)
 
@@ -229,7 +229,7 @@ def test_scan_match_recovers_the_advance_of_a_move():
     """Random scenes (12 objects in view, random heading, turn and advance): the matched advance
     is within a few millimetres on average (dead reckoning's error on a stopped move is up to
     the whole 0.2 m step)."""
-    from lfmdr_gym.scan_match import matched_advance
+    from lfmdr_gym.exploration.scan_match import matched_advance
 
     errors = []
     for seed in range(30):
@@ -250,7 +250,7 @@ def test_scan_match_recovers_the_advance_of_a_move():
 
 
 def test_scan_match_needs_something_in_view_and_contact_reads_the_ring():
-    from lfmdr_gym.scan_match import contact, matched_advance
+    from lfmdr_gym.exploration.scan_match import contact, matched_advance
 
     empty = np.full(32, 0.5)
     assert matched_advance(empty, empty, 0.0, 0.2, 0.5) is None
@@ -261,7 +261,7 @@ def test_scan_match_needs_something_in_view_and_contact_reads_the_ring():
 
 def test_coverage_scan_drifts_less_than_plain_dead_reckoning():
     """Over 300 steps the corrected odometry ends nearer the true pose (4 layouts)."""
-    from lfmdr_gym.exploration import CoveragePolicy
+    from lfmdr_gym.exploration.coverage import CoveragePolicy
 
     errors = {False: [], True: []}
     for correct in (False, True):

@@ -7,8 +7,8 @@ import pytest
 import scipy.sparse as sp
 
 import mappers
-from lfmdr_gym.policies import RandomWalkPolicy
-from lfmdr_gym.recording import collect
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
+from lfmdr_gym.histories.recording import collect
 from mappers.calibrated.cal_sma import history_dissimilarity
 from mappers.catalog import resolve_method
 from mappers.core.graph import informative_pairs, knn_mask

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from lfmdr_gym.experiments.scoring import mpe_nonanchor, score_map
-from lfmdr_gym.history import History
+from lfmdr_gym.histories.history import History
 
 
 def _history(truth):

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from lfmdr_gym import sensors
+from lfmdr_gym.sim import sensors
 
 R = 0.024  # object radius
 THRESHOLD = math.radians(5.0)

@@ -8,8 +8,8 @@ import pytest
 
 import lfmdr_gym  # noqa: F401 - registers the env ids
 from lfmdr_gym import POLICIES, collect
-from lfmdr_gym.policies import check_policy
-from lfmdr_gym.spread import SpreadPolicy
+from lfmdr_gym.exploration.contract import check_policy
+from lfmdr_gym.exploration.spread import SpreadPolicy
 
 
 def test_spread_meets_the_policy_contract_and_is_deterministic():

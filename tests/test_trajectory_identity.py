@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lfmdr_gym.policies import RandomWalkPolicy
-from lfmdr_gym.recording import collect
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
+from lfmdr_gym.histories.recording import collect
 
 DIGESTS = json.loads((Path(__file__).parent / "data" / "trajectory_digests.json").read_text())
 

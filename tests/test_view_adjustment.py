@@ -11,8 +11,8 @@ import pytest
 from threadpoolctl import threadpool_limits
 
 import lfmdr_gym  # noqa: F401 - registers the envs
-from lfmdr_gym.policies import RandomWalkPolicy
-from lfmdr_gym.recording import collect
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
+from lfmdr_gym.histories.recording import collect
 from mappers import build_map, mean_position_error
 from mappers.viewpoints import view_cone_kernels as view_kernels
 from mappers.viewpoints.view_cone import (

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from lfmdr_gym import world as world_module
-from lfmdr_gym.world import BACKOFF, CONTACT_MARGIN, Layout, World, wrap_angle
+from lfmdr_gym.sim import world as world_module
+from lfmdr_gym.sim.world import BACKOFF, CONTACT_MARGIN, Layout, World, wrap_angle
 
 
 def built(world: World, positions, pose, anchors=None) -> World:
@@ -100,7 +100,7 @@ def test_bad_arguments_raise_naming_them(kwargs, name):
 
 
 def test_check_real_states_the_bounds():
-    from lfmdr_gym.world import check_real
+    from lfmdr_gym.checks import check_real
 
     with pytest.raises(ValueError, match=r"x must be > 0, got 0"):
         check_real("x", 0, low=0.0, low_open=True)

@@ -1,4 +1,5 @@
-"""Loaders for logged robot data that produce :class:`lfmdr_gym.history.History` objects."""
+"""Loaders for logged robot data that produce :class:`lfmdr_gym.histories.history.History`
+objects."""
 
 from lfmdr_gym.datasets.mrclam import (
     DEFAULT_BIN_WIDTH,

@@ -3,16 +3,16 @@
     python -m lfmdr_gym.datasets.camera_model [RUN_DIR ...]   (default: the runs
         ../shared/data/mrclam/MRCLAM_Dataset* beside the project)
 
-The figures behind :data:`lfmdr_gym.camera.CAMERA_PRESET` (``LFMDR-Camera-v0``). The runs hold the
-landmarks' motion-capture ground truth but not the robots' poses, so the geometry a measurement is
-checked against comes from the image itself: every camera image that read three or more
-landmarks fixes the robot's pose (x, y, heading) by a robust least-squares fit of its own ranges
-and bearings to the landmarks' true positions (three unknowns, six or more readings), and each
-reading's residual against that pose is *studentised*, divided by ``sqrt(1 - h)`` with ``h`` its
-leverage in the fit, so that what the fit absorbed is given back and the spread is the sensor's,
-not the fit's. The fit weighs range and bearing by their spreads, which are re-estimated from the
-residuals and the fit repeated until they settle. Spreads are robust (1.4826 x the median
-absolute deviation), so the few gross misreads do not inflate them.
+The figures behind :data:`lfmdr_gym.sim.camera.CAMERA_PRESET` (``LFMDR-Camera-v0``). The runs hold
+the landmarks' motion-capture ground truth but not the robots' poses, so the geometry a measurement
+is checked against comes from the image itself: every camera image that read three or more landmarks
+fixes the robot's pose (x, y, heading) by a robust least-squares fit of its own ranges and bearings
+to the landmarks' true positions (three unknowns, six or more readings), and each reading's residual
+against that pose is *studentised*, divided by ``sqrt(1 - h)`` with ``h`` its leverage in the fit,
+so that what the fit absorbed is given back and the spread is the sensor's, not the fit's. The fit
+weighs range and bearing by their spreads, which are re-estimated from the residuals and the fit
+repeated until they settle. Spreads are robust (1.4826 x the median absolute deviation), so the few
+gross misreads do not inflate them.
 
 * field of view: twice the largest ``|bearing|`` logged (the image's edges clip it);
 * range limit: the 99th percentile of the logged ranges (the camera reads no barcode farther);

@@ -1,4 +1,4 @@
-"""UTIAS MRCLAM runs (real robots, real cameras) -> :class:`~lfmdr_gym.history.History`.
+"""UTIAS MRCLAM runs (real robots, real cameras) -> :class:`~lfmdr_gym.histories.history.History`.
 
 A run directory holds ``Barcodes.dat``, ``Landmark_Groundtruth.dat`` and
 ``Robot<N>_Measurement.dat`` (4-line ``#`` header, CRLF, whitespace separated; see the
@@ -33,8 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from lfmdr_gym.history import History
-from lfmdr_gym.world import check_real
+from lfmdr_gym.checks import check_real
+from lfmdr_gym.histories.history import History
 from mappers.core.align import check_anchor_ids
 from mappers.core.sensors import COLUMNS_PER_STEP, check_sensor
 from mappers.masked.coobservation import co_observation_components

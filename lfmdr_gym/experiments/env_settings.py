@@ -1,5 +1,5 @@
 """Env keywords for the experiments: ``NAME=VALUE`` settings such as ``fov_deg=90`` checked
-against the environment, so that runs with imperfect sensing (:mod:`lfmdr_gym.imperfect`) can be
+against the environment, so that runs with imperfect sensing (:mod:`lfmdr_gym.sim.sensing_limits`) can be
 collected, recorded in a run's settings and resumed only with the same settings."""
 
 from __future__ import annotations

@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
+from lfmdr_gym.checks import check_int
 from lfmdr_gym.experiments.store import ensure_writable_dir
-from lfmdr_gym.history import History
-from lfmdr_gym.world import check_int
+from lfmdr_gym.histories.history import History
 
 __all__ = ["Episode", "collect_episode", "collect_history", "derived_seed", "describe_history"]
 
@@ -71,8 +71,8 @@ def collect_episode(episode: Episode) -> History:
     agent's random stream from ``pose_seed``; the layout is held fixed through reset options, so
     the five poses of a layout share its objects and anchors.
     """
-    from lfmdr_gym.policies import RandomWalkPolicy
-    from lfmdr_gym.recording import collect
+    from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
+    from lfmdr_gym.histories.recording import collect
 
     env = make_env(episode.env_id, episode.steps, dict(episode.env_kwargs))
     try:
@@ -105,8 +105,8 @@ def collect_history(
 
     if env_kwargs and env_id in ENV_IDS:
         env_kwargs, _ = check_env_kwargs(ENV_IDS[env_id], env_kwargs)
-    from lfmdr_gym.policies import POLICIES
-    from lfmdr_gym.recording import collect
+    from lfmdr_gym.exploration import POLICIES
+    from lfmdr_gym.histories.recording import collect
 
     if policy not in POLICIES:
         raise ValueError(f"unknown policy {policy!r}; choose from {list(POLICIES)}")

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from lfmdr_gym.atomic import atomic_savefig, atomic_write, atomic_write_text
-from lfmdr_gym.history import History
+from lfmdr_gym.histories.history import History
 
 __all__ = [
     "PAPER",

@@ -34,10 +34,10 @@ def online_episode(env_id: str, steps: int, *, seed: int | None = 0, policy: str
     """
     import mappers
     from lfmdr_gym import ENV_IDS
+    from lfmdr_gym.checks import check_int
     from lfmdr_gym.experiments.episodes import make_env
-    from lfmdr_gym.policies import POLICIES, as_policy
+    from lfmdr_gym.exploration import POLICIES, as_policy
     from lfmdr_gym.render import draw_map
-    from lfmdr_gym.world import check_int
     from mappers.core.sensors import FUSED_SENSORS
 
     if ENV_IDS.get(env_id) in FUSED_SENSORS:

@@ -13,13 +13,13 @@ from typing import Any
 import numpy as np
 
 from lfmdr_gym.atomic import atomic_write
+from lfmdr_gym.checks import check_int
 from lfmdr_gym.experiments.episodes import collect_history
 from lfmdr_gym.experiments.params import param_label, user_params
 from lfmdr_gym.experiments.protocol import DEFAULT_EVERY
 from lfmdr_gym.experiments.scoring import evaluate, map_history, score_map
 from lfmdr_gym.experiments.store import ensure_writable_dir
-from lfmdr_gym.history import History
-from lfmdr_gym.world import check_int
+from lfmdr_gym.histories.history import History
 
 __all__ = ["checkpoints_for", "map_history_file", "run_episode"]
 
@@ -140,7 +140,7 @@ def _write_csv(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
 
 def _write_map(out: Path, positions: np.ndarray, history: History, title: str) -> Path:
     """``map.csv`` (object, estimate, truth, anchor flag) and ``map.png``; returns the figure."""
-    from lfmdr_gym.experiments import figures
+    import lfmdr_gym.experiments.figures as figures
 
     anchors = {int(i) for i in history.anchor_ids}
     with atomic_write(out / "map.csv") as fh:

@@ -27,7 +27,7 @@ from lfmdr_gym.datasets.mrclam import (
     MRCLAMReport,
     load_mrclam,
 )
-from lfmdr_gym.history import History
+from lfmdr_gym.histories.history import History
 from mappers.core.sensors import check_sensor_set, sensor_name
 
 __all__ = ["DEFAULT_METHOD", "ENSEMBLE_BIN_WIDTHS", "FUSED_BIN_WIDTH", "METHOD_ALIASES", "MRCLAMMap", "map_mrclam_run"]

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from lfmdr_gym.checks import check_int
 from lfmdr_gym.experiments.engine import check_jobs, engine_name, parallel, worker_context
 from lfmdr_gym.experiments.env_settings import check_env_kwargs
 from lfmdr_gym.experiments.episodes import Episode, collect_episode, derived_seed
@@ -43,8 +44,7 @@ from lfmdr_gym.experiments.params import (
 from lfmdr_gym.experiments.reproducibility import write_environment
 from lfmdr_gym.experiments.scoring import evaluate
 from lfmdr_gym.experiments.store import RESULTS, ResultStore, ensure_writable_dir
-from lfmdr_gym.history import History, HistoryFileError
-from lfmdr_gym.world import check_int
+from lfmdr_gym.histories.history import History, HistoryFileError
 from mappers.core.sensors import check_sensor
 
 __all__ = ["DEFAULT_EVERY", "ProtocolConfig", "ProtocolSummary", "Unit", "run_protocol",
@@ -90,7 +90,7 @@ class ProtocolConfig:
         seed: base seed; layout ``i`` uses seed ``f(seed, i)`` and its pose ``j`` uses
             ``f(seed, i, j)`` (numpy ``SeedSequence``), so runs never share random streams.
         env_kwargs: env keywords, e.g. ``{"fov_deg": 90, "max_range": 1.5}`` (imperfect
-            sensing, :mod:`lfmdr_gym.imperfect`); unknown keywords and bad values are refused.
+            sensing, :mod:`lfmdr_gym.sim.sensing_limits`); unknown keywords and bad values are refused.
             With a sensing limit on the histories are masked (:attr:`masked`).
     """
 
@@ -408,7 +408,7 @@ def run_protocol(
 
 def write_report(config: ProtocolConfig, out: Path, rows: Sequence[Mapping[str, Any]]) -> list[Path]:
     """Table (md + csv), MPE-versus-N curves and example maps of the first run, from the rows."""
-    from lfmdr_gym.experiments import figures
+    import lfmdr_gym.experiments.figures as figures
 
     defaults = {m: param_label(default_params(m)) for m in config.methods}
     files = figures.write_table(rows, out, sensor=config.sensor, n_steps=config.steps,

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from lfmdr_gym.history import History
+from lfmdr_gym.histories.history import History
 
 __all__ = ["evaluate", "map_history", "mpe_nonanchor", "score_map"]
 

@@ -4,7 +4,7 @@ Each Gauss-Newton round of VIEW-BA visits every (step, object) pair once (N x M,
 N = 2000, M = 50) to sum the pair's terms into the blocks of the normal equations. As numpy
 array expressions that is some thirty temporaries of N x M and a scatter-add per block, about
 0.1 s a round; as a compiled loop it is a few milliseconds. numba is the well-kept way to write
-such a loop in Python (as :mod:`lfmdr_gym.kernels` does for the world); it is imported, and the
+such a loop in Python (as :mod:`lfmdr_gym.sim.kernels` does for the world); it is imported, and the
 loops compiled (cached on disk), on first use, so ``import mappers`` does not pay for it.
 
 The model (one pair: viewpoint ``c`` with heading ``theta``, object ``p``, ``d = |p - c|``,

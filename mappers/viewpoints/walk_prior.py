@@ -13,7 +13,7 @@ consecutive steps (the EM statistic of ``sigma``). The Gaussian is applied as tw
 convolutions on the full rectangular grid (the kept cells scattered into it), only over the
 bounding box of the cells that carry mass (above :data:`CUTOFF` of the largest), with loops
 along contiguous rows that the compiler vectorises. The loops are compiled with
-numba, imported on first use (as :mod:`lfmdr_gym.kernels`: numba costs about 0.25 s to import,
+numba, imported on first use (as :mod:`lfmdr_gym.sim.kernels`: numba costs about 0.25 s to import,
 which the other mappers should not pay), and cached on disk.
 """
 

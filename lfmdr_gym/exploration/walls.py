@@ -14,7 +14,7 @@ size (configuration a user knows, like the step length; never the pose or the la
 - after that, a wall seen again where it should not be means the dead reckoning has drifted:
   :meth:`WallFrame.observe` returns the shift that puts the robot back (its relocalisation).
 
-It is the sensed substitute for the true arena in :class:`lfmdr_gym.even.EvenPolicy`.
+It is the sensed substitute for the true arena in :class:`lfmdr_gym.exploration.even.EvenPolicy`.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from lfmdr_gym.world import check_int, check_real
+from lfmdr_gym.checks import check_int, check_real
 
 __all__ = ["WallFrame", "wall_runs"]
 
@@ -74,7 +74,7 @@ class WallFrame:
     (module docstring).
 
     Args:
-        arena_size: the room's side [m] (a square room, as :class:`~lfmdr_gym.world.World`).
+        arena_size: the room's side [m] (a square room, as :class:`~lfmdr_gym.sim.world.World`).
         robot_radius: the robot's radius [m]; the rectangle is where its centre can be.
         proximity_range: the ring's range [m] (a ray that reads it has hit nothing).
         sightings: sightings per axis that fix its walls; later ones relocalise the robot.

@@ -6,12 +6,12 @@ hidden layers) with :func:`export_sb3`. :class:`MLPExplorationPolicy` reads that
 computes the deterministic action with numpy alone (``tanh(W h + b)`` per hidden layer, a linear
 output clipped to [-1, 1], as SB3's ``predict(..., deterministic=True)`` does for a Gaussian
 policy on a Box(-1, 1) action space), so the registered ``"rl"`` policy needs neither torch
-nor SB3. Its features and the shield come from the same :class:`~lfmdr_gym.agent_view.AgentView`
-as in training.
+nor SB3. Its features and the shield come from the same
+:class:`~lfmdr_gym.exploration.agent_view.AgentView` as in training.
 
 File format (``.npz``, loaded with ``allow_pickle=False``): ``weight_0``, ``bias_0``, ... per
 layer (weights as (out, in), as torch stores them) and ``config``, a JSON string with the
-:class:`~lfmdr_gym.agent_view.ViewConfig` the agent was trained with and ``format`` = 1.
+:class:`~lfmdr_gym.exploration.agent_view.ViewConfig` the agent was trained with and ``format`` = 1.
 """
 
 from __future__ import annotations
@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from lfmdr_gym.agent_view import AgentView, ViewConfig
-from lfmdr_gym.policies import RandomWalkPolicy
+from lfmdr_gym.exploration.agent_view import AgentView, ViewConfig
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
 
 __all__ = ["DEFAULT_MODEL", "MLPExplorationPolicy", "export_sb3", "load_mlp"]
 
@@ -131,8 +131,8 @@ class MLPExplorationPolicy:
         model: path of a model file; None for the shipped one.
         seed: accepted for the registry's interface; the policy is deterministic.
 
-    Sees observations only: its state is the :class:`~lfmdr_gym.agent_view.AgentView` memory of
-    this episode and the turn it made last; :meth:`reset` forgets both.
+    Sees observations only: its state is the :class:`~lfmdr_gym.exploration.agent_view.AgentView`
+    memory of this episode and the turn it made last; :meth:`reset` forgets both.
     """
 
     def __init__(self, config: ViewConfig, model: str | os.PathLike | None = None, *,

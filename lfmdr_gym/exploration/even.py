@@ -1,6 +1,5 @@
-"""An exploration policy that covers the room evenly: our fastest mapper, whose 500-step
-visibility map is better than the random walk's after 2,000 steps (by 1-10 % on four unseen
-sets of 25 layouts, 7 % over the 100; the measurements are in ``docs/online-and-exploration.md``).
+"""An exploration policy that covers the room evenly: the fastest mapper of the registered
+policies (measured in ``docs/online-and-exploration.md``).
 
 A visibility map is built from how often two objects are seen together, i.e. from where the
 robot's viewpoints fall in the discs that see each object; it is best when the viewpoints cover
@@ -9,22 +8,22 @@ directly and plans for it:
 
 - its coverage is a sum of Gaussian kernels (width ``sigma``) at its viewpoints on a fine grid
   (``grid``) in its own dead-reckoned frame (the drift-corrected odometry of
-  :class:`~lfmdr_gym.exploration.CoveragePolicy` with ``correct_drift=True``);
+  :class:`~lfmdr_gym.exploration.coverage.CoveragePolicy` with ``correct_drift=True``);
 - the ground to cover is the room: the walls the proximity ring shows, with the room's size,
-  place its rectangle (:class:`~lfmdr_gym.walls.WallFrame`); before a wall is seen, the convex
-  hull of the ground the ring has shown free;
+  place its rectangle (:class:`~lfmdr_gym.exploration.walls.WallFrame`); before a wall is seen, the
+  convex hull of the ground the ring has shown free;
 - each of ``fan`` turns is scored by the best plan of ``1 + lookahead`` moves that starts with
   it (the later turns from the same fan): the variance of the coverage over the room once the
   plan's kernels are added (lower is more even);
 - a plan's moves are simulated among the obstacles it has sensed: the cylinders fitted to every
-  ring hit so far (:class:`~lfmdr_gym.obstacles.ObstacleMap`) and the room's walls (until both
-  axes are fixed, also the walls in the current ring), each move stopping at its first predicted
-  contact (``stop_margin`` short of it); plans whose moves are all full are preferred, and a
-  move stopped short is taken only where no turn has a full plan (as the physics would stop it:
+  ring hit so far (:class:`~lfmdr_gym.exploration.obstacles.ObstacleMap`) and the room's walls
+  (until both axes are fixed, also the walls in the current ring), each move stopping at its first
+  predicted contact (``stop_margin`` short of it); plans whose moves are all full are preferred, and
+  a move stopped short is taken only where no turn has a full plan (as the physics would stop it:
   beside the object). The random walk's collision check, which keeps 20 mm and a free next move
-  around each hit of the current ring, is left to the escapes; planning with the fitted
-  cylinders instead lets the robot pass the objects closely, where viewpoints inform a
-  visibility map most (``docs/online-and-exploration.md``);
+  around each hit of the current ring, is left to the escapes; planning with the fitted cylinders
+  instead lets the robot pass the objects closely, where viewpoints inform a visibility map most
+  (``docs/online-and-exploration.md``);
 - once the walls of an axis are fixed, seeing them again corrects the dead reckoning (its drift
   stays at millimetres over 500 steps), which keeps the fitted cylinders in place;
 - a move the physics stopped short (the ring shows contact) is followed by ``escape_moves``
@@ -48,11 +47,11 @@ from typing import Any
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from lfmdr_gym.exploration import CoveragePolicy
-from lfmdr_gym.obstacles import ObstacleMap, advance, ring_hits
-from lfmdr_gym.policies import base_env
-from lfmdr_gym.walls import WallFrame, wall_runs
-from lfmdr_gym.world import check_int, check_real
+from lfmdr_gym.checks import check_int, check_real
+from lfmdr_gym.exploration.contract import base_env
+from lfmdr_gym.exploration.coverage import CoveragePolicy
+from lfmdr_gym.exploration.obstacles import ObstacleMap, advance, ring_hits
+from lfmdr_gym.exploration.walls import WallFrame, wall_runs
 
 __all__ = ["EvenPolicy"]
 
@@ -71,19 +70,20 @@ class EvenPolicy(CoveragePolicy):
             plan, at least 2 (a plan count of ``fan ** (1 + lookahead)``).
         lookahead: moves planned after the first (0: greedy).
         arena_size: the room's side [m], or None to cover the seen-free hull only.
-        wall_sightings: sightings of an axis's walls that fix them (:class:`~lfmdr_gym.walls.WallFrame`).
+        wall_sightings: sightings of an axis's walls that fix them
+            (:class:`~lfmdr_gym.exploration.walls.WallFrame`).
         escape_moves: random-walk moves after a stopped move (0: none).
         stop_margin: how far short of a predicted contact a planned move stops [m].
         max_turn, step_length, robot_radius, extent, proximity_range, seed, and the collision
-            check's keywords: as for :class:`~lfmdr_gym.exploration.CoveragePolicy` (its drift
-            correction is always on, its ``cell`` grid unused; ``extent`` bounds the coverage
-            grid around the start; ``obstacle_radius`` is also the fitted cylinders' radius;
-            the collision check guards the escapes only).
+            check's keywords: as for :class:`~lfmdr_gym.exploration.coverage.CoveragePolicy` (its
+            drift correction is always on, its ``cell`` grid unused; ``extent`` bounds the coverage
+            grid around the start; ``obstacle_radius`` is also the fitted cylinders' radius; the
+            collision check guards the escapes only).
 
     One observation at a time (it keeps per-episode memory); :meth:`reset` forgets it.
     Attributes: ``coverage`` (the grid of summed kernels), ``odometry`` (x, y, heading) in the
-    frame of the start, ``walls`` (the :class:`~lfmdr_gym.walls.WallFrame`, or None),
-    ``obstacles`` (the :class:`~lfmdr_gym.obstacles.ObstacleMap`).
+    frame of the start, ``walls`` (the :class:`~lfmdr_gym.exploration.walls.WallFrame`, or None),
+    ``obstacles`` (the :class:`~lfmdr_gym.exploration.obstacles.ObstacleMap`).
     """
 
     def __init__(self, max_turn: float = math.pi / 4, step_length: float = 0.2,

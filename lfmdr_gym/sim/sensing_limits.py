@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from lfmdr_gym import sensors
-from lfmdr_gym.world import check_real
+import lfmdr_gym.sim.sensors as sensors
+from lfmdr_gym.checks import check_real
 from mappers.core.sensors import sensors_of
 
 __all__ = ["LIMIT_DEFAULTS", "SensingLimits"]

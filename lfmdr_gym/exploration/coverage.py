@@ -13,14 +13,14 @@ It knows only what it senses and what it did, never the pose or the layout in ``
   (the full step when the way is clear; the room before the obstacle otherwise);
 - each candidate turn is scored by the visit counts of the cells one and two steps ahead along
   it, counting only points the proximity ring reports free, nearer cells weighing more; the
-  best-scored candidate that passes :class:`~lfmdr_gym.policies.RandomWalkPolicy`'s collision
-  check is taken.
+  best-scored candidate that passes :class:`~lfmdr_gym.exploration.random_walk.RandomWalkPolicy`'s
+  collision check is taken.
 
 Dead reckoning drifts on moves the physics cuts short (an object hidden between two rays).
 With ``correct_drift=True`` (registered as ``"coverage-scan"``) each move is re-reckoned once the
 ring after it is known: made in full unless it ended in contact, else the advance a scan match
-of the two rings gives (:mod:`lfmdr_gym.scan_match`). It maps visibility better and bearing no
-better (``docs/online-and-exploration.md``), so the default stays off.
+of the two rings gives (:mod:`lfmdr_gym.exploration.scan_match`). It maps visibility better and
+bearing no better (``docs/online-and-exploration.md``), so the default stays off.
 """
 
 from __future__ import annotations
@@ -31,9 +31,9 @@ from typing import Any
 
 import numpy as np
 
-from lfmdr_gym.policies import RandomWalkPolicy
-from lfmdr_gym.scan_match import contact, matched_advance
-from lfmdr_gym.world import check_real
+from lfmdr_gym.checks import check_real
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
+from lfmdr_gym.exploration.scan_match import contact, matched_advance
 
 __all__ = ["CoveragePolicy"]
 
@@ -48,7 +48,7 @@ class CoveragePolicy(RandomWalkPolicy):
         correct_drift: re-reckon each move from the ring after it (module docstring).
         proximity_range: the ring's range [m] (``for_env`` reads it from the env's space).
         max_turn, step_length, robot_radius, margin, obstacle_radius, plan_ahead, n_tries, seed:
-            as for :class:`~lfmdr_gym.policies.RandomWalkPolicy`.
+            as for :class:`~lfmdr_gym.exploration.random_walk.RandomWalkPolicy`.
 
     One observation at a time (it keeps per-episode memory); :meth:`reset` forgets it.
     Attributes: ``visits`` (the grid of visit counts), ``odometry`` (x, y, heading) in the frame

@@ -19,7 +19,7 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import ArrayLike
 
-from lfmdr_gym import kernels
+import lfmdr_gym.sim.kernels as kernels
 
 __all__ = [
     "bearing",
@@ -112,7 +112,7 @@ def visibility_kernel(
 ) -> np.ndarray:
     """:func:`visibility_from_candidates` with ``d_vis^2`` and ``q = dc2 - radius^2`` precomputed
     (the env shares ``q`` with the proximity ring): the compiled
-    :func:`lfmdr_gym.kernels.visible_targets`."""
+    :func:`lfmdr_gym.sim.kernels.visible_targets`."""
     out = np.zeros(n_objects, dtype=np.int8)
     kernels.visible_targets(cand, rc, dc2, d_vis2, q, bool(occlusion), out)
     return out
@@ -224,7 +224,7 @@ def proximity_kernel(
     max_range: float,
 ) -> np.ndarray:
     """:func:`proximity_from_candidates` with ``q = dc2 - radius^2`` precomputed (the env shares
-    it with the visibility test): the compiled :func:`lfmdr_gym.kernels.proximity_ring`."""
+    it with the visibility test): the compiled :func:`lfmdr_gym.sim.kernels.proximity_ring`."""
     return kernels.proximity_ring(
         x, y, math.cos(heading), math.sin(heading), rc, q, arena_half, dirs, max_range
     )

@@ -4,8 +4,8 @@
 sub-env of a Gymnasium vector env and copes with each autoreset mode. Both record, per move,
 the mapping sensor's reading, the robot's true pose (for scoring only) and whether the move was
 blocked; the reset observation is not a move and is never recorded. An env with imperfect
-sensing (:mod:`lfmdr_gym.imperfect`) also reports which objects it measured (``"observed"``):
-that becomes the history's mask, True on every column of a measured object's step.
+sensing (:mod:`lfmdr_gym.sim.sensing_limits`) also reports which objects it measured
+(``"observed"``): that becomes the history's mask, True on every column of a measured object's step.
 """
 
 from __future__ import annotations
@@ -17,9 +17,10 @@ from typing import Any
 
 import numpy as np
 
-from lfmdr_gym.compact import COMPACT_ABOVE_BYTES, CompactSteps
-from lfmdr_gym.history import History
-from lfmdr_gym.world import check_int
+from lfmdr_gym.checks import check_int
+from lfmdr_gym.exploration.contract import PredictPolicy, as_policy
+from lfmdr_gym.histories.compact import COMPACT_ABOVE_BYTES, CompactSteps
+from lfmdr_gym.histories.history import History
 from mappers.core.sensors import COLUMNS_PER_STEP, FUSED_SENSORS, SENSORS
 
 __all__ = ["collect", "collect_vector"]
@@ -203,8 +204,7 @@ def _env_from(env: Any, make_kwargs: dict[str, Any] | None) -> Iterator[Any]:
         return
     import gymnasium as gym
 
-    import lfmdr_gym  # noqa: F401  (registers the LFMDR ids)
-
+    # The LFMDR ids are registered: importing this module ran lfmdr_gym/__init__.py first.
     made = gym.make(env, **(make_kwargs or {}))
     try:
         yield made
@@ -237,20 +237,19 @@ def collect(
 
     ``env`` is a Gymnasium env with a dict observation (one sensor entry, or the entries of a
     fused set such as ``"range"`` and ``"bearing"``, which give a fused History, plus, for
-    :class:`~lfmdr_gym.policies.RandomWalkPolicy`, ``"proximity"``) and the ground truth in
+    :class:`~lfmdr_gym.RandomWalkPolicy`, ``"proximity"``) and the ground truth in
     ``info``, or an env id (made with ``make_kwargs`` and closed afterwards). ``policy`` is anything
-    :func:`~lfmdr_gym.policies.as_policy` accepts; its ``reset(seed=...)`` is called with a seed
-    derived from ``seed``, so one seed fixes layout, start pose and walk. The observation after
-    each move is column (or column pair) t of the matrix; the reset observation is not a move and
-    is not recorded. Raises ValueError if the episode ends before ``n_steps`` moves.
+    :func:`~lfmdr_gym.exploration.contract.as_policy` accepts; its ``reset(seed=...)`` is called
+    with a seed derived from ``seed``, so one seed fixes layout, start pose and walk. The
+    observation after each move is column (or column pair) t of the matrix; the reset observation is
+    not a move and is not recorded. Raises ValueError if the episode ends before ``n_steps`` moves.
 
     ``compact``: record the history in compact form (visibility and range sparse, bearing
-    float32, a masked history's matrix and mask both sparse; see :mod:`lfmdr_gym.compact`);
-    None (default) does so only when the float64 matrix would exceed
-    :data:`~lfmdr_gym.compact.COMPACT_ABOVE_BYTES`, so small histories are as before.
+    float32, a masked history's matrix and mask both sparse; see
+    :mod:`lfmdr_gym.histories.compact`); None (default) does so only when the float64 matrix would
+    exceed :data:`~lfmdr_gym.histories.compact.COMPACT_ABOVE_BYTES`, so small histories are as
+    before.
     """
-    from lfmdr_gym.policies import as_policy
-
     n_steps = check_int("n_steps", n_steps, low=1)
     seed = _check_seed(seed)
     pol = as_policy(policy)
@@ -395,7 +394,6 @@ def collect_vector(
     """
     from gymnasium.vector import AutoresetMode
 
-    from lfmdr_gym.policies import PredictPolicy, as_policy
 
     n_steps = check_int("n_steps", n_steps, low=1)
     seed = _check_seed(seed)

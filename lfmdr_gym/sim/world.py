@@ -20,7 +20,6 @@ same space in their own collision category, next to the true walls and cylinders
 from __future__ import annotations
 
 import math
-import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -28,7 +27,8 @@ from typing import Any
 import numpy as np
 import pymunk
 
-from lfmdr_gym.grid import sample_separated
+from lfmdr_gym.checks import check_int, check_real
+from lfmdr_gym.sim.grid import sample_separated
 
 __all__ = ["ANCHOR_CHOICES", "Layout", "World", "wrap_angle"]
 
@@ -74,35 +74,6 @@ def wrap_angle(angle: float) -> float:
     """``angle`` wrapped into (-pi, pi]."""
     a = math.pi - ((math.pi - angle) % (2.0 * math.pi))
     return a + 2.0 * math.pi if a <= -math.pi else a
-
-
-# ----------------------------------------------------------------------------- argument checks
-def check_real(name: str, value: Any, *, low: float = -math.inf, low_open: bool = False,
-               high: float = math.inf, high_open: bool = False) -> float:
-    """``value`` as a finite float within the bounds, else ValueError naming ``name``."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
-        raise ValueError(f"{name} must be a finite number, got {value!r}")
-    v = float(value)
-    if (v < low or (low_open and v == low)) or (v > high or (high_open and v == high)):
-        if high == math.inf:  # one-sided: "> 0" rather than "(0, inf]"
-            bound = (">" if low_open else ">=") + f" {low:g}"
-        elif low == -math.inf:
-            bound = ("<" if high_open else "<=") + f" {high:g}"
-        else:
-            lo = ("(" if low_open else "[") + f"{low:g}"
-            hi = f"{high:g}" + (")" if high_open else "]")
-            bound = f"in {lo}, {hi}"
-        raise ValueError(f"{name} must be {bound}, got {value!r}")
-    return v
-
-
-def check_int(name: str, value: Any, *, low: int) -> int:
-    """``value`` as an int >= ``low``, else ValueError naming ``name``."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise ValueError(f"{name} must be an integer, got {value!r}")
-    if value < low:
-        raise ValueError(f"{name} must be >= {low}, got {value!r}")
-    return int(value)
 
 
 def collinear(points: np.ndarray, rtol: float = 1e-6) -> bool:
@@ -255,7 +226,7 @@ class World:
 
     def _sample_dense(self, rng: np.random.Generator, n: int, a: float,
                       budget: int) -> tuple[np.ndarray, int]:
-        """:func:`~lfmdr_gym.grid.sample_separated` checking each batch against every accepted
+        """:func:`~lfmdr_gym.sim.grid.sample_separated` checking each batch against every accepted
         point at once (fastest for small M)."""
         s2 = self.min_separation**2
         pts = np.empty((n, 2))

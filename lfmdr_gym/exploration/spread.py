@@ -2,16 +2,15 @@
 
 A visibility map is built from how often two objects are seen together, i.e. from where the
 robot's viewpoints fall in the discs that see each object. The visit counts of
-:class:`~lfmdr_gym.exploration.CoveragePolicy` (0.25 m cells) even out the coarse density of
-the viewpoints, but within a cell they still fall where the walk happens to put them. Placed
-directly, without a walk (``docs/online-and-exploration.md``), 500 viewpoints spread like blue
-noise (greedy farthest-point sampling) give a far better CAL-SMA map than 500 uniform random
-ones, and a better one than 2,000 steps of the random walk. :class:`SpreadPolicy` steers toward
-such a spread (a walk of 0.2 m steps lays it less well: on the 25 fresh layouts its 500-step map
-is the best of the registered policies, 0.0513 m, but not the random walk's 2,000-step 0.0447):
+:class:`~lfmdr_gym.exploration.coverage.CoveragePolicy` (0.25 m cells) even out the coarse density
+of the viewpoints, but within a cell they still fall where the walk happens to put them. Placed
+directly, without a walk (``docs/online-and-exploration.md``), 500 viewpoints spread like blue noise
+(greedy farthest-point sampling) give a far better CAL-SMA map than 500 uniform random ones, and a
+better one than 2,000 steps of the random walk. :class:`SpreadPolicy` steers toward such a spread (a
+walk of 0.2 m steps lays it less well; measured in ``docs/online-and-exploration.md``):
 
 - it remembers its viewpoints in its own dead-reckoned frame (the drift-corrected odometry of
-  :class:`~lfmdr_gym.exploration.CoveragePolicy` with ``correct_drift=True``);
+  :class:`~lfmdr_gym.exploration.coverage.CoveragePolicy` with ``correct_drift=True``);
 - each candidate turn is scored by the best three-move plan that starts with it (the later turns
   from a fixed fan): the sum, discounted by ``discount`` per move, of a Gaussian kernel density
   (width ``sigma``) of the viewpoints at each planned point, the plan's own earlier points
@@ -34,8 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from lfmdr_gym.exploration import CoveragePolicy
-from lfmdr_gym.world import check_int, check_real
+from lfmdr_gym.checks import check_int, check_real
+from lfmdr_gym.exploration.coverage import CoveragePolicy
 
 __all__ = ["SpreadPolicy"]
 
@@ -53,8 +52,8 @@ class SpreadPolicy(CoveragePolicy):
         free_cell: side of the grid of seen-free ground (the holes' candidates) [m].
         escape_moves: random-walk moves after a stopped move (0: none).
         max_turn, step_length, robot_radius, extent, proximity_range, seed, and the collision
-            check's keywords: as for :class:`~lfmdr_gym.exploration.CoveragePolicy` (its drift
-            correction is always on, its ``cell`` grid unused).
+            check's keywords: as for :class:`~lfmdr_gym.exploration.coverage.CoveragePolicy` (its
+            drift correction is always on, its ``cell`` grid unused).
 
     One observation at a time (it keeps per-episode memory); :meth:`reset` forgets it.
     Attributes: ``viewpoints`` (k, 2) in the frame of the start, ``odometry`` (x, y, heading).

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from lfmdr_gym import compact
+import lfmdr_gym.histories.compact as compact
 from lfmdr_gym.atomic import atomic_write
 from mappers.core.align import check_anchor_ids
 from mappers.core.sensors import (
@@ -67,7 +67,7 @@ class History:
         matrix: (M, N * columns_per_step) float64, one row per object. May be given in a
             compact form (a ``scipy.sparse`` matrix, or float32), which is kept as given
             (:attr:`compact`); reading ``matrix`` then builds the float64 matrix if it fits in
-            :data:`lfmdr_gym.compact.MAX_DENSE_BYTES` (else DenseTooLargeError naming
+            :data:`lfmdr_gym.histories.compact.MAX_DENSE_BYTES` (else DenseTooLargeError naming
             :attr:`sparse`, the accessor that always works).
         object_positions: (M, 2) true object positions [m] (NaN where unknown).
         anchor_ids: (A,) indices of the anchor objects, A >= 3.
@@ -287,8 +287,8 @@ class History:
 
     def dense(self, max_bytes: int | None = None) -> np.ndarray:
         """The (M, D) float64 matrix; for a compact history built once (cached) if it needs at most
-        ``max_bytes`` (default :data:`lfmdr_gym.compact.MAX_DENSE_BYTES`), else DenseTooLargeError.
-        A fused history gives a read-only mapping sensor -> matrix."""
+        ``max_bytes`` (default :data:`lfmdr_gym.histories.compact.MAX_DENSE_BYTES`), else
+        DenseTooLargeError. A fused history gives a read-only mapping sensor -> matrix."""
         if self.fused:
             return MappingProxyType({n: p.dense(max_bytes) for n, p in self.parts.items()})
         data = self.__dict__["_data"]
@@ -476,12 +476,3 @@ History.matrix = property(_matrix_get, _matrix_set, doc="The (M, D) float64 matr
 # ``mask`` likewise: kept as stored (dense or sparse); reading it gives the dense bool array (of a
 # fused history: a read-only mapping sensor -> its part's mask).
 History.mask = property(_mask_get, _mask_set, doc="The (M, D) bool mask or None (History.sparse_mask).")
-
-
-def __getattr__(name: str):
-    # collect() and collect_vector() live in lfmdr_gym.recording; older code imports them here
-    if name in ("collect", "collect_vector"):
-        from lfmdr_gym import recording
-
-        return getattr(recording, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

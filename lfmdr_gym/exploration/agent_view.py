@@ -4,7 +4,7 @@ A mapping sensor reports one value per object, and the objects' identities are a
 layout, so the raw readings mean nothing to a fixed-size network trained on other layouts. What
 does carry over is how the robot's own viewpoints are spread: :class:`AgentView` keeps a visit
 count per cell of a grid in the robot's dead-reckoned frame (as
-:class:`~lfmdr_gym.exploration.CoveragePolicy` does) and hands a network
+:class:`~lfmdr_gym.exploration.coverage.CoveragePolicy` does) and hands a network
 
 - the proximity ring, scaled to [0, 1];
 - the novelty ``1 / (1 + visits)`` of the cells 1, 2 and 4 steps away in 8 directions around the
@@ -17,19 +17,20 @@ count per cell of a grid in the robot's dead-reckoned frame (as
 
 It reads observations and its own turns only, never ``info``. Dead reckoning: a move advances
 the step, or less if the proximity ring reports less room along the turn
-(:meth:`~lfmdr_gym.policies.RandomWalkPolicy.clearance`). That drifts on moves the physics
-stops short (an object hidden between two rays), so by default (``correct_drift``) the view uses
-what the physics guarantees: a move is made in full unless it ends in contact, which the ring
-after it shows; a move ending in contact gets its advance from a scan match of the rings before
-and after it (:mod:`lfmdr_gym.scan_match`). On 6 layouts of random shielded moves this cuts the
-drift after 500 steps from 0.375 m to 0.070 m (2,000 steps: 1.11 m to 0.23 m) (``correct_drift=False``: the plain model).
+(:meth:`~lfmdr_gym.exploration.random_walk.RandomWalkPolicy.clearance`). That drifts on moves the
+physics stops short (an object hidden between two rays), so by default (``correct_drift``) the view
+uses what the physics guarantees: a move is made in full unless it ends in contact, which the ring
+after it shows; a move ending in contact gets its advance from a scan match of the rings before and
+after it (:mod:`lfmdr_gym.exploration.scan_match`); ``correct_drift=False`` keeps the plain model
+(the drift of both is measured in ``docs/online-and-exploration.md``).
 
 The network's action in [-1, 1] is a wish; :meth:`AgentView.turn_for` scales it to a turn and
 shields it: among turns near the wish, the first that the random walk's collision check passes
 (safe first, then merely free), so a learned policy never has to learn obstacle avoidance.
 
 The same object serves training (:class:`lfmdr_gym.wrappers.MappingRewardWrapper`) and the
-shipped policy (:class:`lfmdr_gym.rl_policy.MLPExplorationPolicy`), so both see the same numbers.
+shipped policy (:class:`lfmdr_gym.exploration.rl.MLPExplorationPolicy`), so both see the same
+numbers.
 """
 
 from __future__ import annotations
@@ -41,9 +42,9 @@ from typing import Any
 
 import numpy as np
 
-from lfmdr_gym.policies import RandomWalkPolicy
-from lfmdr_gym.scan_match import contact, matched_advance
-from lfmdr_gym.world import check_int, check_real
+from lfmdr_gym.checks import check_int, check_real
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
+from lfmdr_gym.exploration.scan_match import contact, matched_advance
 
 __all__ = ["AgentView", "ViewConfig"]
 

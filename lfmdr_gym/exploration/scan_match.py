@@ -1,11 +1,12 @@
 """How far a move really went, from the proximity rings before and after it (drift correction).
 
-Dead reckoning from turns and the proximity ring (:class:`~lfmdr_gym.exploration.CoveragePolicy`,
-:class:`~lfmdr_gym.agent_view.AgentView`) assumes a move advances the full step unless the ring
-reports less room. The turn is always exact, but the advance is not: an object hidden between
-two rays (a 48 mm cylinder more than 0.245 m away fits between rays 11.25 degrees apart), or a
-wall between two ray hits, can stop the robot short, and every such move adds its shortfall to
-the drift.
+Dead reckoning from turns and the proximity ring
+(:class:`~lfmdr_gym.exploration.coverage.CoveragePolicy`,
+:class:`~lfmdr_gym.exploration.agent_view.AgentView`) assumes a move advances the full step unless
+the ring reports less room. The turn is always exact, but the advance is not: an object hidden
+between two rays (a 48 mm cylinder more than 0.245 m away fits between rays 11.25 degrees apart), or
+a wall between two ray hits, can stop the robot short, and every such move adds its shortfall to the
+drift.
 
 A stopped move leaves a signature: the robot ends in contact (the physics stops it 10 micro-m
 short), so some ray reads about ``robot_radius``. :func:`contact` detects it, and

@@ -4,10 +4,10 @@ a straight move among them stops.
 One ring sees a 48 mm cylinder with one to three of its 32 rays, too few to place it: a policy
 that plans from one ring must keep a margin around each hit (the random walk's collision check
 models a hit as a cylinder just behind it and asks for 20 mm more). A robot that knows its own
-position to millimetres (:class:`~lfmdr_gym.even.EvenPolicy` relocalises on the walls) can
-instead keep every hit it has seen: the hits of one cylinder, seen from many viewpoints, fit a
-circle of the known radius to a millimetre or two, and a move can then be planned to pass a
-cylinder closely or to stop beside it, as the physics would stop it.
+position to millimetres (:class:`~lfmdr_gym.exploration.even.EvenPolicy` relocalises on the walls)
+can instead keep every hit it has seen: the hits of one cylinder, seen from many viewpoints, fit a
+circle of the known radius to a millimetre or two, and a move can then be planned to pass a cylinder
+closely or to stop beside it, as the physics would stop it.
 
 :class:`ObstacleMap` keeps the hits (not those on the walls' straight runs) and fits the circles
 near the robot when asked; :func:`advance` gives how far each of many moves goes before its
@@ -24,7 +24,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from lfmdr_gym.world import check_real
+from lfmdr_gym.checks import check_real
 
 __all__ = ["ObstacleMap", "advance", "ring_hits"]
 
