@@ -1,4 +1,4 @@
-"""Tests of the online mapper (mappers.online.mapper, issue 14)."""
+"""Tests of the online mapper (mappers.online.mapper and mappers.online.cal_sma, issue 14)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 
 from mappers import OnlineMapper, build_map, mean_position_error
 from mappers.calibrated.cal_sma import CalibratedSMACOF, history_dissimilarity
-from mappers.online.mapper import _OnlineCalSMA, gram_dissimilarity
+from mappers.online.cal_sma import _OnlineCalSMA, gram_dissimilarity
 
 HALF = 1.25
 

@@ -119,7 +119,7 @@ class GuttmanTransform:
     :func:`weighted_smacof` takes its steps with it; the SMACOF variants
     (:mod:`mappers.smacof.variants`), whose targets change at every step while the weights do
     not, keep one instead of inverting V again per step. (The online CAL-SMA rounds keep their
-    own, ``mappers.online.mapper._AnchoredGuttman``: faster, without checks, equal to this to rounding.)
+    own, ``mappers.online.cal_sma._AnchoredGuttman``: faster, without checks, equal to this to rounding.)
 
     Args:
         W: (n, n) symmetric non-negative weights, zero diagonal (checked by the caller).
