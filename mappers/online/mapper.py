@@ -1,73 +1,41 @@
 """Online mapping: the map of a robot still moving, updated as its histories grow.
 
-The paper calls LFMDR "basically an off-line process" and leaves an online algorithm open (§6).
-:class:`OnlineMapper` takes the new steps' columns after each batch of steps and returns the
-current :class:`~mappers.pipeline.Map`, the same kind of map :func:`~mappers.pipeline.build_map`
-returns for the whole history.
+The paper (Yairi 2007) calls LFMDR "basically an off-line process" and leaves an online
+algorithm open (§6). :class:`OnlineMapper` takes the new steps' columns after each batch of
+steps and returns the current :class:`~mappers.pipeline.Map`, the same kind of map
+:func:`~mappers.pipeline.build_map` returns for the whole history. How it updates depends on the
+method:
 
-For CAL-SMA (:mod:`mappers.calibrated.cal_sma`, the default of complete visibility histories, and the
-start of BEARING-BA, the default of bearing histories) on complete histories, the update is
-incremental:
+- **CAL-SMA** on complete histories (the visibility default, and the start of BEARING-BA) is
+  updated incrementally (:mod:`mappers.online.cal_sma`): its statistics are a Gram matrix
+  accumulated over the new columns, and the last map is the start of ``warm_rounds`` anchored
+  calibrate/re-embed rounds (warm-started SMACOF: majorisation decreases stress from any start).
+  An object sensed for the first time starts at the mean position of its three most similar
+  mapped objects. CAL-SMA's fold check runs on every warm update while the map is young (before
+  its second scheduled refit), then every ``fold_check_every`` warm updates, and whenever
+  objects join the map; a warm map that looks folded is refitted from scratch once the steps
+  have grown by 1.5 since the last full fit. Full refits run from scratch whenever the steps
+  have grown by ``refit_growth`` since the last scheduled one (a logarithmic number of them in
+  all), without CAL-SMA's random restarts: a map that still looks folded is refitted later, with
+  more steps.
+- **BEARING-BA** on complete bearing histories (the default) is carried on from that CAL-SMA map
+  by :class:`mappers.online.bearing.OnlineBundle`: new poses resected, a warm joint round every
+  ``bundle_every`` updates, a full fit whenever CAL-SMA is refitted or objects join its map.
+- **VIEW-BA** on masked visibility histories (the default) is refitted with ``build_map``'s own
+  fit on a schedule of its own (``refit_growth`` 1.25: its refits, from a new start map, are
+  what move the map to a better basin) and carried on in between by
+  :class:`mappers.online.view_cone.OnlineView`.
+- **Other methods** (and masked histories, whose methods need the steps' co-observation
+  patterns) keep the columns and refit with ``build_map`` on the geometric schedule; between
+  refits the last map is returned with a note in ``Map.warnings`` saying which steps it covers.
 
-- Statistics: CAL-SMA needs only the dissimilarities of the L2-normalised rows (paper eq. 7),
-  and both its cosine (visibility) and RMS Euclidean (bearing) dissimilarities are functions of
-  the Gram matrix ``G = X X^T`` and the column count. ``G`` is accumulated as ``C C^T`` over the
-  new columns ``C``: O(M^2 k) for k new columns, never a pass over the whole history, and no
-  column is kept.
-- Embedding: the last map is the start of a short CAL-SMA refinement (``warm_rounds``
-  calibrate/re-embed rounds, anchors held fixed, Guttman updates stopped at the looser
-  ``warm_tol``: the start is nearly converged); objects sensed for the first time start at the
-  mean position of their three most similar mapped objects. CAL-SMA's fold check runs on every
-  warm update while the map is young (before its second scheduled refit), then every
-  ``fold_check_every`` warm updates, and whenever objects join the map; a warm map that looks
-  folded is refitted from scratch once the steps have grown by 1.5 since the last full fit
-  (until then it is kept, with a note in ``Map.warnings``); such a refit leaves the schedule of
-  the scheduled ones where it was.
-- Full refits: from scratch (CAL-SMA's two deterministic starts and all its rounds) whenever the
-  number of steps has grown by the factor ``refit_growth`` since the last full fit, so a map
-  whose early shape was poor is rebuilt a logarithmic number of times in all. They skip
-  CAL-SMA's random restarts (tried only when both deterministic starts look folded, which
-  happens in the first few dozen steps, at 3-4x the cost of a fit): such a map is refitted
-  later, with more steps.
-- Both run CAL-SMA's rounds in fewer array passes than
-  :class:`~mappers.calibrated.cal_sma.CalibratedSMACOF` (one solve of the anchored Guttman system per
-  neighbour graph, kept between warm updates whose graph did not change; the calibration summed
-  term by term): the same maps to rounding, at about 3/4 of the cost. ``build_map`` and the
-  offline estimator are untouched.
-
-Cost per update, with M objects: O(M^2 k) for the statistics plus O(M^2 log M) for the
-neighbours plus ``warm_rounds`` rounds of anchored weighted SMACOF (O(M^2) per Guttman update,
-a few updates per round), independent of the number of steps so far. A full refit costs about
-3/4 of what ``build_map`` costs (``2 x n_rounds`` rounds), more in the first hundred steps,
-whose maps converge slowly; with ``refit_growth = g`` there are about ``log_g(N / N_0)`` of
-them over a run of N steps, N_0 the steps of the first map, plus the few a fold check asks for.
-``benchmarks/bench_online.py`` measures both against rebuilding the map (figures in the README
-and in ``docs/online-and-exploration.md``).
-
-BEARING-BA on complete bearing histories (the default) is updated incrementally from that
-CAL-SMA map by :class:`mappers.online.bearing.OnlineBundle`: each new step's pose resected
-against the current objects, a warm Levenberg-Marquardt round of the joint problem every
-``bundle_every`` updates (or once the steps have grown by 5 %), and a full BEARING-BA fit, from
-the CAL-SMA map, whenever CAL-SMA is refitted or objects join its map; a refit that is not kept
-(BEARING-BA's guards) leaves the CAL-SMA map until the next one.
-
-VIEW-BA on masked visibility histories (a limited view; the default) is refitted with
-``build_map``'s own fit on a geometric schedule of its own (``refit_growth`` 1.25: its refits,
-from a new start map, are what move the map to a better basin) and carried on in between by
-:class:`mappers.online.view_cone.OnlineView`: each new step's viewpoint placed against the current
-objects, a warm joint round every ``bundle_every`` updates, and, with a slower schedule
-(``refit_growth`` above 1.25), VIEW-BA refined from the current map (no start map drawn)
-whenever the steps have grown by a quarter; an object seen for the first time is refitted into
-the map at once.
-
-Other methods (and masked histories, whose methods need the steps' co-observation patterns)
-keep the columns and refit with :func:`~mappers.pipeline.build_map` on the same geometric
-schedule; between refits the last map is returned with a note in ``Map.warnings`` saying which
-steps it covers. A first map that fails (too few steps: a limited view's co-observations fall
-apart) is tried again once the steps have grown by a tenth, not at every update.
+A first map that fails (too few steps: a limited view's co-observations fall apart) is tried
+again once the steps have grown by a tenth, not at every update. The cost of an update does not
+grow with the steps for the incremental methods; what it is, and what each choice bought:
+``docs/online-and-exploration.md#onlinemapper-cost-per-update``.
 
 References: de Leeuw (1977) and Borg & Groenen, *Modern Multidimensional Scaling* (2005), on
-warm-started SMACOF (majorisation decreases stress from any start).
+warm-started SMACOF; Triggs et al. (2000) for the bundle adjustments carried on.
 """
 
 from __future__ import annotations
@@ -97,18 +65,17 @@ _INCREMENTAL = "CAL-SMA"
 _BUNDLE = "BEARING-BA"  # updated incrementally from the incremental CAL-SMA map (online_bearing)
 _VIEW = "VIEW-BA"  # masked visibility, updated incrementally between its refits (online_view)
 _REFIT_GROWTH = 4.0  # refit_growth's default
-# ... for VIEW-BA: its refits, from a new start map, are what find a better basin; every 1.25x
-# (about 7 in a run to N = 2,000) since dropout-blend, their start, drops a failed member
-# (2 before: docs/online-and-exploration.md)
+# ... for VIEW-BA: its refits, from a new start map, are what find a better basin (chosen on the
+# tuning seeds: docs/online-and-exploration.md, "With the start's disagreement check")
 _VIEW_REFIT_GROWTH = 1.25
 # a warm map that looks folded is refitted from scratch once the steps have grown by this factor
 # since the last full fit (at most refit_growth), not at every update while it still looks folded
 _FOLD_REFIT_GROWTH = 1.5
 # a refitted method that found nothing to map yet is tried again once the steps have grown by this
 _RETRY_GROWTH = 1.1
-# Guttman updates per round in a full CAL-SMA fit (CAL-SMA's own max_iter is 100): a map of a few
-# dozen steps converges slowly and its fits hit the cap, which made the refits of the first 250
-# steps half of a run's CPU; later fits converge before 30 (docs/online-and-exploration.md)
+# Guttman updates per round in a full CAL-SMA fit (CAL-SMA's own max_iter is 100): the young
+# maps' slow fits hit the cap, later fits converge before it (measured:
+# docs/online-and-exploration.md#online-mapper-the-cost-of-an-update-issue-14)
 _FULL_FIT_MAX_ITER = 30
 
 
@@ -148,20 +115,7 @@ class OnlineMapper:
         those a fold check asked for); n_fold_refits: those a fold check asked for; map: the
         last map (None before the first update).
 
-    Cost per update (``benchmarks/bench_online.py``: M = 50 objects, updates of 10 steps,
-    N = 2,000, CPU time, one BLAS thread; 25 fresh layouts per sensor): visibility (CAL-SMA),
-    median about 1.9 ms, 65x cheaper than rebuilding the map at N = 2,000 with ``build_map``;
-    the mean, the full refits included (5-6 per run: the amortised cost), 27x. Bearing
-    (BEARING-BA): the CAL-SMA update, plus the new steps' resection (O(k M)), plus every
-    ``bundle_every`` updates a joint round over all steps (O(N M) for the normal blocks and
-    O(N F^2 + F^3) for the Schur system, F the free objects: about 70 ms at N = 2,000, a seventh
-    of a rebuild), plus a full BEARING-BA fit at each CAL-SMA refit: median about 4-5 ms,
-    110-125x cheaper than rebuilding the BEARING-BA map (about 0.5-0.6 s), mean 34x; its map is
-    within 1 % of the offline BEARING-BA map's MPE on average (2 degrees of bearing noise), and
-    as exact (~5e-10 m) on perfect bearings. Masked visibility through a 90-degree view
-    (VIEW-BA, ``--env fov_deg=90``): median 8 ms, mean 45 ms, 25x cheaper than a rebuild
-    (1.15 s, a loaded machine), the refits (about 7 per run, 0.5-1.1 s each) most of it. See
-    ``docs/online-and-exploration.md`` for what each change bought.
+    What an update costs: ``docs/online-and-exploration.md#onlinemapper-cost-per-update``.
     """
 
     def __init__(self, anchor_ids, anchor_positions, *, sensor: str | None = None,

@@ -1,58 +1,44 @@
-"""Visibility bundle adjustment of a visibility map (label ``"VIS-BA"``).
+"""Visibility bundle adjustment of a visibility map (labels ``"VIS-BA"``, ``"VIS-BA-WALK"``).
 
 The paper's methods, and the other visibility mappers here, never estimate where the robot was.
 This one does: it starts from the map the visibility default draws (``start``: CAL-SMA for a
-complete history, ``dropout-blend`` for a masked one; for a flickering one, whose default is
-VIS-BA-WALK, the complete default CAL-SMA, and so for any history whose default is a VIS-BA)
-and refines it by treating each step's viewpoint as a latent position. A visibility bit is read
-as a noisy range threshold: at distance ``d`` between viewpoint and object
-
-    P(visible | d) = (1 - eps) (1 - gamma min(d / R, 1.5)^k) sigmoid((R - d) / s)
-
-with one visibility radius ``R``, one softness ``s``, one rate ``eps`` of misses that do not
-depend on the geometry (a camera's dropouts) and a miss rate that grows with distance (gamma,
-k: occlusion by other objects, which is rare near the viewpoint and common near ``R``), all
-unknown to the mapper and fitted by maximum likelihood. Only the entries the mask calls
-observed enter the likelihood (through a limited view an object outside it is unknown).
+complete history, ``dropout-blend`` for a masked one; where the default is itself a VIS-BA, the
+map before it) and refines it by treating each step's viewpoint as a latent position. A
+visibility bit is read as a noisy range threshold with dropouts and occlusion whose parameters
+are fitted by maximum likelihood (:mod:`mappers.viewpoints.visibility_model`); only the entries
+the mask calls observed enter the likelihood.
 
 The viewpoints are not point estimates, which would sit in the middle of the region the bits
-allow and bias the objects (a step sees about 5 objects: its position is known to about 0.1 m);
-they are integrated out by EM over a grid of candidate viewpoints (``grid_cells`` cells per
-radius over the objects' bounding box widened by ``R``):
+allow and bias the objects; they are integrated out by EM over a grid of candidate viewpoints
+(``grid_cells`` cells per radius over the objects' bounding box widened by the radius):
 
-1. *E-step*: each step's posterior over the cells, from the bits of the objects it observed
-   (one (N, M) x (M, G) product), under a prior over the cells learnt from the data (the mean
-   posterior, blurred by ``prior_blur`` cells: the robot's occupancy, which keeps viewpoints out
-   of places no step went, such as beyond the walls);
+1. *E-step* (:mod:`mappers.viewpoints.viewpoint_posterior`): each step's posterior over the
+   cells, from the bits of the objects it observed, under a prior over the cells learnt from the
+   data (the mean posterior, blurred by ``prior_blur`` cells: the robot's occupancy, which keeps
+   viewpoints out of places no step went, such as beyond the walls);
 2. *M-step*: each non-anchor object's position by Fisher scoring of its expected
-   log-likelihood over the cells (one 2 x 2 system per object, a per-object step halving that
-   never lowers it), then ``(R, s, eps, gamma, k)``; the anchors stay at their known positions,
-   which fix the gauge (shift, rotation, scale);
+   log-likelihood over the cells (a per-object step halving that never lowers it), then the
+   sensor model; the anchors stay at their known positions, which fix the gauge (shift,
+   rotation, scale);
 
-for ``max_rounds`` rounds (or until no object moves more than ``tol`` [m]), vectorised with
-numpy; the cells no step is likely to have been in are dropped after the start's E-steps.
+for ``max_rounds`` rounds (or until no object moves more than ``tol`` [m]); the cells no step
+is likely to have been in are dropped after the start's E-steps.
 
 *Continuity* (``continuity=True``; label ``"VIS-BA-WALK"``, the default for flickering
 histories): the steps of a walk are ordered, consecutive viewpoints close together. The E-step is
 then a forward-backward pass over the steps (a hidden Markov model over the cells,
 :mod:`mappers.viewpoints.walk_prior`): a move is an isotropic Gaussian random walk of width
-``step_sigma`` per axis (None: fitted by EM from the expected squared displacement between
-consecutive steps; the mapper is not told the step length), a run's first step is drawn from the
-learnt occupancy prior, and the marginal likelihood is the HMM's (the guard below compares the
-start and refined maps under it). The runs of consecutive steps come from the timeline
-(:func:`mappers.core.flicker.step_runs`); every step takes part, one that saw nothing too. The first
-E-step treats the steps as independent (under the guessed model a walk can settle where nothing
-is expected to be seen, and its fitted width collapse). No odometry, heading or velocity: only
-"consecutive steps are close". Two options speed the M-step's slow modes up: ``align`` moves the
-free objects by the mean offset between the anchors' known positions and where their bits put
-them among the current viewpoints (the interior of a start map can sit shifted against its
-anchors, which EM then moves by a few millimetres a round), and ``overrelax`` lengthens each
-round's move of the objects by that factor (over-relaxed EM, from the second round);
-``model_rounds`` refits the sensor model and the walk's width in the first rounds only. At
-``miss_rate = 0.5`` (N = 2000, tuning layouts 100..119) the start CAL-SMA's 0.075 m becomes
-0.045 (independent steps: 0.057; continuity alone 0.051, alignment alone 0.052), on the 25
-fresh layouts 0.049 (largest run 0.068) against ``dropout-blend``'s 0.069, in 0.70 s per map
-(``docs/imperfect-sensing.md``).
+``step_sigma`` per axis (None: fitted by EM; the mapper is not told the step length), a run's
+first step is drawn from the learnt occupancy prior, and the marginal likelihood is the HMM's.
+The runs of consecutive steps come from the timeline (:func:`mappers.core.flicker.step_runs`);
+every step takes part, one that saw nothing too. The first E-step treats the steps as
+independent (under the guessed model a walk can settle where nothing is expected to be seen,
+and its fitted width collapse). Two options speed the M-step's slow modes up: ``align`` moves
+the free objects by the mean offset between the anchors' known positions and where their bits
+put them among the current viewpoints, and ``overrelax`` lengthens each round's move of the
+objects (over-relaxed EM); ``model_rounds`` refits the sensor model and the walk's width in the
+first rounds only. What each option bought: ``docs/imperfect-sensing.md``, sections "VIS-BA"
+and "VIS-BA-WALK".
 
 Guards: an object seen from fewer than ``min_views`` usable steps keeps its start position (its
 bits leave the problem); if the refined map's marginal likelihood is below the start map's (its
@@ -60,16 +46,16 @@ model and prior fitted the same way), or anything is not finite, the start map i
 Each case is a :class:`VisibilityAdjustmentWarning` (``build_map`` lists them in
 ``Map.warnings``).
 
-*Assumes*: visibility is a range threshold up to misses (a distance, not a visual angle that
-differs between objects; occlusion only as a miss rate that grows with distance, not from the
-layout); a 360-degree view (through a narrower one the mask carries the heading, which is not
-modelled: the viewpoints then sit too close to the objects, see ``docs/imperfect-sensing.md``);
-a static world; the bits of one step are taken from one viewpoint. It estimates viewpoints,
-which the paper's methods do not. No motion model and no odometry: the steps are independent
-viewpoints, found from the history alone; with ``continuity``, the steps are ordered like a
-walk's (by the timeline), consecutive viewpoints within a few tenths of the visibility radius:
-shuffled or unordered steps break it (``build_map`` picks VIS-BA-WALK only for histories whose
-:func:`mappers.core.flicker.persistence` says they are walk-ordered).
+*Assumes*: visibility is a range threshold up to misses (occlusion only as a miss rate that
+grows with distance, not from the layout); a 360-degree view (through a narrower one the mask
+carries the heading, which is not modelled: VIEW-BA, :mod:`mappers.viewpoints.view_cone`, does);
+a static world; the bits of one step are taken from one viewpoint. No motion model and no
+odometry: the steps are independent viewpoints, found from the history alone; with
+``continuity``, the steps are ordered like a walk's (``build_map`` picks VIS-BA-WALK only for
+histories whose :func:`mappers.core.flicker.persistence` says they are walk-ordered).
+
+References: Triggs et al., *Bundle Adjustment — A Modern Synthesis* (2000); Dempster, Laird &
+Rubin (1977) for EM; Rabiner (1989) for the forward-backward recursion.
 """
 
 from __future__ import annotations
