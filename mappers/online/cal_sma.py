@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from mappers.calibrated import CalibratedSMACOF, fit_calibration
+from mappers.smacof.weighted import squared_distance_matrix
 
 __all__ = ["gram_dissimilarity"]
 
@@ -53,7 +54,9 @@ class _AnchoredGuttman:
     ``far_weight``, or 1e-6), so ``V_ff`` is positive definite: its inverse is the
     pseudo-inverse ``weighted_smacof`` computes in every call. :meth:`run` makes the same
     updates with the same stopping rule, in fewer array passes and without input checks; its
-    results equal ``weighted_smacof``'s to rounding (not bit for bit).
+    results equal ``weighted_smacof``'s to rounding (not bit for bit), which is why it does not
+    replace :class:`~mappers.smacof.weighted.GuttmanTransform` (the offline maps stay on that)
+    nor call it (the pseudo-inverse and the explicit B(X) are the passes it saves).
     """
 
     def __init__(self, W: np.ndarray, fixed: np.ndarray) -> None:
@@ -64,13 +67,6 @@ class _AnchoredGuttman:
         self.V_ff_inv = np.linalg.inv(V[np.ix_(self.free, self.free)])
         self.V_fa = V[np.ix_(self.free, ~self.free)]
 
-    @staticmethod
-    def _squared_distances(X: np.ndarray) -> np.ndarray:
-        sq = np.einsum("ij,ij->i", X, X)
-        D2 = np.add.outer(sq, sq)
-        D2 -= 2.0 * (X @ X.T)
-        return np.maximum(D2, 0.0, out=D2)
-
     def run(self, delta: np.ndarray, X: np.ndarray, max_iter: int, tol: float):
         """(X, raw stress, updates) from start ``X`` (its fixed rows kept), as weighted_smacof."""
         W, free, V_ff_inv = self.W, self.free, self.V_ff_inv
@@ -78,7 +74,7 @@ class _AnchoredGuttman:
         rhs_fixed = self.V_fa @ X[~free]
         wd = W * delta
         base = float(np.vdot(W, delta * delta))
-        D2 = self._squared_distances(X)
+        D2 = squared_distance_matrix(X)
         D = np.sqrt(D2)
         # raw stress 1/2 sum w (delta - d)^2, expanded: two dot products, no (M, M) temporaries
         stress = 0.5 * (base - 2.0 * float(np.vdot(wd, D)) + float(np.vdot(W, D2)))
@@ -89,7 +85,7 @@ class _AnchoredGuttman:
             BX = R.sum(axis=1)[:, None] * X - R @ X
             X_new = X.copy()
             X_new[free] = V_ff_inv @ (BX[free] - rhs_fixed)
-            D2 = self._squared_distances(X_new)
+            D2 = squared_distance_matrix(X_new)
             D = np.sqrt(D2)
             X, old = X_new, stress
             stress = 0.5 * (base - 2.0 * float(np.vdot(wd, D)) + float(np.vdot(W, D2)))
