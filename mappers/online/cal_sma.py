@@ -113,10 +113,10 @@ def _midpoint_terms(x: np.ndarray, y: np.ndarray, degree: int):
 class _OnlineCalSMA(CalibratedSMACOF):
     """CalibratedSMACOF with the same rounds in fewer array passes (its maps to rounding).
 
-    Used by :class:`OnlineMapper` for its full fits and warm updates: the Guttman system is
-    solved once per neighbour graph (:class:`_AnchoredGuttman`, the last one kept in
-    ``solver_``, so warm updates whose graph did not change reuse it), and the calibration sums
-    its terms instead of building an (M, M, features) array. The offline estimator is untouched.
+    Used by :class:`~mappers.online.mapper.OnlineMapper` for its full fits and warm updates: the
+    Guttman system is solved once per neighbour graph (:class:`_AnchoredGuttman`, the last one
+    kept in ``solver_``, so warm updates whose graph did not change reuse it), and the
+    calibration sums its terms instead of building an (M, M, features) array. The offline estimator is untouched.
     It overrides only :meth:`_embed` and :meth:`_calibrate`: the rounds are
     :meth:`CalibratedSMACOF._refine`'s.
     """
