@@ -277,6 +277,15 @@ class LFMDREnv(gym.Env):
             )
         self.render_mode = render_mode
 
+        self._set_up_sensing(names, limits)
+        self._anchor_positions = np.zeros((0, 2))
+        self._grid: CellGrid | None = None
+        self._last_obs: dict[str, np.ndarray] | None = None
+        self._viewer: HumanViewer | None = None
+
+    def _set_up_sensing(self, names: tuple[str, ...], limits: dict) -> None:
+        """The observation types of the sensors ``names``, the imperfect-sensing limits, the
+        proximity rays, the candidate prefilter's reach and the spaces."""
         # One observation type per sensor (several for a fused set, read from the same pose).
         self.sensors = names
         self._obs_types = {s: observation_factory(self, s) for s in names}
@@ -287,7 +296,7 @@ class LFMDREnv(gym.Env):
         self._obs_type = self._obs_types[self._key]
         range_type = self._obs_types.get("range")
         # Imperfect sensing (lfmdr_gym.sim.sensing_limits): built only when a limit is on.
-        self._limits = (SensingLimits(sensor, self.world.n_objects, self.world.object_radius,
+        self._limits = (SensingLimits(self.sensor, self.world.n_objects, self.world.object_radius,
                                       range_high=getattr(range_type or self._obs_type, "high", 1.0),
                                       **limits)
                         if SensingLimits.active(limits) else None)
@@ -308,10 +317,6 @@ class LFMDREnv(gym.Env):
                 **({"observed": spaces.MultiBinary(self.world.n_objects)} if self._limits else {}),
             }
         )
-        self._anchor_positions = np.zeros((0, 2))
-        self._grid: CellGrid | None = None
-        self._last_obs: dict[str, np.ndarray] | None = None
-        self._viewer: HumanViewer | None = None
 
     # ------------------------------------------------------------------ core API
     def reset(

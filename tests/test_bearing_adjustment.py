@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from map_errors import non_anchor_error
 from synthetic_camera import camera_bearings
-from threadpoolctl import threadpool_limits
 
 from mappers import build_map
 from mappers.catalog import methods_for, resolve_method
@@ -14,11 +14,7 @@ from mappers.pipeline import default_method
 from mappers.viewpoints import engine
 from mappers.viewpoints.bearing import BearingAdjustment, BearingAdjustmentWarning
 
-
-@pytest.fixture(autouse=True)
-def _one_blas_thread():
-    with threadpool_limits(limits=1):
-        yield
+pytestmark = pytest.mark.usefixtures("one_blas_thread")
 
 
 def _camera(fov_deg=360.0, max_range=None, n_obj=24, n_steps=600, noise_deg=0.0, seed=0):
@@ -32,11 +28,6 @@ def _camera(fov_deg=360.0, max_range=None, n_obj=24, n_steps=600, noise_deg=0.0,
     X, seen = camera_bearings(P, poses, fov_deg, max_range, noise_deg, rng)
     mask = None if seen.all() else np.repeat(seen, 2, axis=1)
     return P, X, mask, np.arange(4)
-
-
-def _error(Y, P, ids):
-    keep = np.setdiff1d(np.arange(len(P)), ids)
-    return float(np.mean(np.linalg.norm(Y[keep] - P[keep], axis=1)))
 
 
 def test_registered_for_complete_and_masked_bearing_histories():
@@ -59,7 +50,7 @@ def test_exact_bearings_recover_the_layout_from_a_perturbed_start():
     est = BearingAdjustment()
     Y = est.fit_transform(X, mask=mask, anchor_ids=ids, anchor_positions=P[ids],
                           start_positions=start)
-    assert est.refined_ and _error(start, P, ids) > 0.03
+    assert est.refined_ and non_anchor_error(start, P, ids) > 0.03
     assert np.abs(Y - P).max() < 1e-6
     assert np.abs(est.poses_[:, 2] - np.nan_to_num(est.poses_[:, 2])).max() == 0  # every step posed
 
@@ -69,15 +60,15 @@ def test_build_map_refines_the_default_start_on_a_complete_history():
     ref = build_map(X, ids, P[ids], "CAL-SMA", sensor="bearing")
     m = build_map(X, ids, P[ids], "BEARING-BA", sensor="bearing")
     assert m.method == "BEARING-BA" and not m.warnings
-    assert _error(ref.positions, P, ids) > 1e-3
-    assert _error(m.positions, P, ids) < 1e-6
+    assert non_anchor_error(ref.positions, P, ids) > 1e-3
+    assert non_anchor_error(m.positions, P, ids) < 1e-6
 
 
 def test_noisy_masked_bearings_improve_on_the_start():
     P, X, mask, ids = _camera(fov_deg=90, max_range=1.8, n_steps=1500, noise_deg=2.0, seed=3)
     ref = build_map(X, ids, P[ids], "covis-auto", sensor="bearing", mask=mask)
     m = build_map(X, ids, P[ids], "BEARING-BA", sensor="bearing", mask=mask)
-    assert _error(m.positions, P, ids) < 0.5 * _error(ref.positions, P, ids)
+    assert non_anchor_error(m.positions, P, ids) < 0.5 * non_anchor_error(ref.positions, P, ids)
 
 
 def test_objects_seen_from_too_few_steps_keep_their_start_with_a_warning():
@@ -120,7 +111,7 @@ def test_the_alternating_solver_approaches_exact_bearings_slowly():
     start = P + np.random.default_rng(3).normal(scale=0.02, size=P.shape)
     Y = BearingAdjustment(solver="alternate", max_rounds=40, tol=1e-9).fit_transform(
         X, mask=mask, anchor_ids=ids, anchor_positions=P[ids], start_positions=start)
-    assert _error(Y, P, ids) < 0.1 * _error(start, P, ids)  # linear convergence: joint is default
+    assert non_anchor_error(Y, P, ids) < 0.1 * non_anchor_error(start, P, ids)  # linear convergence: joint is default
 
 
 def test_bad_input_is_a_clear_value_error():

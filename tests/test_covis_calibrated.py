@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from map_errors import non_anchor_error
 from synthetic_camera import camera_bearings
-from threadpoolctl import threadpool_limits
 
 from mappers import build_map
 from mappers.catalog import resolve_method
@@ -15,12 +15,7 @@ from mappers.masked.coobservation import angle_covisibility_dissimilarity
 from mappers.masked.covis_auto import CovisAuto, CovisCalibrated, co_observation_coefficient
 from mappers.masked.pair_maps import masked_embedding
 
-
-@pytest.fixture(autouse=True)
-def _one_blas_thread():
-    """Small problems: one BLAS thread is fastest (as build_map does)."""
-    with threadpool_limits(limits=1):
-        yield
+pytestmark = pytest.mark.usefixtures("one_blas_thread")
 
 
 def _camera(fov_deg, max_range=None, n_obj=30, n_steps=3000, noise_deg=1.0, seed=0):
@@ -34,11 +29,6 @@ def _camera(fov_deg, max_range=None, n_obj=30, n_steps=3000, noise_deg=1.0, seed
     anchors = np.array([int(np.argmin(np.linalg.norm(P - c, axis=1)))
                         for c in [(-1.2, -1.2), (1.2, -1.2), (1.2, 1.2), (-1.2, 1.2)]])
     return P, X, np.repeat(seen, 2, axis=1), anchors
-
-
-def _mpe(est, P, anchors):
-    na = np.setdiff1d(np.arange(len(P)), anchors)
-    return float(np.mean(np.linalg.norm(est[na] - P[na], axis=1)))
 
 
 def test_angle_weighted_coefficient_by_hand():
@@ -63,13 +53,13 @@ def test_covis_cal_recovers_a_layout_seen_through_a_90_degree_view():
     Y = CovisCalibrated().fit_transform(X, mask, sensor="bearing", anchor_ids=a,
                                         anchor_positions=P[a])
     assert np.allclose(Y[a], P[a])
-    assert _mpe(Y, P, a) < 0.2  # 2.5 m arena; a random map is ~1 m off
+    assert non_anchor_error(Y, P, a) < 0.2  # 2.5 m arena; a random map is ~1 m off
 
 
 def test_covis_angle_recovers_a_layout_seen_with_a_range_limit():
     P, X, mask, a = _camera(90, max_range=1.2, seed=1)
     mm = masked_embedding(X, mask, "bearing", "covis-angle", anchor_ids=a, anchor_positions=P[a])
-    assert _mpe(mm.positions, P, a) < 0.08
+    assert non_anchor_error(mm.positions, P, a) < 0.08
     plain = masked_embedding(X, mask, "bearing", "covis-nonmetric", anchor_ids=a,
                              anchor_positions=P[a])
     assert not np.allclose(mm.delta, plain.delta)  # the angles enter the dissimilarity
@@ -82,7 +72,7 @@ def test_covis_auto_chooses_by_the_share_of_pairs_never_seen_together(max_range,
     Y = est.fit_transform(X, mask, sensor="bearing", anchor_ids=a, anchor_positions=P[a])
     assert est.branch_ == branch
     assert (est.local_share_ <= 0.1) == (branch == "covis-cal")
-    assert _mpe(Y, P, a) < (0.2 if branch == "covis-cal" else 0.08)
+    assert non_anchor_error(Y, P, a) < (0.2 if branch == "covis-cal" else 0.08)
 
 
 def test_covis_auto_maps_masked_bearing_through_build_map():
@@ -90,10 +80,10 @@ def test_covis_auto_maps_masked_bearing_through_build_map():
     # the masked bearing default refines covis-auto's map (BEARING-BA); named here, its own map
     assert DEFAULT_METHODS[("bearing", True)] == "BEARING-BA"
     m = build_map(X, a, P[a], "covis-auto", mask=mask, sensor="bearing")
-    assert m.method == "covis-auto" and _mpe(m.positions, P, a) < 0.2
+    assert m.method == "covis-auto" and non_anchor_error(m.positions, P, a) < 0.2
     vis = (mask[:, 0::2]).astype(float)  # visibility: the co-observation pattern alone
     m = build_map(vis, a, P[a], "covis-cal", mask=mask[:, 0::2], sensor="visibility")
-    assert _mpe(m.positions, P, a) < 0.3
+    assert non_anchor_error(m.positions, P, a) < 0.3
 
 
 def test_bad_input_is_refused_with_its_name():

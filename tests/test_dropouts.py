@@ -7,7 +7,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
-from threadpoolctl import threadpool_limits
+from map_errors import map_error
 
 import lfmdr_gym  # noqa: F401 - registers the envs
 from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
@@ -22,21 +22,12 @@ from mappers.core.flicker import (
 )
 from mappers.masked.dropout_blend import DropoutBlend, smooth_steps
 
-
-@pytest.fixture(autouse=True)
-def _one_blas_thread():
-    with threadpool_limits(limits=1):
-        yield
+pytestmark = pytest.mark.usefixtures("one_blas_thread")
 
 
 def _episode(seed: int, steps: int = 2000, **sensing):
     env = gym.make("LFMDR-Visibility-v0", max_episode_steps=steps, **sensing)
     return collect(env, RandomWalkPolicy.for_env(env), steps, seed=seed)
-
-
-def _mpe(m, h):
-    keep = np.setdiff1d(np.arange(h.n_objects), [*h.anchor_ids, *m.unmapped])
-    return mean_position_error(m.positions[keep], h.object_positions[keep])
 
 
 def test_flicker_rate_by_hand():
@@ -124,9 +115,9 @@ def test_a_flickering_history_is_mapped_by_vis_ba_walk_and_better():
         m = build_map(h, h.anchor_ids, h.anchor_positions)
         assert m.method == "VIS-BA-WALK"
         assert any("flickers" in w and "VIS-BA-WALK" in w and "walk" in w for w in m.warnings)
-        walk.append(_mpe(m, h))
-        blend.append(_mpe(build_map(h, h.anchor_ids, h.anchor_positions, "dropout-blend"), h))
-        cal.append(_mpe(build_map(h, h.anchor_ids, h.anchor_positions, "CAL-SMA"), h))
+        walk.append(map_error(m, h))
+        blend.append(map_error(build_map(h, h.anchor_ids, h.anchor_positions, "dropout-blend"), h))
+        cal.append(map_error(build_map(h, h.anchor_ids, h.anchor_positions, "CAL-SMA"), h))
     assert np.mean(blend) < 0.95 * np.mean(cal)
     assert np.mean(walk) < 0.9 * np.mean(blend)
     assert max(walk) < 0.08

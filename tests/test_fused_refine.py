@@ -7,18 +7,13 @@ import warnings
 
 import numpy as np
 import pytest
-from threadpoolctl import threadpool_limits
 
 from mappers import build_map, mean_position_error
 from mappers.fused.loc_sma import LawOfCosinesSMACOF
 from mappers.fused.vb_sma import VisibilityBearingSMACOF
 from mappers.viewpoints.range_bearing import RangeBearingAdjustment
 
-
-@pytest.fixture(autouse=True)
-def _one_blas_thread():
-    with threadpool_limits(limits=1):
-        yield
+pytestmark = pytest.mark.usefixtures("one_blas_thread")
 
 
 def _walk(n_obj=24, n_steps=600, fov_deg=360.0, max_range=None, noise_deg=0.0, noise_r=0.0,

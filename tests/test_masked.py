@@ -95,13 +95,18 @@ def test_covis_nonmetric_beats_zero_filled_baseline():
     assert err < 1.0
 
 
-def test_nonmetric_smacof_uses_only_the_order_of_dissimilarities():
-    rng = np.random.default_rng(4)
-    P = rng.uniform(0, 4, size=(12, 2))
+def _layout_and_start(seed: int, side: float, jitter: float):
+    """12 points uniform in a square of ``side``, their distances, equal weights, the first
+    four as fixed points, and a start ``jitter`` off the truth."""
+    rng = np.random.default_rng(seed)
+    P = rng.uniform(0, side, size=(12, 2))
     D = np.linalg.norm(P[:, None] - P[None], axis=2)
-    W = 1.0 - np.eye(12)
-    fixed = np.array([0, 1, 2, 3])
-    start = P + rng.normal(scale=0.5, size=P.shape)
+    start = P + rng.normal(scale=jitter, size=P.shape)
+    return P, D, 1.0 - np.eye(12), np.array([0, 1, 2, 3]), start
+
+
+def test_nonmetric_smacof_uses_only_the_order_of_dissimilarities():
+    P, D, W, fixed, start = _layout_and_start(4, 4, 0.5)
     a = nonmetric_smacof(D, W, start, fixed=fixed, fixed_positions=P[fixed])
     b = nonmetric_smacof(np.exp(D), W, start, fixed=fixed, fixed_positions=P[fixed])
     assert np.allclose(a, b, atol=1e-6)
@@ -249,12 +254,7 @@ def test_ensemble_is_the_mean_of_its_members_and_no_worse_than_them_on_average()
 def test_power_link_smacof_recovers_a_layout_from_a_power_of_its_distances():
     from mappers.smacof.variants import power_link_smacof
 
-    rng = np.random.default_rng(12)
-    P = rng.uniform(0, 5, size=(12, 2))
-    D = np.linalg.norm(P[:, None] - P[None], axis=2)
-    W = 1.0 - np.eye(12)
-    fixed = np.array([0, 1, 2, 3])
-    start = P + rng.normal(scale=0.4, size=P.shape)
+    P, D, W, fixed, start = _layout_and_start(12, 5, 0.4)
     # delta = 7 d^2: with power 0.5 the link a * delta**0.5 is linear in d (a = 1/sqrt(7))
     X, a = power_link_smacof(7 * D**2, W, start, power=0.5, fixed=fixed,
                              fixed_positions=P[fixed], n_rounds=200)

@@ -1,4 +1,4 @@
-"""Tests of the online mapper (mappers.online.mapper, issue 14)."""
+"""Tests of the online mapper (mappers.online.mapper and mappers.online.cal_sma, issue 14)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 
 from mappers import OnlineMapper, build_map, mean_position_error
 from mappers.calibrated.cal_sma import CalibratedSMACOF, history_dissimilarity
-from mappers.online.mapper import _OnlineCalSMA, gram_dissimilarity
+from mappers.online.cal_sma import _OnlineCalSMA, gram_dissimilarity
 
 HALF = 1.25
 
@@ -194,12 +194,20 @@ def test_fold_check_runs_every_k_warm_updates(monkeypatch):
     assert om.n_full_fits == fits and checked == [0, 0, 1, 1, 1, 2, 2, 2, 3, 3]
 
 
-def test_folded_warm_map_is_refitted_from_scratch():
+def _folded(n_steps: int, first: int):
+    """``(pts, ids, X, om)``: world 3's visibility history of ``n_steps`` steps, and an online
+    mapper checking folds at every update whose map of the first ``first`` steps is folded by
+    hand."""
     pts, ids, rng = _world(3)
-    X = _histories(pts, "visibility", 300, rng)
+    X = _histories(pts, "visibility", n_steps, rng)
     om = OnlineMapper(ids, pts[ids], sensor="visibility", fold_check_every=1)
-    om.update(X[:, :200])
+    om.update(X[:, :first])
     _fold(om, ids)
+    return pts, ids, X, om
+
+
+def test_folded_warm_map_is_refitted_from_scratch():
+    pts, ids, X, om = _folded(300, 200)
     result = om.update(X[:, 200:300])  # 300 >= 1.5 x 200 steps: refitted at once
     assert om.n_fold_refits == 1 and om.n_full_fits == 2 and om._last_full == 300
     offline = build_map(X, ids, pts[ids], sensor="visibility")
@@ -209,11 +217,7 @@ def test_folded_warm_map_is_refitted_from_scratch():
 
 
 def test_folded_warm_map_waits_for_growth_before_a_refit():
-    pts, ids, rng = _world(3)
-    X = _histories(pts, "visibility", 400, rng)
-    om = OnlineMapper(ids, pts[ids], sensor="visibility", fold_check_every=1)
-    om.update(X[:, :300])
-    _fold(om, ids)
+    _, _, X, om = _folded(400, 300)
     result = om.update(X[:, 300:320])  # 320 < 1.5 x 300 steps: kept, with a note
     assert om.n_fold_refits == 0 and om.n_full_fits == 1
     assert any("looks folded" in w and "450 steps" in w for w in result.warnings)

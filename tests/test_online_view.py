@@ -6,19 +6,15 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
-from threadpoolctl import threadpool_limits
+from map_errors import map_error
 
 import lfmdr_gym  # noqa: F401 - registers the envs
 import mappers.online.mapper as online
 from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
 from lfmdr_gym.histories.recording import collect
-from mappers import OnlineMapper, build_map, mean_position_error
+from mappers import OnlineMapper, build_map
 
-
-@pytest.fixture(autouse=True)
-def _one_blas_thread():
-    with threadpool_limits(limits=1):
-        yield
+pytestmark = pytest.mark.usefixtures("one_blas_thread")
 
 
 @pytest.fixture(scope="module")
@@ -27,11 +23,6 @@ def walk():
     env = gym.make("LFMDR-Visibility-v0", max_episode_steps=700, fov_deg=90)
     h = collect(env, RandomWalkPolicy.for_env(env), 700, seed=5)
     return h, np.asarray(h.matrix, dtype=float), np.asarray(h.mask, dtype=bool)
-
-
-def _mpe(m, h):
-    keep = np.setdiff1d(np.arange(h.n_objects), [*h.anchor_ids, *m.unmapped])
-    return mean_position_error(m.positions[keep], h.object_positions[keep])
 
 
 def test_one_update_is_build_maps_view_adjustment(walk):
@@ -66,7 +57,7 @@ def test_new_steps_move_the_map_between_refits(walk):
     assert len(moved) >= len(warm) // 6
     assert not any("online map of the first" in w for m in maps[first:] for w in m.warnings)
     offline = build_map(h.head(690), h.anchor_ids, h.anchor_positions)
-    assert _mpe(maps[-2], h) < 1.5 * _mpe(offline, h) and _mpe(maps[-2], h) < 0.15
+    assert map_error(maps[-2], h) < 1.5 * map_error(offline, h) and map_error(maps[-2], h) < 0.15
 
 
 def test_an_object_seen_for_the_first_time_is_refitted_into_the_map(walk):

@@ -138,23 +138,30 @@ def test_random_walk_is_reproducible_and_batched():
     assert batch.shape == (4, 1) and batch.dtype == np.float32
 
 
-def test_random_walk_in_the_env_stays_in_the_action_space_and_is_reproducible():
-    env = gym.make("LFMDR-Visibility-v0")
+def _check_seeded_rollouts(env, make_policy, seed: int, steps: int) -> None:
+    """The policy ``make_policy(seed)`` acts inside the env's action space for ``steps`` steps
+    from the env's seed-0 reset, the same seed gives the same actions, and the next seed
+    others."""
 
     def rollout(seed: int) -> np.ndarray:
-        policy = RandomWalkPolicy.for_env(env, seed=seed)
+        policy = make_policy(seed)
         obs, _ = env.reset(seed=0)
         actions = []
-        for _ in range(200):
+        for _ in range(steps):
             action = policy(obs)
             assert env.action_space.contains(action)
             actions.append(action)
             obs, *_ = env.step(action)
         return np.array(actions)
 
-    first = rollout(7)
-    assert np.array_equal(first, rollout(7))
-    assert not np.array_equal(first, rollout(8))
+    first = rollout(seed)
+    assert np.array_equal(first, rollout(seed))
+    assert not np.array_equal(first, rollout(seed + 1))
+
+
+def test_random_walk_in_the_env_stays_in_the_action_space_and_is_reproducible():
+    env = gym.make("LFMDR-Visibility-v0")
+    _check_seeded_rollouts(env, lambda seed: RandomWalkPolicy.for_env(env, seed=seed), 7, 200)
 
 
 def _blocked_rate(policy_factory, n_rays: int, seeds=(0, 1), steps: int = 1000) -> float:
@@ -237,21 +244,8 @@ def test_levy_policy_rejects_bad_arguments(kwargs, name):
 def test_levy_policy_in_the_env_meets_the_contract():
     module = _load_example("levy_policy")
     env = gym.make("LFMDR-Visibility-v0")
-
-    def rollout(seed: int) -> np.ndarray:
-        policy = as_policy(module.LevyWalkPolicy.for_env(env, seed=seed))
-        obs, _ = env.reset(seed=0)
-        actions = []
-        for _ in range(300):
-            action = policy(obs)
-            assert env.action_space.contains(action)
-            actions.append(action)
-            obs, *_ = env.step(action)
-        return np.array(actions)
-
-    first = rollout(5)
-    assert np.array_equal(first, rollout(5))
-    assert not np.array_equal(first, rollout(6))
+    _check_seeded_rollouts(
+        env, lambda seed: as_policy(module.LevyWalkPolicy.for_env(env, seed=seed)), 5, 300)
     policy = module.LevyWalkPolicy(seed=0)
     batch = policy(_obs(batch=3))
     assert batch.shape == (3, 1) and batch.dtype == np.float32

@@ -8,7 +8,6 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
-from threadpoolctl import threadpool_limits
 
 import lfmdr_gym  # noqa: F401 - registers the envs
 from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
@@ -25,10 +24,7 @@ from mappers.viewpoints.view_cone import (
 ANCHORS = np.array([0, 1, 2, 3])
 
 
-@pytest.fixture(autouse=True)
-def _one_blas_thread():
-    with threadpool_limits(limits=1):
-        yield
+pytestmark = pytest.mark.usefixtures("one_blas_thread")
 
 
 def _camera(fov_deg: float, n_steps: int = 600, m: int = 30, seed: int = 0, radius: float = 0.6):

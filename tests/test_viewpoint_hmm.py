@@ -7,16 +7,12 @@ import itertools
 
 import numpy as np
 import pytest
-from threadpoolctl import threadpool_limits
+from map_errors import non_anchor_error
 
 from mappers.viewpoints.visibility import VisibilityAdjustment
 from mappers.viewpoints.walk_prior import forward_backward, gaussian_taps
 
-
-@pytest.fixture(autouse=True)
-def _one_blas_thread():
-    with threadpool_limits(limits=1):
-        yield
+pytestmark = pytest.mark.usefixtures("one_blas_thread")
 
 
 def _brute_force(E, top, init, cells, shape, sigma, h, starts):
@@ -108,11 +104,6 @@ def _walk(n_obj=30, n_steps=1500, radius=0.55, miss=0.5, seed=0):
     return P, X, np.arange(4), C
 
 
-def _error(Y, P, ids):
-    keep = np.setdiff1d(np.arange(len(P)), ids)
-    return float(np.mean(np.linalg.norm(Y[keep] - P[keep], axis=1)))
-
-
 def test_continuity_improves_a_walk_with_dropouts():
     P, X, ids, C = _walk()
     start = P + np.random.default_rng(1).normal(scale=0.06, size=P.shape)
@@ -120,8 +111,8 @@ def test_continuity_improves_a_walk_with_dropouts():
     kw = dict(anchor_ids=ids, anchor_positions=P[ids], start_positions=start)
     plain = VisibilityAdjustment(grid_cells=4)
     walk = VisibilityAdjustment(grid_cells=4, continuity=True)
-    e_plain = _error(plain.fit_transform(X, **kw), P, ids)
-    e_walk = _error(walk.fit_transform(X, **kw), P, ids)
+    e_plain = non_anchor_error(plain.fit_transform(X, **kw), P, ids)
+    e_walk = non_anchor_error(walk.fit_transform(X, **kw), P, ids)
     assert walk.refined_ and walk.loglik_ >= walk.start_loglik_
     assert e_walk < 0.85 * e_plain, (e_plain, e_walk)
     assert 0.1 < walk.step_sigma_ < 0.3  # the walk's width fitted (0.14 m per axis)
@@ -174,4 +165,4 @@ def test_vis_ba_walk_is_registered_and_maps_a_walk():
     m = build_map(X, ids, P[ids], "VIS-BA-WALK", sensor="visibility")
     cal = build_map(X, ids, P[ids], "CAL-SMA", sensor="visibility")
     assert m.method == "VIS-BA-WALK" and m.params["continuity"] and np.all(np.isfinite(m.positions))
-    assert _error(m.positions, P, ids) < _error(cal.positions, P, ids)
+    assert non_anchor_error(m.positions, P, ids) < non_anchor_error(cal.positions, P, ids)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from threadpoolctl import threadpool_limits
+from map_errors import non_anchor_error
 
 from mappers import build_map
 from mappers.catalog import methods_for
@@ -14,11 +14,7 @@ from mappers.viewpoints.visibility import (
     visibility_bits,
 )
 
-
-@pytest.fixture(autouse=True)
-def _one_blas_thread():
-    with threadpool_limits(limits=1):
-        yield
+pytestmark = pytest.mark.usefixtures("one_blas_thread")
 
 
 def _threshold(n_obj=30, n_steps=800, radius=0.55, seed=0):
@@ -33,11 +29,6 @@ def _threshold(n_obj=30, n_steps=800, radius=0.55, seed=0):
     return P, X, np.arange(4), C
 
 
-def _error(Y, P, ids):
-    keep = np.setdiff1d(np.arange(len(P)), ids)
-    return float(np.mean(np.linalg.norm(Y[keep] - P[keep], axis=1)))
-
-
 def test_registered_for_visibility_only():
     assert "VIS-BA" in methods_for("visibility", masked=False)
     assert "VIS-BA" in methods_for("visibility", masked=True)
@@ -49,7 +40,7 @@ def test_threshold_visibility_improves_a_perturbed_start():
     start = P + np.random.default_rng(1).normal(scale=0.06, size=P.shape)
     est = VisibilityAdjustment(max_rounds=6)
     Y = est.fit_transform(X, anchor_ids=ids, anchor_positions=P[ids], start_positions=start)
-    before, after = _error(start, P, ids), _error(Y, P, ids)
+    before, after = non_anchor_error(start, P, ids), non_anchor_error(Y, P, ids)
     assert est.refined_ and est.loglik_ >= est.start_loglik_
     assert after < 0.75 * before, (before, after)
     np.testing.assert_array_equal(Y[ids], P[ids])  # anchors held
@@ -103,7 +94,7 @@ def test_build_map_with_vis_ba():
     m = build_map(X, ids, P[ids], "VIS-BA", sensor="visibility")
     assert m.method == "VIS-BA" and np.all(np.isfinite(m.positions))
     start = build_map(X, ids, P[ids], sensor="visibility")
-    assert _error(m.positions, P, ids) < _error(start.positions, P, ids)
+    assert non_anchor_error(m.positions, P, ids) < non_anchor_error(start.positions, P, ids)
 
 
 def test_as_the_default_it_refines_the_former_default(monkeypatch):

@@ -3,7 +3,8 @@
 :class:`~lfmdr_gym.exploration.random_walk.RandomWalkPolicy` runs this once per env step;
 usually the first draw settles it. As a plain-Python loop or a dozen numpy calls its fixed
 costs outweigh its arithmetic many times over, so it is compiled with numba on first use and
-cached on disk (``cache=True``); numba itself is imported on first use (see :func:`__getattr__`).
+cached on disk (``cache=True``); numba itself is imported on first use
+(:func:`mappers.core.jit.compiled_on_first_use`).
 It makes the same decisions, with the same formulas in the same order, as the vectorised
 reference :meth:`lfmdr_gym.exploration.random_walk.RandomWalkPolicy._plan`
 (``tests/test_policies.py``), and every walk recorded before is recorded again bit for bit
@@ -16,28 +17,15 @@ import math
 
 import numpy as np
 
+from mappers.core.jit import compiled_on_first_use
+
 __all__ = ["first_choice"]  # noqa: F822 - bound by __getattr__
 
 
-def __getattr__(name: str):
-    """Compile the kernel on first use (PEP 562).
-
-    numba is imported here and not at the top: it costs about 90 MB of memory and 0.25 s, which
-    code that only reads histories or maps should not pay. ``_room`` is compiled first: the
-    compiled ``first_choice`` calls it as a global, so it must be compiled when that is. The
-    compiled function is bound under its public name, so every later access is an ordinary
-    attribute lookup.
-    """
-    if name not in __all__:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    from numba import njit
-
-    g = globals()
-    compile_ = njit(cache=True, nogil=True)
-    g["_room"] = compile_(g["_room"])
-    for public in __all__:
-        g[public] = compile_(g["_" + public])
-    return g[name]
+# Compiled at first use and bound under its public name (``_room`` first: the compiled
+# ``first_choice`` calls it as a global). numba is imported then and not at the top: code that
+# only reads histories or maps should not pay for it.
+__getattr__ = compiled_on_first_use(globals(), __all__, helpers=("_room",))
 
 
 def _room(px, py, n, c, s, rr2):  # pragma: no cover - compiled

@@ -6,7 +6,7 @@ their arithmetic many times over; compiled with numba they are plain loops over 
 numbers. numba is the well-kept way to do this from Python (no C extension to build); the
 functions are compiled on first use and cached on disk (``cache=True``), so a process pays the
 compilation once per installation. numba itself is imported on first use (see
-:func:`__getattr__`). The random walk's compiled choice is in
+:func:`mappers.core.jit.compiled_on_first_use`). The random walk's compiled choice is in
 :mod:`lfmdr_gym.exploration.random_walk_kernel`.
 
 Each kernel computes the same geometry as the vectorised numpy code it replaced, with the same
@@ -22,26 +22,14 @@ import math
 
 import numpy as np
 
+from mappers.core.jit import compiled_on_first_use
+
 __all__ = ["proximity_ring", "visible_targets"]  # noqa: F822 - bound by __getattr__
 
-
-def __getattr__(name: str):
-    """Compile the kernels on first use of any of them (PEP 562).
-
-    numba is imported here and not at the top: it costs about 90 MB of memory and 0.25 s, which
-    code that only reads histories or maps (``lfmdr map FILE``, :class:`~lfmdr_gym.History`)
-    should not pay. The plain functions below are compiled and bound under their public names,
-    so every later access is an ordinary attribute lookup.
-    """
-    if name not in __all__:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    from numba import njit
-
-    g = globals()
-    compile_ = njit(cache=True, nogil=True)
-    for public in __all__:
-        g[public] = compile_(g["_" + public])
-    return g[name]
+# The kernels are compiled at the first use of any of them and bound under their public names.
+# numba is imported then and not at the top: code that only reads histories or maps
+# (``lfmdr map FILE``, :class:`~lfmdr_gym.History`) should not pay for it.
+__getattr__ = compiled_on_first_use(globals(), __all__)
 
 
 def _proximity_ring(x, y, c, s, rc, q, arena_half, dirs, max_range):  # pragma: no cover - compiled

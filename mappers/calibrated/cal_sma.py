@@ -23,8 +23,8 @@ Reasons for each choice:
   by least squares over ~10 M pairs, so it cannot absorb a fold or the map's noise, only the
   smooth, position-dependent bias of the sensor.
 - Anchors held fixed inside the stress fix scale, rotation and reflection of the whole map and
-  let the calibration be in metres (with anchors only aligned afterwards, visibility maps are
-  twice as far off: the calibration then has no scale to hold on to).
+  let the calibration be in metres (with anchors only aligned afterwards the calibration has no
+  scale to hold on to).
 - Defaults (K = 12 / 10, 20 rounds, quadratic position term, far weight 0.02) were tuned on
   seeds of our own, never on the protocol's or on the fresh evaluation seeds.
 - Folds: two deterministic starts (unweighted SMACOF, which is globally rigid and does not
@@ -39,10 +39,11 @@ Reasons for each choice:
   :class:`FoldWarning` is raised (``build_map`` lists it in ``Map.warnings``) and
   ``fold_score_`` / ``folded_`` say so.
 
-References: de Leeuw (1977) and Borg & Groenen, *Modern Multidimensional Scaling* (2005), for
-weighted SMACOF and its majorisation with fixed points; Tenenbaum et al. (2000) for the geodesic
-start. Its accuracy against the paper's methods is measured by ``benchmarks/bench_calibrated.py``
-(figures in the README).
+References: Yairi (2007) for the history rows and SMA, which this extends; de Leeuw (1977) and
+Borg & Groenen, *Modern Multidimensional Scaling* (2005), for weighted SMACOF and its
+majorisation with fixed points; Tenenbaum et al. (2000) for the geodesic start. Its accuracy
+against the paper's methods is measured by ``benchmarks/bench_calibrated.py`` (figures in the
+README, "CAL-SMA").
 """
 
 from __future__ import annotations

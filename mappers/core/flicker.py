@@ -2,18 +2,17 @@
 
 A robot that walks smoothly sees an object come into view and go out of it in runs of steps:
 visible at ``t - 1`` and at ``t + 1`` but not at ``t`` ("a flicker") is rare with perfect
-sensing (an object hidden for one step behind another, or at the edge of sight: 3.6–4.7 % of
-the visible-on-both-sides steps on 12 of our layouts, N = 2000; 0.6 % with 20 objects, 2.9 %
-with 200 in a 5 m arena). A camera that misses each
-visible object with probability ``p`` independently turns such a step into a 0 with probability
-``p``, so the share of flickers among the steps whose neighbours are both visible estimates
-``p`` (0.22–0.25 at ``miss_rate = 0.2``, 0.51–0.56 at 0.5, same layouts). The mapper is never
-told the miss rate; this statistic reads it from the timeline of the history.
+sensing (an object hidden for one step behind another, or at the edge of sight). A camera that
+misses each visible object with probability ``p`` independently turns such a step into a 0 with
+probability ``p``, so the share of flickers among the steps whose neighbours are both visible
+estimates ``p``. The mapper is never told the miss rate; this statistic reads it from the
+timeline of the history. The rates measured with and without misses:
+``docs/imperfect-sensing.md#flicker-rate``.
 
 *Assumes*: consecutive steps (by the timeline: the same robot, consecutive ticks) are close
-viewpoints (the random walk's 0.2 m steps in a 2.5 m arena), and misses are independent. The
-first is checked from the data too (:func:`persistence`): histories from unordered viewpoints
-(random poses, shuffled logs) flicker as often as they see anything, and are not read this way.
+viewpoints, and misses are independent. The first is checked from the data too
+(:func:`persistence`): histories from unordered viewpoints (random poses, shuffled logs) flicker
+as often as they see anything, and are not read this way.
 """
 
 from __future__ import annotations
@@ -24,16 +23,14 @@ from mappers.core.sensors import check_timeline
 
 __all__ = ["FLICKER_THRESHOLD", "MIN_PERSISTENCE", "flicker_rate", "persistence", "step_runs"]
 
-FLICKER_THRESHOLD = 0.15
+FLICKER_THRESHOLD = 0.15  # between perfect sensing and misses: docs/imperfect-sensing.md#flicker-rate
 """Flicker rate above which ``build_map`` treats a complete visibility history as one with
-dropouts (the ``dropouts`` column of :data:`mappers.defaults.DEFAULTS`): three times the largest perfect-sensing
-rate we measured (0.047), below the rate at ``miss_rate = 0.2`` (0.22)."""
+dropouts (the ``dropouts`` column of :data:`mappers.defaults.DEFAULTS`)."""
 
 
-MIN_PERSISTENCE = 2.0
-"""Smallest :func:`persistence` at which the flicker rate is read: 4.8–5.3 on the random walk's
-histories with or without dropouts (misses scale both sides of the ratio alike), 1.1 for
-viewpoints drawn at random (the tests' synthetic histories)."""
+MIN_PERSISTENCE = 2.0  # between walks and random viewpoints: docs/imperfect-sensing.md#flicker-rate
+"""Smallest :func:`persistence` at which the flicker rate is read (misses scale both sides of
+its ratio alike, so it does not depend on them)."""
 
 
 def step_runs(n_steps: int, timeline=None) -> list[np.ndarray]:

@@ -261,10 +261,16 @@ def _wrong_in_rows(est: np.ndarray, tru: np.ndarray, i0: int, i1: int) -> int:
     n_m = np.count_nonzero(rho == -1, axis=1)
     wrong += 2 * (inv_p + inv_m) - inv_all + int(np.dot(n_p, n_m))
 
-    # Near ties: each pair in a cluster of either configuration (once) swaps its model verdict
-    # for the exact one.
-    pe_, se_, pt_, st_ = (x.ravel() for x in (pe, se, pt, st))
-    for (S, cnt), rot, other_cl in zip(runs, (rote, rott), (None, cle), strict=True):
+    wrong += _near_tie_corrections(runs, (rote, rott), cle, d, (pe, se, pt, st), w)
+    return wrong + _wrong_with_equal_points(zero, d, w)
+
+
+def _near_tie_corrections(runs, rots, cle, d, model, w: int) -> int:
+    """Near ties: each pair in a cluster of either configuration (once) swaps its model verdict
+    for the exact one; returns the change in the count of wrong triangles (see _wrong_in_rows)."""
+    pe_, se_, pt_, st_ = (x.ravel() for x in model)
+    change = 0
+    for (S, cnt), rot, other_cl in zip(runs, rots, (None, cle), strict=True):
         ends = np.cumsum(cnt)
         lo = 0
         while lo < S.size:
@@ -280,11 +286,15 @@ def _wrong_in_rows(est: np.ndarray, tru: np.ndarray, i0: int, i1: int) -> int:
                 f1, f2 = f1[keep], f2[keep]
             me = np.sign(pe_[f2] - pe_[f1]) * se_[f1] * se_[f2]
             mt = np.sign(pt_[f2] - pt_[f1]) * st_[f1] * st_[f2]
-            wrong += int(np.count_nonzero(_mismatch(d, f1, f2))) - int(np.count_nonzero(me != mt))
+            change += int(np.count_nonzero(_mismatch(d, f1, f2))) - int(np.count_nonzero(me != mt))
             lo = hi
+    return change
 
-    # Points equal to the apex in either configuration are outside the model: all their pairs
-    # are checked exactly (a pair of two such points once).
+
+def _wrong_with_equal_points(zero, d, w: int) -> int:
+    """Points equal to the apex in either configuration are outside the model: all their pairs
+    are checked exactly (a pair of two such points once); returns their wrong triangles."""
+    wrong = 0
     zr, zc = np.nonzero(zero)
     cols = np.arange(w)
     step = max(1, _BATCH // w)

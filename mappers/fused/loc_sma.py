@@ -18,11 +18,10 @@ placed either: each such case is a :class:`RigidityWarning` and NaN rows, never 
 
 The map is then refined (``refine="range-bearing"``, the default) by a bundle adjustment that
 estimates each step's viewpoint and fits the readings' ranges and angles
-(:mod:`mappers.viewpoints.range_bearing`): on fresh simulated walks 0.0064 -> 0.0053 m with a
-60-degree 1 m camera, 0.0027 -> 0.0018 m at 360 degrees, 0.0136 -> 0.0011 m on
-``LFMDR-Camera-v0``, and on MRCLAM 0.08 -> 0.04 m (docs/fused-sensing.md). ``refine=None`` is
-the law-of-cosines map alone, ``refine="bearing"`` the bearing-only adjustment
-(:mod:`mappers.viewpoints.bearing`, which loses the ranges: worse at 60 degrees).
+(:mod:`mappers.viewpoints.range_bearing`; Triggs et al. 2000), better than the law-of-cosines
+map on every setting measured (``docs/fused-sensing.md``, "After BEARING-BA"). ``refine=None``
+is the law-of-cosines map alone, ``refine="bearing"`` the bearing-only adjustment
+(:mod:`mappers.viewpoints.bearing`, which loses the ranges: worse through a narrow view).
 """
 
 from __future__ import annotations

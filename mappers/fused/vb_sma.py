@@ -16,17 +16,19 @@ and bearing, which grows smoothly with distance over the whole arena, both shape
 That map is then blended with CAL-SMA's map of the bearing rows alone, both held to the same
 anchors: ``(1 - s) * fused + s * bearing-only`` with ``s = bearing_share``. The two maps' errors
 are largely independent, so the blend keeps most of the fused map's gain and loses little on
-the walks where the joined rows mislead (on tuning seeds 300-319, ``s = 0.3``: mean MPE 0.82 x
-the better single sensor's, as without the blend, and worst run 1.01 x instead of 1.18 x;
-``benchmarks/bench_fusion_sim.py`` gives the fresh-seed figures, docs/fused-sensing.md the
-search). ``bearing_share=0`` is the fused map alone.
+the walks where the joined rows mislead (``s`` chosen on tuning seeds:
+``docs/fused-sensing.md#vb-smas-worst-run-a-blend-not-a-switch``). ``bearing_share=0`` is the
+fused map alone.
 
 Last (``refine=True``, the default since BEARING-BA became the bearing default), the blend is the
 start map of a bearing-only bundle adjustment of the bearing part (:mod:`mappers.viewpoints.bearing`,
 ``start_positions`` = the blend): each step's viewpoint is estimated and the map refined until it
-explains the bearings, which visibility bits cannot do to millimetres. Without it a fused history
-mapped far worse than its bearing half alone (fresh seeds 9000-9024, perfect bearings: 0.02 m
-against 0.000 m). ``refine=False`` is the paper-era VB-SMA (the blend alone).
+explains the bearings, which visibility bits cannot do to millimetres: without it a fused
+history mapped far worse than its bearing half alone (``docs/fused-sensing.md``, "After
+BEARING-BA"). ``refine=False`` is the paper-era VB-SMA (the blend alone).
+
+References: Yairi (2007) for the rows and their normalisation (eq. 7); de Leeuw (1977) for the
+anchored SMACOF; Triggs et al. (2000) for the bundle adjustment.
 """
 
 from __future__ import annotations

@@ -1,61 +1,38 @@
 """A map for visibility histories with dropouts (label ``"dropout-blend"``).
 
 With a miss rate ``p`` a visible object reads 0 in a share ``p`` of the steps, at random. Two
-estimators that see the history differently each lose to the noise in their own way:
+anchored maps that each lose to this noise in their own way are averaged:
 
-- CAL-SMA (:mod:`mappers.calibrated.cal_sma`) of the history after a moving average over ``window``
-  consecutive steps (by the timeline: :func:`mappers.core.flicker.step_runs`). A miss is surrounded
-  by steps that saw the object, so the average puts part of it back; a wider window blurs the
-  walk's 0.2 m steps (window 3 / 5 / 9 / 15 at ``miss_rate = 0.5``: 0.064 / 0.069 / 0.094 /
-  0.17 m against 0.072 unsmoothed, 10 of our layouts).
-- ``covis-nonmetric`` (:mod:`mappers.masked.pair_maps`): only the order of the co-observation rates, which
-  a miss rate common to all objects leaves unchanged (0.061 m, same layouts).
+- CAL-SMA (:mod:`mappers.calibrated.cal_sma`) of the history after a moving average over
+  ``window`` consecutive steps (by the timeline: :func:`mappers.core.flicker.step_runs`): a miss
+  is surrounded by steps that saw the object, so the average puts part of it back, and a wider
+  window blurs the walk's steps;
+- ``covis-nonmetric`` (:mod:`mappers.masked.pair_maps`): only the order of the co-observation
+  rates, which a miss rate common to all objects leaves unchanged.
 
-Both maps are anchored (the anchors held at their positions), so they are in one frame and their
-mean is a map; their errors are only partly shared, and the mean beats either (0.056 m, largest
-run 0.071, same layouts; at ``miss_rate = 0.2`` 0.049 against CAL-SMA's 0.053; on the 25 fresh
-layouts of ``benchmarks/bench_masked_goals.py`` at 0.5: 0.069 against CAL-SMA's 0.089 and
-``covis-nonmetric``'s 0.073). An object one of them leaves unplaced takes the other's position;
-one whose two positions lie farther apart than the anchors' spread (a member's failure, not
-noise) keeps CAL-SMA's, with a warning. When the two maps disagree as a whole (their median
-distance over the objects both place above ``max_disagreement`` times the anchors' spread), the
-map is CAL-SMA's alone, with a warning: ``covis-nonmetric`` has then failed, folded or flung
-far, and half of it is no longer noise that the mean averages out. This holds for walk-ordered
-steps (:func:`mappers.core.flicker.persistence` at least :data:`WALK_PERSISTENCE`), which CAL-SMA's
-window assumes; on viewpoints drawn at random CAL-SMA is the member that fails (one synthetic
-history: 0.57 m against ``covis-nonmetric``'s 0.05), and the maps are blended as before.
-Measured through a 90-degree view (VIEW-BA starts from this map; mean non-anchor MPE [m] at 500
-/ 1,000 / 1,500 / 2,000 steps, without the check -> with it):
+Both hold the anchors at their positions, so they share one frame, and their errors are only
+partly shared: their mean beats either. An object one of them leaves unplaced takes the other's
+position; one whose two positions lie farther apart than the anchors' spread (a member's
+failure, not noise) keeps CAL-SMA's, with a warning. When the two maps disagree as a whole
+(their median distance over the objects both place above ``max_disagreement`` times the anchors'
+spread; the median, not the mean: one object flung far is the guard above's), the map is
+CAL-SMA's alone, with a warning: ``covis-nonmetric`` has then failed, and half of it is no
+longer noise that the mean averages out. That check holds for walk-ordered steps
+(:func:`mappers.core.flicker.persistence` at least :data:`WALK_PERSISTENCE`), which CAL-SMA's
+window assumes; on viewpoints drawn at random CAL-SMA is the member that fails, and the maps are
+blended as they are.
 
-- tuning histories (seeds 777 and 4242 of ``bench_online.py``, 50 layouts): VIEW-BA 0.106 /
-  0.070 / 0.043 / 0.043 -> 0.074 / 0.061 / 0.042 / 0.041; the blend itself 0.197 / 0.118 / 0.068
-  / 0.064 -> 0.113 / 0.096 / 0.063 / 0.058;
-- unseen ones (seed 31337, 25 layouts): VIEW-BA 0.113 / 0.085 / 0.050 / 0.041 -> 0.086 / 0.055 /
-  0.042 / 0.041; another simulator's (``bench_view_other_sim.py``'s world, 20 layouts, 500 /
-  1,000 / 2,000): 0.114 / 0.097 / 0.084 -> 0.093 / 0.070 / 0.084;
-- through a 60-degree view, where ``covis-nonmetric`` fails on most layouts (fresh seeds
-  1000..1024 of ``bench_masked_goals.py``, N = 2,000): VIEW-BA 0.121 -> 0.072, the blend 0.184 ->
-  0.096.
-
-Above 0.25 CAL-SMA was the better member in 39 of 39 tuning maps, 23 of 23 unseen ones and 26 of
-27 of the other simulator's (covis-nonmetric 0.29 m to 10^19 m off; the exception, both members
-off by 0.4-0.5 m). Below it the members' errors are mixed, and on the MRCLAM runs (real data,
-where CAL-SMA alone is by far the worse member) they disagree by 0.06-0.12, so the check leaves
-those maps as they were; at 0.1 it fired there and cost 0.5 m on Dataset 1.
-The median, not the mean: one object flung far is the guard above's.
-
-A limited field of view is a dropout the mask names: an object out of view reads 0 at steps
-between steps that saw it. The same blend (unobserved entries as 0) is the default for masked
-visibility histories: through a 90-degree view 0.074 m (largest run 0.28) against
-``covis-power``'s 0.102 (0.54) on 20 of our layouts, and 0.063 (0.115) against 0.074 (0.170) on
-the 25 fresh ones of ``benchmarks/bench_masked_goals.py`` (``covis-nonmetric``: 0.085, 0.202).
+A limited field of view is a dropout the mask names (an object out of view reads 0 at steps
+between steps that saw it), so the same blend, unobserved entries as 0, maps masked visibility
+histories. It is VIEW-BA's start and the masked visibility default above
+:data:`mappers.defaults.SCALABLE_ABOVE_OBJECTS` objects (:data:`mappers.defaults.DEFAULTS`).
+What each choice was measured on: ``docs/imperfect-sensing.md#dropout-blend``.
 
 *Assumes*: what CAL-SMA and ``covis-nonmetric`` assume, and that consecutive steps are close
-viewpoints (the window). It was ``build_map``'s default for masked visibility histories and for
-complete ones with dropouts; VIEW-BA and VIS-BA-WALK replaced it there
-(:data:`mappers.defaults.DEFAULTS`). It is
-VIEW-BA's start, and the masked visibility default above
-:data:`mappers.defaults.SCALABLE_ABOVE_OBJECTS` objects.
+viewpoints (the window).
+
+References: Yairi (2007) for the history rows; de Leeuw (1977) for the anchored SMACOF of both
+members; Kruskal (1964) for the ordinal fit of ``covis-nonmetric``.
 """
 
 from __future__ import annotations
@@ -72,12 +49,10 @@ from mappers.masked.pair_maps import MaskedMapper, MaskedMapWarning
 
 __all__ = ["WALK_PERSISTENCE", "DropoutBlend", "smooth_steps"]
 
-WALK_PERSISTENCE = 1.5
+WALK_PERSISTENCE = 1.5  # between walks and random viewpoints: docs/imperfect-sensing.md#dropout-blend
 """The smallest :func:`mappers.core.flicker.persistence` of the zero-filled rows at which
 ``dropout-blend`` takes its steps for a walk's and, when its members disagree as a whole, keeps
-CAL-SMA's map. Masked walks through a 90-degree view: 1.9-3.5 (median 3.1; 225 histories of 500
-to 2,000 steps), lower than complete ones (4.8-5.3: a turning view changes what is visible);
-another simulator's walk 4.3-5.9; viewpoints drawn at random about 1.1."""
+CAL-SMA's map."""
 
 
 def smooth_steps(X, window: int, timeline=None) -> np.ndarray:

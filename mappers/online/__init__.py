@@ -6,9 +6,11 @@ from __future__ import annotations
 from mappers.online.bearing import (
     OnlineBundle,
 )
+from mappers.online.cal_sma import (
+    gram_dissimilarity,
+)
 from mappers.online.mapper import (
     OnlineMapper,
-    gram_dissimilarity,
 )
 from mappers.online.view_cone import (
     OnlineView,

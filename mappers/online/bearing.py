@@ -1,7 +1,7 @@
 """Incremental bearing bundle adjustment: BEARING-BA kept up to date as a bearing history grows.
 
 :class:`mappers.online.mapper.OnlineMapper` updates CAL-SMA incrementally for complete bearing
-histories (cheap, but ~0.02 m from the truth on perfect bearings); ``build_map``'s default,
+histories (cheap, but centimetres from the truth on perfect bearings); ``build_map``'s default,
 BEARING-BA (:mod:`mappers.viewpoints.bearing`), refines that map by estimating every step's
 viewpoint. :class:`OnlineBundle` keeps the refinement's state, the objects and every step's pose,
 between updates instead of refitting it from the whole history:
@@ -11,7 +11,8 @@ between updates instead of refitting it from the whole history:
 - *joint rounds*: every ``every`` updates, or sooner once the steps have grown by 5% since the
   last (every update of a short history, whose new steps weigh most), ``rounds`` Levenberg-Marquardt rounds of BEARING-BA's joint problem (poses and
   non-anchor objects, Schur complement, Huber weights at the scale of the last refit) over all
-  steps, warm from the current state: each costs about a sixth of a full BEARING-BA fit;
+  steps, warm from the current state (a fraction of a full fit's cost:
+  ``docs/online-and-exploration.md``, "Online bearing maps");
 - *refits*: a full BEARING-BA fit over the whole history, from the CAL-SMA map
   (``start_positions``), whenever the CAL-SMA map is refitted (the online mapper's geometric
   schedule, or a fold check) or objects join it: the offline map of those steps, to rounding.
@@ -20,6 +21,8 @@ Guards as BEARING-BA's: a refit that does not lower the robust angle cost below 
 start's, or is not finite, leaves no state (the CAL-SMA map is returned, with the refit's
 warning, until the next refit); a joint round only takes steps that lower the cost, drops
 viewpoints that drift out of the map's box, and a non-finite result drops the state likewise.
+
+References: Triggs et al., *Bundle Adjustment — A Modern Synthesis* (2000).
 """
 
 from __future__ import annotations

@@ -1,73 +1,41 @@
 """Online mapping: the map of a robot still moving, updated as its histories grow.
 
-The paper calls LFMDR "basically an off-line process" and leaves an online algorithm open (§6).
-:class:`OnlineMapper` takes the new steps' columns after each batch of steps and returns the
-current :class:`~mappers.pipeline.Map`, the same kind of map :func:`~mappers.pipeline.build_map`
-returns for the whole history.
+The paper (Yairi 2007) calls LFMDR "basically an off-line process" and leaves an online
+algorithm open (§6). :class:`OnlineMapper` takes the new steps' columns after each batch of
+steps and returns the current :class:`~mappers.pipeline.Map`, the same kind of map
+:func:`~mappers.pipeline.build_map` returns for the whole history. How it updates depends on the
+method:
 
-For CAL-SMA (:mod:`mappers.calibrated.cal_sma`, the default of complete visibility histories, and the
-start of BEARING-BA, the default of bearing histories) on complete histories, the update is
-incremental:
+- **CAL-SMA** on complete histories (the visibility default, and the start of BEARING-BA) is
+  updated incrementally (:mod:`mappers.online.cal_sma`): its statistics are a Gram matrix
+  accumulated over the new columns, and the last map is the start of ``warm_rounds`` anchored
+  calibrate/re-embed rounds (warm-started SMACOF: majorisation decreases stress from any start).
+  An object sensed for the first time starts at the mean position of its three most similar
+  mapped objects. CAL-SMA's fold check runs on every warm update while the map is young (before
+  its second scheduled refit), then every ``fold_check_every`` warm updates, and whenever
+  objects join the map; a warm map that looks folded is refitted from scratch once the steps
+  have grown by 1.5 since the last full fit. Full refits run from scratch whenever the steps
+  have grown by ``refit_growth`` since the last scheduled one (a logarithmic number of them in
+  all), without CAL-SMA's random restarts: a map that still looks folded is refitted later, with
+  more steps.
+- **BEARING-BA** on complete bearing histories (the default) is carried on from that CAL-SMA map
+  by :class:`mappers.online.bearing.OnlineBundle`: new poses resected, a warm joint round every
+  ``bundle_every`` updates, a full fit whenever CAL-SMA is refitted or objects join its map.
+- **VIEW-BA** on masked visibility histories (the default) is refitted with ``build_map``'s own
+  fit on a schedule of its own (``refit_growth`` 1.25: its refits, from a new start map, are
+  what move the map to a better basin) and carried on in between by
+  :class:`mappers.online.view_cone.OnlineView`.
+- **Other methods** (and masked histories, whose methods need the steps' co-observation
+  patterns) keep the columns and refit with ``build_map`` on the geometric schedule; between
+  refits the last map is returned with a note in ``Map.warnings`` saying which steps it covers.
 
-- Statistics: CAL-SMA needs only the dissimilarities of the L2-normalised rows (paper eq. 7),
-  and both its cosine (visibility) and RMS Euclidean (bearing) dissimilarities are functions of
-  the Gram matrix ``G = X X^T`` and the column count. ``G`` is accumulated as ``C C^T`` over the
-  new columns ``C``: O(M^2 k) for k new columns, never a pass over the whole history, and no
-  column is kept.
-- Embedding: the last map is the start of a short CAL-SMA refinement (``warm_rounds``
-  calibrate/re-embed rounds, anchors held fixed, Guttman updates stopped at the looser
-  ``warm_tol``: the start is nearly converged); objects sensed for the first time start at the
-  mean position of their three most similar mapped objects. CAL-SMA's fold check runs on every
-  warm update while the map is young (before its second scheduled refit), then every
-  ``fold_check_every`` warm updates, and whenever objects join the map; a warm map that looks
-  folded is refitted from scratch once the steps have grown by 1.5 since the last full fit
-  (until then it is kept, with a note in ``Map.warnings``); such a refit leaves the schedule of
-  the scheduled ones where it was.
-- Full refits: from scratch (CAL-SMA's two deterministic starts and all its rounds) whenever the
-  number of steps has grown by the factor ``refit_growth`` since the last full fit, so a map
-  whose early shape was poor is rebuilt a logarithmic number of times in all. They skip
-  CAL-SMA's random restarts (tried only when both deterministic starts look folded, which
-  happens in the first few dozen steps, at 3-4x the cost of a fit): such a map is refitted
-  later, with more steps.
-- Both run CAL-SMA's rounds in fewer array passes than
-  :class:`~mappers.calibrated.cal_sma.CalibratedSMACOF` (one solve of the anchored Guttman system per
-  neighbour graph, kept between warm updates whose graph did not change; the calibration summed
-  term by term): the same maps to rounding, at about 3/4 of the cost. ``build_map`` and the
-  offline estimator are untouched.
-
-Cost per update, with M objects: O(M^2 k) for the statistics plus O(M^2 log M) for the
-neighbours plus ``warm_rounds`` rounds of anchored weighted SMACOF (O(M^2) per Guttman update,
-a few updates per round), independent of the number of steps so far. A full refit costs about
-3/4 of what ``build_map`` costs (``2 x n_rounds`` rounds), more in the first hundred steps,
-whose maps converge slowly; with ``refit_growth = g`` there are about ``log_g(N / N_0)`` of
-them over a run of N steps, N_0 the steps of the first map, plus the few a fold check asks for.
-``benchmarks/bench_online.py`` measures both against rebuilding the map (figures in the README
-and in ``docs/online-and-exploration.md``).
-
-BEARING-BA on complete bearing histories (the default) is updated incrementally from that
-CAL-SMA map by :class:`mappers.online.bearing.OnlineBundle`: each new step's pose resected
-against the current objects, a warm Levenberg-Marquardt round of the joint problem every
-``bundle_every`` updates (or once the steps have grown by 5 %), and a full BEARING-BA fit, from
-the CAL-SMA map, whenever CAL-SMA is refitted or objects join its map; a refit that is not kept
-(BEARING-BA's guards) leaves the CAL-SMA map until the next one.
-
-VIEW-BA on masked visibility histories (a limited view; the default) is refitted with
-``build_map``'s own fit on a geometric schedule of its own (``refit_growth`` 1.25: its refits,
-from a new start map, are what move the map to a better basin) and carried on in between by
-:class:`mappers.online.view_cone.OnlineView`: each new step's viewpoint placed against the current
-objects, a warm joint round every ``bundle_every`` updates, and, with a slower schedule
-(``refit_growth`` above 1.25), VIEW-BA refined from the current map (no start map drawn)
-whenever the steps have grown by a quarter; an object seen for the first time is refitted into
-the map at once.
-
-Other methods (and masked histories, whose methods need the steps' co-observation patterns)
-keep the columns and refit with :func:`~mappers.pipeline.build_map` on the same geometric
-schedule; between refits the last map is returned with a note in ``Map.warnings`` saying which
-steps it covers. A first map that fails (too few steps: a limited view's co-observations fall
-apart) is tried again once the steps have grown by a tenth, not at every update.
+A first map that fails (too few steps: a limited view's co-observations fall apart) is tried
+again once the steps have grown by a tenth, not at every update. The cost of an update does not
+grow with the steps for the incremental methods; what it is, and what each choice bought:
+``docs/online-and-exploration.md#onlinemapper-cost-per-update``.
 
 References: de Leeuw (1977) and Borg & Groenen, *Modern Multidimensional Scaling* (2005), on
-warm-started SMACOF (majorisation decreases stress from any start).
+warm-started SMACOF; Triggs et al. (2000) for the bundle adjustments carried on.
 """
 
 from __future__ import annotations
@@ -79,7 +47,7 @@ from typing import Any
 
 import numpy as np
 
-from mappers.calibrated import CalibratedSMACOF, fit_calibration, fold_score, log_floor
+from mappers.calibrated import fold_score, log_floor
 from mappers.catalog import resolve_method
 from mappers.core.align import apply_affine, check_anchor_ids, check_anchors
 from mappers.core.errors import MappingError
@@ -87,172 +55,28 @@ from mappers.core.graph import informative_pairs, knn_mask
 from mappers.core.sensors import COLUMNS_PER_STEP, check_sensor, infer_sensor
 from mappers.fitting import Map, _thread_limit
 from mappers.online.bearing import OnlineBundle
+from mappers.online.cal_sma import _OnlineCalSMA, gram_dissimilarity
 from mappers.online.view_cone import OnlineView
 from mappers.pipeline import _fit_map, build_map
 
-__all__ = ["OnlineMapper", "gram_dissimilarity"]
+__all__ = ["OnlineMapper"]
 
 _INCREMENTAL = "CAL-SMA"
 _BUNDLE = "BEARING-BA"  # updated incrementally from the incremental CAL-SMA map (online_bearing)
 _VIEW = "VIEW-BA"  # masked visibility, updated incrementally between its refits (online_view)
 _REFIT_GROWTH = 4.0  # refit_growth's default
-# ... for VIEW-BA: its refits, from a new start map, are what find a better basin; every 1.25x
-# (about 7 in a run to N = 2,000) since dropout-blend, their start, drops a failed member
-# (2 before: docs/online-and-exploration.md)
+# ... for VIEW-BA: its refits, from a new start map, are what find a better basin (chosen on the
+# tuning seeds: docs/online-and-exploration.md, "With the start's disagreement check")
 _VIEW_REFIT_GROWTH = 1.25
 # a warm map that looks folded is refitted from scratch once the steps have grown by this factor
 # since the last full fit (at most refit_growth), not at every update while it still looks folded
 _FOLD_REFIT_GROWTH = 1.5
 # a refitted method that found nothing to map yet is tried again once the steps have grown by this
 _RETRY_GROWTH = 1.1
-# Guttman updates per round in a full CAL-SMA fit (CAL-SMA's own max_iter is 100): a map of a few
-# dozen steps converges slowly and its fits hit the cap, which made the refits of the first 250
-# steps half of a run's CPU; later fits converge before 30 (docs/online-and-exploration.md)
+# Guttman updates per round in a full CAL-SMA fit (CAL-SMA's own max_iter is 100): the young
+# maps' slow fits hit the cap, later fits converge before it (measured:
+# docs/online-and-exploration.md#online-mapper-the-cost-of-an-update-issue-14)
 _FULL_FIT_MAX_ITER = 30
-
-
-def gram_dissimilarity(gram: np.ndarray, n_columns: int, kind: str) -> np.ndarray:
-    """CAL-SMA's dissimilarity of the L2-normalised history rows, from their Gram matrix.
-
-    ``gram`` is ``X X^T`` of the raw rows (no empty row), ``n_columns`` the columns of ``X``.
-    ``kind`` ``"cosine"`` gives ``1 - cos``; ``"euclidean"`` gives ``||y_i - y_j|| / sqrt(D)``
-    of the unit rows ``y``: the values :func:`mappers.calibrated.cal_sma.history_dissimilarity` gives.
-    """
-    norms = np.sqrt(np.diag(gram))
-    cos = np.clip(gram / np.outer(norms, norms), -1.0, 1.0)
-    if kind == "cosine":
-        delta = 1.0 - cos
-    elif kind == "euclidean":
-        delta = np.sqrt(np.maximum(2.0 - 2.0 * cos, 0.0) / n_columns)
-    else:
-        raise ValueError(f"kind must be 'cosine' or 'euclidean', got {kind!r}")
-    delta = 0.5 * (delta + delta.T)
-    np.fill_diagonal(delta, 0.0)
-    return np.maximum(delta, 0.0)
-
-
-class _AnchoredGuttman:
-    """Anchored Guttman updates (:func:`mappers.smacof.weighted.weighted_smacof` with ``fixed``) for one
-    weight matrix, its system solved once.
-
-    CAL-SMA's weights depend only on the neighbour graph, so every calibrate/re-embed round of
-    a fit, and every warm update whose graph did not change, solves the same system
-    ``V_ff X_f = [B(X) X]_f - V_fa X_a``. Every pair has a positive weight (far pairs
-    ``far_weight``, or 1e-6), so ``V_ff`` is positive definite: its inverse is the
-    pseudo-inverse ``weighted_smacof`` computes in every call. :meth:`run` makes the same
-    updates with the same stopping rule, in fewer array passes and without input checks; its
-    results equal ``weighted_smacof``'s to rounding (not bit for bit).
-    """
-
-    def __init__(self, W: np.ndarray, fixed: np.ndarray) -> None:
-        self.W = W
-        self.free = np.ones(len(W), dtype=bool)
-        self.free[fixed] = False
-        V = np.diag(W.sum(axis=1)) - W
-        self.V_ff_inv = np.linalg.inv(V[np.ix_(self.free, self.free)])
-        self.V_fa = V[np.ix_(self.free, ~self.free)]
-
-    @staticmethod
-    def _squared_distances(X: np.ndarray) -> np.ndarray:
-        sq = np.einsum("ij,ij->i", X, X)
-        D2 = np.add.outer(sq, sq)
-        D2 -= 2.0 * (X @ X.T)
-        return np.maximum(D2, 0.0, out=D2)
-
-    def run(self, delta: np.ndarray, X: np.ndarray, max_iter: int, tol: float):
-        """(X, raw stress, updates) from start ``X`` (its fixed rows kept), as weighted_smacof."""
-        W, free, V_ff_inv = self.W, self.free, self.V_ff_inv
-        X = np.array(X, dtype=float)
-        rhs_fixed = self.V_fa @ X[~free]
-        wd = W * delta
-        base = float(np.vdot(W, delta * delta))
-        D2 = self._squared_distances(X)
-        D = np.sqrt(D2)
-        # raw stress 1/2 sum w (delta - d)^2, expanded: two dot products, no (M, M) temporaries
-        stress = 0.5 * (base - 2.0 * float(np.vdot(wd, D)) + float(np.vdot(W, D2)))
-        n_iter = 0
-        for n_iter in range(1, max_iter + 1):  # noqa: B007 - n_iter is returned
-            D[D <= 0] = np.inf  # B(X)_ij = 0 where d_ij = 0 (the diagonal, coinciding points)
-            R = wd / D  # B(X) = diag(R 1) - R
-            BX = R.sum(axis=1)[:, None] * X - R @ X
-            X_new = X.copy()
-            X_new[free] = V_ff_inv @ (BX[free] - rhs_fixed)
-            D2 = self._squared_distances(X_new)
-            D = np.sqrt(D2)
-            X, old = X_new, stress
-            stress = 0.5 * (base - 2.0 * float(np.vdot(wd, D)) + float(np.vdot(W, D2)))
-            if old <= 0 or (old - stress) <= tol * old:
-                break
-        return X, stress, n_iter
-
-
-def _midpoint_terms(x: np.ndarray, y: np.ndarray, degree: int):
-    """The terms of :func:`mappers.calibrated.cal_sma._features`, in its order, one array at a time."""
-    if degree >= 1:
-        yield x
-        yield y
-    if degree >= 2:
-        yield x * x
-        yield y * y
-        yield x * y
-    if degree >= 3:
-        yield x**3
-        yield y**3
-        yield x * x * y
-        yield x * y * y
-
-
-class _OnlineCalSMA(CalibratedSMACOF):
-    """CalibratedSMACOF with the same rounds in fewer array passes (its maps to rounding).
-
-    Used by :class:`OnlineMapper` for its full fits and warm updates: the Guttman system is
-    solved once per neighbour graph (:class:`_AnchoredGuttman`, the last one kept in
-    ``solver_``, so warm updates whose graph did not change reuse it), and the calibration sums
-    its terms instead of building an (M, M, features) array. The offline estimator is untouched.
-    It overrides only :meth:`_embed` and :meth:`_calibrate`: the rounds are
-    :meth:`CalibratedSMACOF._refine`'s.
-    """
-
-    solver_: tuple | None = None
-
-    def _solver(self, loc: np.ndarray, fixed: np.ndarray) -> _AnchoredGuttman:
-        key = (loc.tobytes(), np.asarray(fixed).tobytes(), float(self.far_weight))
-        if self.solver_ is None or self.solver_[0] != key:
-            self.solver_ = (key, _AnchoredGuttman(self._weights(loc), np.asarray(fixed)))
-        return self.solver_[1]
-
-    def _calibrate(self, D, X, pairs, lo_delta):
-        # CalibratedSMACOF._calibrate without the (M, M, features) array: the calibrated log
-        # distance summed term by term
-        i, j = np.nonzero(np.triu(pairs, 1))
-        L = np.log(np.maximum(D, lo_delta))
-        fit = fit_calibration(L[i, j], X, i, j, self.dissimilarity_degree, self.position_degree)
-        coef, target = fit.coef, fit.target
-        dd = self.dissimilarity_degree
-        expo = np.full(L.shape, coef[dd])
-        Lp = L
-        for p in range(dd):
-            expo += coef[p] * Lp
-            if p + 1 < dd:
-                Lp = Lp * L
-        u = (X - fit.centre) / fit.half  # the pair's midpoint features from the objects' own
-        x = 0.5 * (u[:, 0, None] + u[:, 0])
-        y = 0.5 * (u[:, 1, None] + u[:, 1])
-        for c, f in zip(coef[dd + 1:], _midpoint_terms(x, y, self.position_degree), strict=True):
-            expo += c * f
-        np.clip(expo, target.min() - 1.0, target.max() + 1.0, out=expo)
-        Dh = np.exp(expo)
-        Dh = 0.5 * (Dh + Dh.T)
-        np.fill_diagonal(Dh, 0.0)
-        return Dh, coef
-
-    def _embed(self, T, X, loc, fixed):
-        # the estimator's rounds (CalibratedSMACOF._refine), each re-embedding by the cached
-        # solver of this neighbour graph instead of weighted_smacof
-        if fixed is None:  # no anchors (never in OnlineMapper): the estimator's own embedding
-            return super()._embed(T, X, loc, fixed)
-        X, _, it = self._solver(loc, fixed).run(T, X, self.max_iter, self.tol)
-        return X, it
 
 
 class OnlineMapper:
@@ -291,20 +115,7 @@ class OnlineMapper:
         those a fold check asked for); n_fold_refits: those a fold check asked for; map: the
         last map (None before the first update).
 
-    Cost per update (``benchmarks/bench_online.py``: M = 50 objects, updates of 10 steps,
-    N = 2,000, CPU time, one BLAS thread; 25 fresh layouts per sensor): visibility (CAL-SMA),
-    median about 1.9 ms, 65x cheaper than rebuilding the map at N = 2,000 with ``build_map``;
-    the mean, the full refits included (5-6 per run: the amortised cost), 27x. Bearing
-    (BEARING-BA): the CAL-SMA update, plus the new steps' resection (O(k M)), plus every
-    ``bundle_every`` updates a joint round over all steps (O(N M) for the normal blocks and
-    O(N F^2 + F^3) for the Schur system, F the free objects: about 70 ms at N = 2,000, a seventh
-    of a rebuild), plus a full BEARING-BA fit at each CAL-SMA refit: median about 4-5 ms,
-    110-125x cheaper than rebuilding the BEARING-BA map (about 0.5-0.6 s), mean 34x; its map is
-    within 1 % of the offline BEARING-BA map's MPE on average (2 degrees of bearing noise), and
-    as exact (~5e-10 m) on perfect bearings. Masked visibility through a 90-degree view
-    (VIEW-BA, ``--env fov_deg=90``): median 8 ms, mean 45 ms, 25x cheaper than a rebuild
-    (1.15 s, a loaded machine), the refits (about 7 per run, 0.5-1.1 s each) most of it. See
-    ``docs/online-and-exploration.md`` for what each change bought.
+    What an update costs: ``docs/online-and-exploration.md#onlinemapper-cost-per-update``.
     """
 
     def __init__(self, anchor_ids, anchor_positions, *, sensor: str | None = None,

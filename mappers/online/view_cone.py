@@ -2,8 +2,8 @@
 
 ``build_map``'s default for masked visibility histories (a limited view), VIEW-BA
 (:mod:`mappers.viewpoints.view_cone`), estimates every step's viewpoint and heading with the objects.
-Refitting it costs about 0.9 s at N = 2,000 steps, so an online mapper that only refits on a
-geometric schedule returns a map of a quarter of the steps in between. :class:`OnlineView` keeps
+A refit costs most of a second at N = 2,000 steps, so an online mapper that only refits on a
+geometric schedule would return a stale map in between. :class:`OnlineView` keeps
 the adjustment's state, the objects, every step's viewpoint, the view's width and the visibility
 radius, between updates instead:
 
@@ -44,9 +44,9 @@ from mappers.viewpoints import ConeProblem, ViewAdjustment
 
 __all__ = ["OnlineView"]
 
-_REFINE_GROWTH = 1.25
+_REFINE_GROWTH = 1.25  # chosen on the tuning seeds: docs/online-and-exploration.md (VIEW-BA)
 """A refinement (:meth:`OnlineView.refine`) once the steps have grown by this factor since the
-last refit or refinement (1.5 maps as well on the tuning layouts, for a little less)."""
+last refit or refinement."""
 _GROWTH = 1.05
 """A joint round is due, whatever ``every`` says, once the steps have grown by this factor since
 the last round or refit."""

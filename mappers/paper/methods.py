@@ -1,4 +1,4 @@
-"""The paper's ten dimensionality-reduction methods (paper §3, Table 1), registered in
+"""The paper's ten dimensionality-reduction methods (Yairi 2007, §3, Table 1), registered in
 :data:`mappers.catalog.METHODS` with the paper's optimum as defaults and the protocol's grids.
 
 scikit-learn supplies PCA, kernel PCA, Isomap, LLE / Hessian LLE and the spectral embedding;

@@ -22,6 +22,7 @@ from mappers.smacof.weighted import (
     classical_mds,
     euclidean_distance_matrix,
     raw_stress,
+    squared_distance_matrix,
     weighted_smacof,
 )
 
@@ -38,5 +39,6 @@ __all__ = [
     "power_link_smacof",
     "raw_stress",
     "sparse_smacof",
+    "squared_distance_matrix",
     "weighted_smacof",
 ]

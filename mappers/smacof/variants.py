@@ -184,6 +184,11 @@ def _guttman(weights, X, fixed) -> GuttmanTransform:
 
 def _guttman_step(guttman: GuttmanTransform, targets, X, tol):
     """One Guttman transform towards ``targets``, and whether it moved the map by less than
-    ``tol`` of its extent."""
+    ``tol`` of its extent.
+
+    The update is :func:`mappers.smacof.weighted.weighted_smacof`'s (the same
+    :class:`~mappers.smacof.weighted.GuttmanTransform`); only the stopping rule differs: the
+    targets change at every step here, so the stress of one step's targets says nothing about
+    convergence, and the map's movement is watched instead."""
     X_new = guttman(guttman.W * targets, euclidean_distance_matrix(X), X)
     return X_new, np.abs(X_new - X).max() <= tol * max(np.abs(X_new).max(), 1e-12)

@@ -34,8 +34,18 @@ __all__ = [
     "classical_mds",
     "euclidean_distance_matrix",
     "raw_stress",
+    "squared_distance_matrix",
     "weighted_smacof",
 ]
+
+
+def squared_distance_matrix(X: np.ndarray) -> np.ndarray:
+    """(n, n) squared Euclidean distances between the rows of ``X`` (n, p), clipped at 0, no
+    checks; the diagonal is left as computed (rounding-small, not set to 0)."""
+    sq = np.einsum("ij,ij->i", X, X)
+    D2 = np.add.outer(sq, sq)
+    D2 -= 2.0 * (X @ X.T)
+    return np.maximum(D2, 0.0, out=D2)
 
 
 def euclidean_distance_matrix(X: np.ndarray) -> np.ndarray:
@@ -44,9 +54,7 @@ def euclidean_distance_matrix(X: np.ndarray) -> np.ndarray:
     Plain numpy for use inside loops: sklearn's ``pairwise_distances`` validates its input on
     every call, which dominates a SMACOF iteration at n = 50.
     """
-    sq = np.einsum("ij,ij->i", X, X)
-    D2 = sq[:, None] + sq[None, :] - 2.0 * (X @ X.T)
-    np.maximum(D2, 0.0, out=D2)
+    D2 = squared_distance_matrix(X)
     np.fill_diagonal(D2, 0.0)
     return np.sqrt(D2)
 
@@ -118,8 +126,14 @@ class GuttmanTransform:
 
     :func:`weighted_smacof` takes its steps with it; the SMACOF variants
     (:mod:`mappers.smacof.variants`), whose targets change at every step while the weights do
-    not, keep one instead of inverting V again per step. (The online CAL-SMA rounds keep their
-    own, ``mappers.online.mapper._AnchoredGuttman``: faster, without checks, equal to this to rounding.)
+    not, keep one instead of inverting V again per step.
+
+    Not shared with the online CAL-SMA rounds' ``mappers.online.cal_sma._AnchoredGuttman``,
+    which makes the same update another way: this one takes any non-negative weights, so V (or
+    V_ff) may be singular and is pseudo-inverted, and B(X) is built as a matrix; that one relies
+    on CAL-SMA's weights being positive for every pair (V_ff positive definite: a plain inverse)
+    and fuses B(X) X and the stress into fewer array passes. The results agree to rounding, not
+    bit for bit, and the offline maps (the paper's tables) stay on this one.
 
     Args:
         W: (n, n) symmetric non-negative weights, zero diagonal (checked by the caller).

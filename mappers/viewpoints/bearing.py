@@ -37,6 +37,9 @@ is not finite, the start map is returned. Each case is a :class:`BearingAdjustme
 heading at that step (one unknown heading per step, no calibration offset); a static world;
 bearings to the objects' centres. No motion model and no odometry: the steps are independent
 viewpoints, found from the history alone.
+
+References: Triggs et al., *Bundle Adjustment — A Modern Synthesis* (2000), for the adjustment
+and its Schur complement; Huber & Ronchetti, *Robust Statistics* (2009), for the weights.
 """
 
 from __future__ import annotations

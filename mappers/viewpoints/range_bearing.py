@@ -23,6 +23,9 @@ not finite, the start map is returned. Each case is a :class:`BearingAdjustmentW
 
 *Assumes*: one viewpoint per step, ranges and bearings to the objects' centres, a static world;
 no motion model and no odometry.
+
+References: Triggs et al., *Bundle Adjustment — A Modern Synthesis* (2000); Kabsch (1976) for
+the rigid fit; Huber & Ronchetti, *Robust Statistics* (2009), for the weights and the scale.
 """
 
 from __future__ import annotations

@@ -23,8 +23,7 @@ The steps:
 1. **The start map**, drawn by ``start`` (default ``dropout-blend``, the masked visibility
    default before this method).
 2. **The view's width**, a camera's calibration: ``fov_deg`` if given, else the width whose cone
-   explains the observed sets best on the start map (:func:`estimate_fov`; within one 15-degree
-   step of the truth for 60-, 90- and 180-degree cameras on our layouts).
+   explains the observed sets best on the start map (:func:`estimate_fov`).
 3. **Viewpoints**, per step, the best of a grid of positions x headings over the start map's
    bounding box (one (N, M) x (M, G) product), then ``pose_iters`` Newton steps each.
 4. **Joint Gauss-Newton** (Levenberg-Marquardt) of the viewpoints and the free objects, the
@@ -40,12 +39,12 @@ like a view cone: its loss per pair from the best viewpoints of the start map ab
 
 *Assumes*: the mask is a view cone centred on the heading (every object inside it observed at
 any distance, none outside: a range limit is not modelled); visibility is a range threshold up
-to misses; a static world; one viewpoint per step.
+to misses; a static world; one viewpoint per step. What it gains over its start, and what was
+tried: ``docs/imperfect-sensing.md``, section "VIEW-BA".
 
-Figures (``docs/imperfect-sensing.md``; N = 2000, 50 objects, a 90-degree view, mean non-anchor
-MPE, largest run in brackets): ``dropout-blend`` 0.074 m (0.278) -> 0.046 (0.139) on 20 tuning
-layouts, 0.063 (0.115) -> 0.043 (0.092) on 25 fresh ones, about 0.86 s per map with the start;
-on another simulator's histories (``benchmarks/bench_view_other_sim.py``) 0.139 -> 0.097.
+References: Triggs et al., *Bundle Adjustment — A Modern Synthesis* (2000), for the bundle
+adjustment and its Schur complement; Böhning & Lindsay (1988) for the bound on the logistic's
+curvature.
 """
 
 from __future__ import annotations
@@ -261,8 +260,8 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         grid, headings: the viewpoints' search grid (positions per side, headings).
         pose_iters: Newton steps of each viewpoint after the search.
         max_start_loss: the loss per pair of the start map (viewpoints fitted) above which the
-            mask is not read as a view cone and the start map is kept: a cone's mask gives
-            0.06-0.19 on our layouts, a 360-degree view with a 1 m range limit 0.58-0.61.
+            mask is not read as a view cone and the start map is kept (between a cone's mask
+            and a range limit's: ``docs/imperfect-sensing.md``, section "VIEW-BA", Guards).
         random_state: handed to the start methods.
 
     Attributes:

@@ -5,7 +5,8 @@ N = 2000, M = 50) to sum the pair's terms into the blocks of the normal equation
 array expressions that is some thirty temporaries of N x M and a scatter-add per block, about
 0.1 s a round; as a compiled loop it is a few milliseconds. numba is the well-kept way to write
 such a loop in Python (as :mod:`lfmdr_gym.sim.kernels` does for the world); it is imported, and the
-loops compiled (cached on disk), on first use, so ``import mappers`` does not pay for it.
+loops compiled (cached on disk), on first use (:mod:`mappers.core.jit`), so ``import mappers``
+does not pay for it.
 
 The model (one pair: viewpoint ``c`` with heading ``theta``, object ``p``, ``d = |p - c|``,
 ``alpha`` the object's angle off the heading; ``o`` whether the step observed the object, ``b``
@@ -25,22 +26,14 @@ from __future__ import annotations
 
 import math
 
+from mappers.core.jit import compiled_on_first_use
+
 __all__ = ["cone_blocks", "cone_cost"]  # noqa: F822 - bound by __getattr__
 
 FLOOR = 1e-3
 """The visibility bit's probability floor ``f``."""
 
-
-def __getattr__(name: str):
-    """Compile the loops on first use (PEP 562; numba costs 90 MB and 0.25 s to import)."""
-    if name not in __all__:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    from numba import njit
-
-    g = globals()
-    for public in __all__:
-        g[public] = njit(cache=True, nogil=True)(g["_" + public])
-    return g[name]
+__getattr__ = compiled_on_first_use(globals(), __all__)
 
 
 def _cone_cost(P, C, obs, seen, cos_h, R, s_c, s_r, eps):  # pragma: no cover - compiled

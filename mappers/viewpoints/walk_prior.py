@@ -13,8 +13,8 @@ consecutive steps (the EM statistic of ``sigma``). The Gaussian is applied as tw
 convolutions on the full rectangular grid (the kept cells scattered into it), only over the
 bounding box of the cells that carry mass (above :data:`CUTOFF` of the largest), with loops
 along contiguous rows that the compiler vectorises. The loops are compiled with
-numba, imported on first use (as :mod:`lfmdr_gym.sim.kernels`: numba costs about 0.25 s to import,
-which the other mappers should not pay), and cached on disk.
+numba on first use (:mod:`mappers.core.jit`: the other mappers should not pay for importing
+numba) and cached on disk.
 """
 
 from __future__ import annotations
@@ -22,6 +22,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
+from mappers.core.jit import compile_in_place
 
 __all__ = ["forward_backward", "gaussian_taps"]
 
@@ -96,13 +98,10 @@ def forward_backward(E, top, init, cells, shape, sigma, h, starts, *, want_disp=
 def _compile() -> None:
     """Compile the loops below (the helpers first: the compiled recursion calls them as globals)
     and keep the recursion in ``_compiled``."""
-    from numba import njit
-
     g = globals()
-    jit = njit(cache=True, nogil=True, fastmath=True)
-    for name in ("_conv", "_scatter", "_gather", "_unscatter"):
-        g[name] = jit(g[name])
-    _compiled["fb"] = jit(g["_forward_backward"])
+    compile_in_place(g, ("_conv", "_scatter", "_gather", "_unscatter", "_forward_backward"),
+                     fastmath=True)
+    _compiled["fb"] = g["_forward_backward"]
 
 
 def _conv(src, tmp, tmp_t, dst_t, box, kx, ky, nx, ny):  # pragma: no cover - compiled
