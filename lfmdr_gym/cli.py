@@ -96,12 +96,44 @@ def _add_method_options(p: argparse.ArgumentParser, default: str) -> None:
                         "n_neighbors=7, sigma2=1, d=4")
 
 
-def _add_env_keywords(p: argparse.ArgumentParser, flag: str) -> None:
-    """The env keywords option (``--env`` for reproduce, ``--env-kw`` where --env is an id)."""
-    p.add_argument(flag, action="append", default=None, metavar="NAME=VALUE", dest="env_kwargs",
+_ENV_ID_HELP = ("environment id, one of lfmdr_gym.ENV_IDS (LFMDR-Visibility-v0, LFMDR-Bearing-v0, "
+                "LFMDR-Range-v0, LFMDR-RangeBearing-v0, LFMDR-VisibilityBearing-v0, "
+                "LFMDR-Camera-v0)")
+
+
+def _version() -> str:
+    """The installed package's version (its metadata), or a note that it is not installed."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("lfmdr")
+    except PackageNotFoundError:
+        return "(version unknown: the lfmdr package is not installed)"
+
+
+def _add_env_keywords(p: argparse.ArgumentParser) -> None:
+    """``--env-kw NAME=VALUE``: the env keywords, in every command that makes an env (``--env``
+    is always an env id)."""
+    p.add_argument("--env-kw", action="append", default=None, metavar="NAME=VALUE",
+                   dest="env_kwargs",
                    help="env keyword (repeatable), e.g. fov_deg=90, max_range=1.5, "
                         "bearing_noise_deg=2, miss_rate=0.5, line_of_sight=true: imperfect "
                         "sensing (see LFMDREnv); values are read as numbers, true/false or none")
+
+
+class _OldEnvKeyword(argparse.Action):
+    """``reproduce --env NAME=VALUE``, the older spelling of ``--env-kw``: still accepted, with a
+    deprecation message naming the new flag, in argparse's style on stderr (everywhere else
+    ``--env`` is an env id)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: Any, option_string: str | None = None) -> None:
+        if "=" not in str(values):
+            parser.error(f"argument --env: reproduce takes no env id ({values!r}): its env is "
+                         "chosen by --sensor; env keywords are given as --env-kw NAME=VALUE")
+        print(f"{parser.prog}: warning: --env {values} is deprecated, write --env-kw {values} "
+              "(--env is an env id in the other commands)", file=sys.stderr)
+        setattr(namespace, self.dest, [*(getattr(namespace, self.dest, None) or []), values])
 
 
 def _add_reproduce(sub: Any) -> None:
@@ -120,7 +152,7 @@ def _add_reproduce(sub: Any) -> None:
             "command resumes where it stopped, after Ctrl-C or a kill alike, and computes again "
             "any unit whose mapper failed. Other settings on the same --out are refused. "
             "Episodes are cached in --out/histories.",
-            "With --env keywords that limit sensing (fov_deg, max_range, noise, dropouts) the "
+            "With --env-kw keywords that limit sensing (fov_deg, max_range, noise, dropouts) the "
             "histories are masked and the methods default to those that map masked histories.",
         ),
     )
@@ -138,7 +170,9 @@ def _add_reproduce(sub: Any) -> None:
                         "comma-separated, case-insensitive (default: every method made for "
                         "complete histories)")
     p.add_argument("--seed", type=int, default=0, help="base seed of layouts and poses")
-    _add_env_keywords(p, "--env")
+    _add_env_keywords(p)
+    p.add_argument("--env", action=_OldEnvKeyword, dest="env_kwargs", metavar="NAME=VALUE",
+                   help=argparse.SUPPRESS)  # the older spelling of --env-kw (FutureWarning)
     p.add_argument("--jobs", type=_jobs, default=1,
                    help="worker processes on this machine (-1: all cores); BLAS is kept to one "
                         "thread per worker")
@@ -160,16 +194,14 @@ def _add_run(sub: Any) -> None:
             "MPE and MOE, and write history.npz, scores.csv, map.csv and map.png into --out."
         ),
     )
-    p.add_argument("--env", default="LFMDR-Visibility-v0", metavar="ID",
-                   help="environment id (LFMDR-Visibility-v0, LFMDR-Bearing-v0, LFMDR-Range-v0, "
-                        "LFMDR-RangeBearing-v0, LFMDR-VisibilityBearing-v0, LFMDR-Camera-v0)")
+    p.add_argument("--env", default="LFMDR-Visibility-v0", metavar="ID", help=_ENV_ID_HELP)
     p.add_argument("--steps", type=_positive_int, default=2000, help="episode length N")
     _add_method_options(p, "the default for the env's histories, as build_map chooses")
     p.add_argument("--seed", type=int, default=0, help="seed of layout, start pose and walk")
     p.add_argument("--every", type=_positive_int, default=None,
                    help="checkpoint interval; must divide --steps (default: 500 for visibility, "
                         "200 otherwise, plus N itself)")
-    _add_env_keywords(p, "--env-kw")
+    _add_env_keywords(p)
     p.add_argument("--out", default="lfmdr-run", metavar="DIR", help="output directory")
     p.add_argument("--online", action="store_true",
                    help="map online as the robot moves (mappers.OnlineMapper, updated every 10 "
@@ -209,11 +241,11 @@ def _add_collect(sub: Any) -> None:
         ),
     )
     p.add_argument("--env", default="LFMDR-Visibility-v0", metavar="ID",
-                   help="environment id (a fused one, e.g. LFMDR-RangeBearing-v0 or "
-                        "LFMDR-Camera-v0, records a fused history)")
+                   help=_ENV_ID_HELP + "; a fused one (LFMDR-RangeBearing-v0, "
+                        "LFMDR-VisibilityBearing-v0, LFMDR-Camera-v0) records a fused history")
     p.add_argument("--steps", type=_positive_int, default=2000, help="episode length N")
     p.add_argument("--seed", type=int, default=0, help="seed of layout, start pose and walk")
-    _add_env_keywords(p, "--env-kw")
+    _add_env_keywords(p)
     p.add_argument("--out", required=True, metavar="FILE.npz", help="history file to write")
     p.add_argument("--policy", default="random-walk", metavar="NAME",
                    help=_POLICY_HELP)
@@ -281,6 +313,8 @@ def _add_compare(sub: Any) -> None:
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``lfmdr`` (exposed for tests and documentation)."""
     parser = argparse.ArgumentParser(prog="lfmdr", description=_DESCRIPTION, formatter_class=_Formatter)
+    parser.add_argument("--version", action="version", version=f"lfmdr {_version()}",
+                        help="print the installed version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for add in (_add_reproduce, _add_run, _add_map, _add_collect, _add_mrclam, _add_compare):
         add(sub)

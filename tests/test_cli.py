@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
 import signal
@@ -55,6 +56,8 @@ def test_help_explains_every_option(command, capsys):
     text = capsys.readouterr().out
     sub = build_parser()._subparsers._group_actions[0].choices[command]
     for action in sub._actions:
+        if action.help == argparse.SUPPRESS:  # an older spelling kept working, not advertised
+            continue
         if action.option_strings and action.dest != "help":
             assert action.help, f"{command} {action.option_strings} has no help"
             assert action.option_strings[0] in text
@@ -336,3 +339,59 @@ def test_the_policy_help_names_every_registered_policy():
     from lfmdr_gym.cli import _POLICY_HELP
 
     assert _POLICY_HELP.endswith("(" + ", ".join(POLICIES) + ")")
+
+
+# ------------------------------------------------------------------ a new user's first tries (issue 32)
+def test_version_prints_the_package_version(capsys):
+    from importlib.metadata import version
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out.strip() == f"lfmdr {version('lfmdr')}"
+
+
+@pytest.mark.parametrize("command", ["collect", "run"])
+def test_an_unknown_env_id_is_a_clear_error_naming_the_registered_ids(command, tmp_path, capsys):
+    from lfmdr_gym import ENV_IDS
+
+    out = str(tmp_path / ("walk.npz" if command == "collect" else "run"))
+    err = _error([command, "--env", "LFMDR-Foo-v0", "--steps", "10", "--out", out], capsys)
+    assert err.startswith(f"lfmdr {command}: error: unknown env id 'LFMDR-Foo-v0'")
+    assert all(env_id in err for env_id in ENV_IDS)
+
+
+def test_the_env_id_help_names_every_registered_id():
+    from lfmdr_gym import ENV_IDS
+    from lfmdr_gym.cli import _ENV_ID_HELP
+
+    assert _ENV_ID_HELP.endswith("(" + ", ".join(ENV_IDS) + ")")
+
+
+def test_env_is_an_env_id_and_env_kw_an_env_keyword_in_every_command():
+    parser = build_parser()
+    commands = parser._subparsers._group_actions[0].choices
+    for name in ("reproduce", "run", "collect"):
+        shown = {a.option_strings[0]: a.dest for a in commands[name]._actions
+                 if a.option_strings and a.help != argparse.SUPPRESS}
+        assert shown["--env-kw"] == "env_kwargs", name
+        assert shown.get("--env", "env") == "env", name  # never the keywords
+    for name in ("run", "collect"):
+        args = parser.parse_args([name, "--env", "LFMDR-Bearing-v0", "--env-kw", "fov_deg=90",
+                                  "--out", "x.npz"])
+        assert (args.env, args.env_kwargs) == ("LFMDR-Bearing-v0", ["fov_deg=90"])
+    args = parser.parse_args(["reproduce", "--sensor", "bearing", "--env-kw", "fov_deg=90",
+                              "--env-kw", "max_range=1.5"])
+    assert args.env_kwargs == ["fov_deg=90", "max_range=1.5"]
+
+
+def test_reproduce_env_keyword_old_spelling_still_works_with_a_deprecation_message(capsys):
+    args = build_parser().parse_args(["reproduce", "--sensor", "bearing", "--env", "fov_deg=90",
+                                      "--env-kw", "max_range=1.5"])
+    assert args.env_kwargs == ["fov_deg=90", "max_range=1.5"]
+    err = capsys.readouterr().err
+    assert "--env fov_deg=90 is deprecated" in err and "--env-kw fov_deg=90" in err
+    with pytest.raises(SystemExit) as exc:  # an env id is not what reproduce's --env meant
+        build_parser().parse_args(["reproduce", "--sensor", "bearing", "--env", "LFMDR-Bearing-v0"])
+    assert exc.value.code == 2
+    assert "--env-kw NAME=VALUE" in capsys.readouterr().err

@@ -55,7 +55,8 @@ def _sensor_of(env_id: str) -> str:
     from lfmdr_gym import ENV_IDS
 
     if env_id not in ENV_IDS:
-        raise ValueError(f"unknown env id {env_id!r}; choose from {list(ENV_IDS)}")
+        raise ValueError(f"unknown env id {env_id!r}; the registered LFMDR env ids are "
+                         f"{list(ENV_IDS)}")
     return ENV_IDS[env_id]
 
 
