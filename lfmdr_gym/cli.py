@@ -205,8 +205,10 @@ def _add_run(sub: Any) -> None:
     p.add_argument("--out", default="lfmdr-run", metavar="DIR", help="output directory")
     p.add_argument("--online", action="store_true",
                    help="map online as the robot moves (mappers.OnlineMapper, updated every 10 "
-                        "steps) and write the growing map beside the robot as DIR/live.gif "
-                        "(needs matplotlib: pip install lfmdr[plots])")
+                        "steps); writes history.npz, scores.csv (the online map's error at every "
+                        "update), map.csv and map.png (the final online map) and live.gif (the "
+                        "growing map beside the robot; needs matplotlib: pip install "
+                        "'lfmdr[plots]')")
     p.add_argument("--policy", default="random-walk", metavar="NAME",
                    help=_POLICY_HELP)
     p.set_defaults(handler=_cmd_run)
@@ -357,58 +359,63 @@ def _print_scores(rows: Sequence[dict[str, Any]]) -> None:
         print(line)
 
 
+def _print_warnings(notes: Sequence[str]) -> None:
+    """A map's warnings (``Map.warnings``), one line each."""
+    for note in notes:
+        print(f"warning: {note}")
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from lfmdr_gym.experiments.env_settings import parse_env_kwargs
     from lfmdr_gym.experiments.mapping import run_episode
+    from lfmdr_gym.experiments.params import method_label
 
     if args.online:
         return _cmd_run_online(args)
     rows = run_episode(args.env, args.steps, args.method, seed=args.seed, every=args.every,
                        params=args.param, out=args.out, policy=args.policy,
                        env_kwargs=parse_env_kwargs(args.env_kwargs))
-    print(f"{args.env}, seed {args.seed}, {rows[-1]['method']} ({rows[-1]['param']})")
+    print(f"{args.env}, seed {args.seed}, {method_label(rows[-1]['method'], rows[-1]['param'])}")
     _print_scores(rows)
+    _print_warnings(rows[-1]["warnings"])
     print(f"wrote {args.out}/history.npz, scores.csv, map.csv, map.png")
     return 0
 
 
 def _cmd_run_online(args: argparse.Namespace) -> int:
-    from lfmdr_gym.experiments.env_settings import check_env_kwargs, parse_env_kwargs
-    from lfmdr_gym.experiments.live import online_episode, save_gif
-    from lfmdr_gym.experiments.mapping import _sensor_of, checkpoints_for
-    from lfmdr_gym.experiments.params import user_params
-    from lfmdr_gym.experiments.store import ensure_writable_dir
-    from mappers import resolve_method
+    from lfmdr_gym.experiments.env_settings import parse_env_kwargs
+    from lfmdr_gym.experiments.live import run_online
+    from lfmdr_gym.experiments.params import method_label
 
-    sensor = _sensor_of(args.env)
-    points = set(checkpoints_for(args.steps, args.every, sensor))
-    out = ensure_writable_dir(args.out)
-    env_kwargs, masked = check_env_kwargs(sensor, parse_env_kwargs(args.env_kwargs))
-    label = resolve_method(args.method, sensor, masked=masked).label
-    frames, rows, _ = online_episode(args.env, args.steps, seed=args.seed, policy=args.policy,
-                                     method=args.method, params=user_params(label, args.param),
-                                     frame_every=max(args.steps // 50, 1), env_kwargs=env_kwargs)
-    print(f"{args.env}, seed {args.seed}, policy {args.policy}, online {label}")
+    run = run_online(args.env, args.steps, args.method, out=args.out, seed=args.seed,
+                     every=args.every, params=args.param, policy=args.policy,
+                     env_kwargs=parse_env_kwargs(args.env_kwargs))
+    print(f"{args.env}, seed {args.seed}, policy {args.policy}, online "
+          f"{method_label(run.method, run.params)}")
     print(f"{'steps':>6s} {'MPE non-anchor [m]':>19s} {'mapped':>7s}")
-    for r in rows:
-        if r["n_steps"] in points:
-            print(f"{r['n_steps']:6d} {r['mpe']:19.4f} {r['mapped']:7d}")
-    path = save_gif(frames, rows, out / "live.gif", title=f"{args.env} ({args.policy})")
-    print(f"wrote {path}")
+    unmapped = [r for r in run.checkpoints if r["note"]]
+    for r in run.checkpoints:
+        mpe = f"{r['mpe']:19.4f}" if not r["note"] else f"{'-':>19s}"
+        print(f"{r['n_steps']:6d} {mpe} {r['mapped']:7d}" + ("  no map yet" if r["note"] else ""))
+    if unmapped:  # why: what the mapper said at the last of them
+        print(f"no map at {unmapped[-1]['n_steps']} steps: {unmapped[-1]['note']}")
+    if not run.rows[-1]["note"]:  # (else the final map's warnings are that reason)
+        _print_warnings(run.map.warnings)
+    print("wrote " + ", ".join(str(p) for p in run.written))
     return 0
 
 
 def _cmd_map(args: argparse.Namespace) -> int:
     from lfmdr_gym.experiments.mapping import map_history_file
+    from lfmdr_gym.experiments.params import method_label
 
     info = map_history_file(args.history, args.method, params=args.param,
                             n_steps=args.steps, out=args.out)
     m = info["map"]
-    print(f"{info['history']!r}: {info['method']} ({info['param']})")
+    print(f"{info['history']!r}: {method_label(info['method'], info['param'])}")
     if m.unmapped:
         print(f"unmapped objects: {list(m.unmapped)}")
-    for w in getattr(m, "warnings", ()):
-        print(f"warning: {w}")
+    _print_warnings(m.warnings)
     if "mpe" in info:
         print(f"MPE {info['mpe']:.4f} m (non-anchor {info['mpe_nonanchor']:.4f} m), "
               f"MOE {info['moe']:.2f} %")
@@ -436,7 +443,7 @@ def _cmd_mrclam(args: argparse.Namespace) -> int:
 
     from lfmdr_gym.datasets.mrclam import MRCLAMDataWarning
     from lfmdr_gym.experiments.mrclam import map_mrclam_run
-    from lfmdr_gym.experiments.params import parse_params
+    from lfmdr_gym.experiments.params import method_label, parse_params
 
     kwargs: dict[str, Any] = {"out": args.out, "bin_width": args.bin_width,
                               "groundtruth_fixes": args.groundtruth_fixes,
@@ -449,11 +456,10 @@ def _cmd_mrclam(args: argparse.Namespace) -> int:
         warnings.simplefilter("ignore", MRCLAMDataWarning)  # they come back in result.warnings
         result = map_mrclam_run(args.run_dir, args.sensor, method=args.method, **kwargs,
                                 **parse_params(args.param))
-    params = ", ".join(f"{k}={v}" for k, v in result.params.items()) or "-"
-    print(f"{result.run} ({result.sensor}), {result.method} ({params}), anchors "
+    params = ", ".join(f"{k}={v}" for k, v in result.params.items())
+    print(f"{result.run} ({result.sensor}), {method_label(result.method, params)}, anchors "
           f"{list(result.anchor_subjects)}")
-    for w in result.warnings:
-        print(f"warning: {w}")
+    _print_warnings(result.warnings)
     non_anchor = ~np.isin(result.subjects, result.anchor_subjects)
     mapped = int(np.sum(non_anchor & np.isfinite(result.positions).all(axis=1)))
     which = ("the" if mapped == int(non_anchor.sum())

@@ -159,17 +159,20 @@ def draw_map(
     truth: ArrayLike | None = None,
     anchor_ids: ArrayLike = (),
     size: int = 480,
+    view_half: float | None = None,
 ) -> np.ndarray:
     """Draw a map as an (size, size, 3) uint8 RGB image, in the arena's frame.
 
     The estimated positions (M, 2) are blue discs (NaN rows, objects not mapped yet, are left
     out); with ``truth`` (M, 2) the true objects are grey and a red line joins each estimate to
-    its truth; anchors are ringed in red at their (known) positions.
+    its truth; anchors are ringed in red at their (known) positions. ``view_half``: half-side
+    [m] of the square drawn, centred on the arena (default ``arena_half``; larger shows the
+    estimates that fall outside the arena, the walls then drawn smaller).
     """
     if size < 32:
         raise ValueError(f"size must be >= 32 pixels, got {size}")
     est = np.asarray(estimates, dtype=np.float64).reshape(-1, 2)
-    canvas = _Canvas(size, arena_half)
+    canvas = _Canvas(size, arena_half if view_half is None else max(view_half, arena_half))
     a = arena_half
     corners = np.array([(-a, -a), (a, -a), (a, a), (-a, a)])
     canvas.lines(corners, np.roll(corners, -1, axis=0), WALL)

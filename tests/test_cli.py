@@ -395,3 +395,105 @@ def test_reproduce_env_keyword_old_spelling_still_works_with_a_deprecation_messa
         build_parser().parse_args(["reproduce", "--sensor", "bearing", "--env", "LFMDR-Bearing-v0"])
     assert exc.value.code == 2
     assert "--env-kw NAME=VALUE" in capsys.readouterr().err
+
+
+def _promised_files(help_text: str) -> set[str]:
+    import re
+
+    return set(re.findall(r"\b[a-z_]+\.(?:npz|csv|png|gif)\b", " ".join(help_text.split())))
+
+
+def test_run_online_writes_every_file_its_help_promises(tmp_path, capsys):
+    pytest.importorskip("matplotlib")
+    from lfmdr_gym.history import History
+
+    sub = build_parser()._subparsers._group_actions[0].choices["run"]
+    online = next(a for a in sub._actions if a.dest == "online")
+    promised = _promised_files(online.help)
+    assert {"history.npz", "scores.csv", "map.csv", "map.png", "live.gif"} <= promised
+    assert main(["run", "--online", "--env", "LFMDR-Bearing-v0", "--steps", "40", "--every", "20",
+                 "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    for name in promised:
+        assert (tmp_path / name).stat().st_size > 0, name
+        assert name in out
+    history = History.load(tmp_path / "history.npz")
+    assert history.sensor == "bearing" and history.n_steps == 40
+    scores = (tmp_path / "scores.csv").read_text().splitlines()
+    assert scores[0] == "n_steps,method,param,mpe_nonanchor,mapped,note" and len(scores) == 1 + 4
+    assert len((tmp_path / "map.csv").read_text().splitlines()) == 1 + history.n_objects
+    # the history written is the episode mapped: lfmdr map reads it like any other
+    assert main(["map", str(tmp_path / "history.npz"), "--out", str(tmp_path / "again")]) == 0
+
+
+def test_run_online_says_why_there_is_no_map_instead_of_nan(tmp_path, capsys):
+    pytest.importorskip("matplotlib")
+    assert main(["run", "--online", "--env-kw", "fov_deg=90", "--steps", "60", "--every", "30",
+                 "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    table = [line for line in out.splitlines() if line.strip()[:2].isdigit()]
+    assert table and all("nan" not in line for line in table), out
+    assert all(line.endswith("no map yet") for line in table), out
+    why = next(line for line in out.splitlines() if line.startswith("no map at 60 steps: "))
+    assert "sensed so far" in why  # the mapper's reason: too few anchors sensed yet
+    assert why.split(": ", 1)[1] in (tmp_path / "scores.csv").read_text()  # the note column
+
+
+def test_a_method_without_parameters_is_shown_by_its_name_alone(tmp_path, capsys):
+    path = tmp_path / "walk.npz"
+    assert main(["collect", "--steps", "100", "--out", str(path)]) == 0
+    assert main(["map", str(path), "--method", "CAL-SMA", "--out", str(tmp_path / "m")]) == 0
+    out = capsys.readouterr().out
+    assert ": CAL-SMA\n" in out and "(-)" not in out
+    assert main(["run", "--method", "LPCA", "--steps", "100", "--every", "100",
+                 "--out", str(tmp_path / "r")]) == 0
+    out = capsys.readouterr().out
+    assert "seed 0, LPCA\n" in out and "(-)" not in out
+
+
+def test_run_and_map_print_the_map_warnings(tmp_path, capsys, monkeypatch):
+    import mappers
+
+    real = mappers.build_map
+
+    def warned(*args, **kwargs):
+        import dataclasses
+
+        return dataclasses.replace(real(*args, **kwargs), warnings=("a note from the mapper",))
+
+    monkeypatch.setattr(mappers, "build_map", warned)
+    assert main(["run", "--steps", "100", "--every", "100", "--out", str(tmp_path / "r")]) == 0
+    assert "warning: a note from the mapper" in capsys.readouterr().out
+    assert "a note from the mapper" in (tmp_path / "r" / "scores.csv").read_text()
+    assert main(["map", str(tmp_path / "r" / "history.npz"), "--out", str(tmp_path / "m")]) == 0
+    assert "warning: a note from the mapper" in capsys.readouterr().out
+
+
+def test_the_live_gif_panels_show_the_walls_and_every_estimate(monkeypatch):
+    """The arena panel keeps its one-pixel walls when scaled down; the map panel widens beyond
+    the walls to show estimates that fall outside the arena (they used to be cut off)."""
+    from types import SimpleNamespace
+
+    import mappers
+    from lfmdr_gym.experiments.live import online_episode
+    from lfmdr_gym.render import ESTIMATE, WALL
+
+    class Far:  # a map whose estimates lie outside the arena, as an early online map's may
+        def __init__(self, anchor_ids, anchor_positions, **kwargs):
+            self.anchors = np.asarray(anchor_ids)
+
+        def update(self, columns, mask=None):
+            positions = np.tile([[2.0, 0.0]], (50, 1))
+            positions[self.anchors] = [[0.0, 0.0]]
+            return SimpleNamespace(positions=positions, warnings=())
+
+    monkeypatch.setattr(mappers, "OnlineMapper", Far)
+    frames, rows, _ = online_episode("LFMDR-Visibility-v0", 20, frame_every=20, size=240)
+    frame = frames[-1][1]
+    arena, picture = frame[:, :240], frame[:, 240:]
+    dark = np.all(arena < 200, axis=2)  # walls (drawn dark, averaged with the background)
+    assert dark[:, -8:].sum(axis=0).max() > 200 and dark[-8:].sum(axis=1).max() > 200
+    wall = np.argwhere(np.all(picture == WALL, axis=2))
+    blue = np.argwhere(np.all(picture == ESTIMATE, axis=2))
+    assert blue.size and blue[:, 1].max() > wall[:, 1].max()  # drawn, right of the east wall
+    assert rows[-1]["mapped"] == 50
