@@ -216,6 +216,44 @@ def test_map_warnings_name_landmark_subjects_not_rows(tmp_path):
     assert any("LOC-SMA" in w and groups in w for w in res.warnings), res.warnings
 
 
+def test_map_png_keeps_its_title_and_every_warning_inside_the_figure(tmp_path, monkeypatch):
+    pytest.importorskip("matplotlib")
+    from lfmdr_gym.experiments import figures
+
+    drawn = {}
+    real = figures.atomic_savefig
+
+    def keep(fig, path, **kwargs):
+        drawn["fig"] = fig
+        return real(fig, path, **kwargs)
+
+    monkeypatch.setattr(figures, "atomic_savefig", keep)
+    rng = np.random.default_rng(4)
+    truth = {s: ((0.0, 0.0) if k < 6 else (0.0, 12.0)) + rng.uniform(-1, 1, 2)
+             for k, s in enumerate(range(6, 18))}
+    run = _write_run(tmp_path / "Clustered", truth,
+                     _simulate_rows(truth, n_images=1200, max_range=4.0, seed=5))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MRCLAMDataWarning)
+        res = map_mrclam_run(run, "visibility", robots=(1, 2, 3), out=tmp_path / "o")
+    assert len(res.warnings) >= 2 and res.png_path.is_file()
+    fig = drawn["fig"]
+    renderer = fig.canvas.get_renderer()
+    box = fig.bbox
+    title = fig.axes[0].title
+    notes = [t for t in fig.findobj(lambda a: hasattr(a, "get_text"))
+             if str(t.get_text()).startswith("warning: ")]
+    assert title.get_text().startswith("Clustered visibility") and len(notes) == 1
+    shown = " ".join(notes[0].get_text().replace("warning: ", "").split())
+    for w in res.warnings:  # every warning in full, not its first 80 characters
+        assert " ".join(w.split()) in shown, w
+    for t in (title, notes[0]):
+        ext = t.get_window_extent(renderer)
+        assert box.x0 - 1 <= ext.x0 and ext.x1 <= box.x1 + 1, t.get_text()[:60]
+        assert box.y0 - 1 <= ext.y0 and ext.y1 <= box.y1 + 1, t.get_text()[:60]
+    assert not fig.axes[0].get_window_extent(renderer).overlaps(notes[0].get_window_extent(renderer))
+
+
 def test_loader_robot_subset_and_bad_arguments(tmp_path):
     run = _tiny_run(tmp_path)
     with warnings.catch_warnings():
