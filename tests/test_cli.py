@@ -497,3 +497,42 @@ def test_the_live_gif_panels_show_the_walls_and_every_estimate(monkeypatch):
     blue = np.argwhere(np.all(picture == ESTIMATE, axis=2))
     assert blue.size and blue[:, 1].max() > wall[:, 1].max()  # drawn, right of the east wall
     assert rows[-1]["mapped"] == 50
+
+
+def test_the_table_footer_says_plainly_what_the_paper_text_lacks(tmp_path):
+    from lfmdr_gym.experiments.figures import write_table
+
+    rows = [{"method": "LPCA", "param": "-", "n_steps": 100, "mpe": 1.0, "moe": 10.0,
+             "mpe_nonanchor": 1.1, "error": ""}]
+    for sensor in ("visibility", "bearing"):
+        write_table(rows, tmp_path, sensor=sensor, n_steps=100, methods=["LPCA"])
+        footer = (tmp_path / "table.md").read_text().splitlines()[-1]
+        assert footer.startswith("Paper: Yairi 2007, Table") and "seed" not in footer
+    assert "numbers are missing" in footer
+    write_table(rows, tmp_path, sensor="visibility", n_steps=100, methods=["LPCA"])
+    footer = (tmp_path / "table.md").read_text().splitlines()[-1]
+    assert "only three of its five graph-based methods" in footer and "without saying" in footer
+
+
+@pytest.mark.parametrize("missing", ["pygame", "display"])
+def test_human_rendering_without_pygame_or_a_display_names_the_project_extra(missing, monkeypatch):
+    import gymnasium as gym
+
+    from lfmdr_gym import ENV_IDS
+
+    if missing == "pygame":
+        monkeypatch.setitem(sys.modules, "pygame", None)  # import pygame -> ImportError
+    else:
+        pytest.importorskip("pygame")
+        for name in ("DISPLAY", "WAYLAND_DISPLAY", "SDL_VIDEODRIVER"):
+            monkeypatch.delenv(name, raising=False)
+        monkeypatch.setattr(sys, "platform", "linux")
+    for env_id in ENV_IDS:
+        # gym.make hands "human" to the env (no HumanRendering wrapper, whose error asked for
+        # gymnasium[classic-control] at the first step): the env says what to install
+        with pytest.raises(Exception) as exc:
+            env = gym.make(env_id, render_mode="human")
+            env.reset(seed=0)
+            env.step(env.action_space.sample())
+        assert 'pip install "lfmdr[human]"' in str(exc.value), str(exc.value)
+        assert "classic-control" not in str(exc.value)

@@ -33,8 +33,10 @@ __all__ = [
     "write_table",
 ]
 
-# The paper's figures as far as the seed's text conversion keeps them (Tables 1 and 2, figures 6, 7 and 9). Parameters are
-# in the paper's notation; "mpe"/"moe" None where the pairing was lost.
+# The paper's figures as far as the text of the paper we have keeps them (Tables 1 and 2,
+# figures 6, 7 and 9). Parameters are in the paper's notation. Table 1's text lists every
+# method's parameter in order, but MPE and MOE for only three of the five graph-based methods,
+# without saying which: those rows carry a "note" instead of "mpe"/"moe".
 PAPER: dict[str, dict[str, dict[str, Any]]] = {
     "visibility": {
         "LPCA": {"param": "-", "mpe": 1.055, "moe": 18.19},
@@ -55,9 +57,14 @@ PAPER: dict[str, dict[str, dict[str, Any]]] = {
     },
 }
 PAPER_SOURCE = {
-    "visibility": "Yairi 2007, Table 1 (graph-method pairings lost in the seed's conversion)",
-    "bearing": "Yairi 2007, Table 2 (numbers lost in the seed's conversion; remarks from §4.4.2)",
+    "visibility": "Yairi 2007, Table 1. The text of the paper we have gives every method's "
+                  "parameter, but MPE and MOE for only three of its five graph-based methods "
+                  "(0.177, 0.241 and 0.192 m) without saying which method each belongs to, so "
+                  "their rows give the range; its text says SDE's error is the lowest",
+    "bearing": "Yairi 2007, Table 2, whose numbers are missing from the text of the paper we "
+               "have; the remarks are from its §4.4.2",
 }
+"""The last line of ``table.md``: where the paper's column comes from, and what it lacks."""
 
 PAPER_EXAMPLES: dict[str, tuple[str, ...]] = {
     "visibility": ("LPCA", "SDE"),  # figures 6 and 7
