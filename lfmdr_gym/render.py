@@ -2,7 +2,7 @@
 
 :func:`draw_frame` is a pure function of the geometry and the current readings, so it draws
 logged data as well as the live environment. :class:`HumanViewer` shows frames in a pygame
-window for ``render_mode="human"`` (optional extra: ``pip install lfmdr[human]``).
+window for ``render_mode="human"`` (optional extra: ``pip install "lfmdr[human]"``).
 """
 
 from __future__ import annotations
@@ -189,9 +189,23 @@ def draw_map(
     return canvas.img
 
 
+class _RenderModes(list):
+    """The render modes this machine can show (iterating gives them: Gymnasium's ``check_env``
+    renders each), which also answers yes to ``"human" in modes`` where "human" cannot work,
+    so that ``gym.make(id, render_mode="human")`` hands "human" to the env, whose error says
+    what is missing (``pip install "lfmdr[human]"``, or a display), instead of wrapping the env
+    in Gymnasium's HumanRendering, which fails at the first step asking for
+    ``gymnasium[classic-control]``."""
+
+    def __contains__(self, mode: object) -> bool:
+        return mode == "human" or super().__contains__(mode)
+
+
 def available_render_modes() -> list[str]:
-    """``"rgb_array"`` always (pure numpy), ``"human"`` where pygame and a display exist."""
-    return ["rgb_array"] if human_rendering_error() is not None else ["rgb_array", "human"]
+    """``"rgb_array"`` always (pure numpy), ``"human"`` where pygame and a display exist (the
+    list answers yes to ``"human" in ...`` regardless: see :class:`_RenderModes`)."""
+    return _RenderModes(["rgb_array"] if human_rendering_error() is not None
+                        else ["rgb_array", "human"])
 
 
 def human_rendering_error() -> Exception | None:
@@ -202,7 +216,7 @@ def human_rendering_error() -> Exception | None:
         from gymnasium.error import DependencyNotInstalled
 
         return DependencyNotInstalled(
-            'render_mode="human" needs pygame: pip install lfmdr[human] '
+            'render_mode="human" needs pygame: pip install "lfmdr[human]" '
             '(or use render_mode="rgb_array", which needs nothing extra)'
         )
     if sys.platform.startswith("linux") and not (
@@ -210,7 +224,7 @@ def human_rendering_error() -> Exception | None:
     ):
         return RuntimeError(
             'render_mode="human" needs a display (no DISPLAY or WAYLAND_DISPLAY is set); '
-            'use render_mode="rgb_array" on a headless machine (pip install lfmdr[human] on a desktop)'
+            'use render_mode="rgb_array" on a headless machine (pip install "lfmdr[human]" on a desktop)'
         )
     return None
 
