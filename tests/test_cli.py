@@ -536,3 +536,13 @@ def test_human_rendering_without_pygame_or_a_display_names_the_project_extra(mis
             env.step(env.action_space.sample())
         assert 'pip install "lfmdr[human]"' in str(exc.value), str(exc.value)
         assert "classic-control" not in str(exc.value)
+
+
+def test_both_packages_ship_py_typed():
+    import tomllib
+
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    data = config["tool"]["setuptools"]["package-data"]
+    for package in ("lfmdr_gym", "mappers"):
+        assert (ROOT / package / "py.typed").is_file(), package
+        assert "py.typed" in data.get(package, []), package
