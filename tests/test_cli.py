@@ -546,3 +546,29 @@ def test_both_packages_ship_py_typed():
     for package in ("lfmdr_gym", "mappers"):
         assert (ROOT / package / "py.typed").is_file(), package
         assert "py.typed" in data.get(package, []), package
+
+
+def test_the_policy_contract_gives_the_proximity_rays_layout_and_it_is_true():
+    import gymnasium as gym
+
+    from lfmdr_gym.policies import Policy
+
+    doc = " ".join(Policy.__doc__.split())
+    for fact in ("2 pi k / n_rays", "counter-clockwise", "ray 0 straight ahead",
+                 "proximity_range", "step_length + robot_radius", "[m]"):
+        assert fact in doc, fact
+    readme = " ".join((ROOT / "README.md").read_text().split())
+    assert "ray k points at `heading + 2 pi k / 32`" in readme
+    # the truth: the robot facing north (+y) near the east wall, nothing else around
+    env = gym.make("LFMDR-Visibility-v0")
+    a = env.unwrapped.world.arena_half
+    objects = np.array([[-a + 0.3 + 0.2 * (k % 5), -a + 0.3 + 0.2 * (k // 5)] for k in range(50)])
+    obs, _ = env.reset(seed=0, options={"object_positions": objects,
+                                        "robot_pose": np.array([a - 0.2, 0.5, np.pi / 2])})
+    ray = obs["proximity"]
+    n = env.unwrapped.n_proximity_rays
+    assert ray.shape == (n,) == (32,) and ray.dtype == np.float32
+    assert ray[3 * n // 4] == pytest.approx(0.2, abs=1e-5)  # to the right: the east wall, 0.2 m
+    assert ray[0] == ray[n // 4] == ray[n // 2] == pytest.approx(0.5)  # ahead, left, behind: free
+    assert ray.max() <= env.unwrapped.proximity_range == 0.5
+    env.close()
