@@ -172,7 +172,7 @@ def _add_reproduce(sub: Any) -> None:
     p.add_argument("--seed", type=int, default=0, help="base seed of layouts and poses")
     _add_env_keywords(p)
     p.add_argument("--env", action=_OldEnvKeyword, dest="env_kwargs", metavar="NAME=VALUE",
-                   help=argparse.SUPPRESS)  # the older spelling of --env-kw (FutureWarning)
+                   help=argparse.SUPPRESS)  # the older spelling of --env-kw (with a notice)
     p.add_argument("--jobs", type=_jobs, default=1,
                    help="worker processes on this machine (-1: all cores); BLAS is kept to one "
                         "thread per worker")
