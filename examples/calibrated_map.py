@@ -52,6 +52,8 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
                     X, anchor_ids=anchors, anchor_positions=history.anchor_positions)
                 note = f"{est.fold_score_:.3f}"
             print(f"{history.sensor:10s} {m.method:9s} {mpe:8.3f} {moe:8.2f}  {note}")
+            for w in m.warnings:  # what the mapper repaired or doubts (Map.warnings)
+                print(f"  warning: {w}")
     if args.plot:
         import matplotlib
 

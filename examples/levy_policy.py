@@ -164,6 +164,8 @@ def map_error(history: History, method: str = "SMA(WGT)") -> float:
     """Mean position error [m] of the mapped non-anchor objects."""
     m = mappers.build_map(history, history.anchor_ids, history.anchor_positions,
                           method=method)
+    for w in m.warnings:  # what the mapper repaired or doubts (Map.warnings)
+        print(f"warning: seed {history.meta.get('seed')}, {m.method}: {w}")
     skip = set(history.anchor_ids.tolist()) | set(m.unmapped)
     return mappers.mean_position_error(m.positions, history.object_positions, exclude=sorted(skip))
 

@@ -49,12 +49,14 @@ def main(argv: list[str] | None = None) -> History:
     mpe = mappers.mean_position_error(result.positions, history.object_positions, exclude=skip)
     print(f"{result.method}: MPE {mpe:.3f} m (mapped non-anchor objects), "
           f"unmapped {list(result.unmapped)}")
+    for w in result.warnings:  # what the mapper repaired or doubts (Map.warnings)
+        print(f"warning: {w}")
 
     from lfmdr_gym.experiments.figures import plot_map
 
     path = plot_map(result.positions, history, Path(args.out),
                     title=f"90 deg camera, 1.5 m range, 2 deg noise: {result.method}, "
-                          f"MPE {mpe:.3f} m")
+                          f"MPE {mpe:.3f} m", notes=result.warnings)
     print(f"wrote {path}")
     return history
 

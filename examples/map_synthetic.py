@@ -37,8 +37,12 @@ for label in methods_for("visibility", masked=False):
         f"{label:12s} {mean_position_error(est, truth):8.3f} "
         f"{mean_orientation_error(est, truth):8.2f} {seconds:9.3f}"
     )
+    for w in result.warnings:  # what the mapper repaired or doubts (Map.warnings)
+        print(f"  warning: {w}")
 
 # The same places with a range sensor: the (M, N) distances themselves are the histories.
 ranged = build_map(distance, anchors, objects[anchors])  # default for range: UNFOLD
 err = mean_position_error(ranged.positions[others], objects[others])
 print(f"\nrange histories, {ranged.method}: MPE {err:.2e} m (exact ranges give an exact map)")
+for w in ranged.warnings:
+    print(f"  warning: {w}")

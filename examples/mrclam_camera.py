@@ -37,6 +37,8 @@ def main(argv: list[str] | None = None) -> History:
         mpe = mappers.mean_position_error(result.positions, h.object_positions, exclude=skip)
         print(f"{name:>16}: {result.method:<15} MPE {mpe:.3f} m (non-anchor), "
               f"unmapped {len(result.unmapped)}")
+        for w in result.warnings:  # e.g. a fold the mapper suspects: read the map with care
+            print(f"{'':>16}  warning: {w}")
     print(f"wrote {args.out}")
     return history
 

@@ -22,7 +22,8 @@ DEFAULT_RUN = Path(__file__).resolve().parents[1].parent / "shared/data/mrclam/M
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run_dir", nargs="?", type=Path, default=DEFAULT_RUN)
-    ap.add_argument("--sensor", default="range", choices=["visibility", "bearing", "range"])
+    ap.add_argument("--sensor", default="range",
+                    choices=["visibility", "bearing", "range", "range-bearing"])
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args(argv)
     if not args.run_dir.is_dir():

@@ -56,6 +56,8 @@ def main() -> None:
             error = mappers.mean_position_error(current.positions[placed], truth[placed])
             print(f"{start + 10:5d} steps: {placed.size} of {others.size} non-anchor objects mapped, "
                   f"MPE {error:.3f} m ({current.method})")
+    for w in current.warnings:  # the last map's own notes (Map.warnings)
+        print(f"warning: {w}")
 
 
 if __name__ == "__main__":

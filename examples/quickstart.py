@@ -51,8 +51,8 @@ def main(argv: list[str] | None = None) -> History:
         )
         moe = mappers.mean_orientation_error(result.positions, history.object_positions)
         print(f"{result.method:>10}: MPE {mpe:.3f} m (non-anchor objects), MOE {moe:.2f} %")
-        for note in result.warnings:  # repairs and degradations worth knowing
-            print(f"{'':>10}  note: {note}")
+        for w in result.warnings:  # what the mapper repaired or doubts (Map.warnings)
+            print(f"{'':>10}  warning: {w}")
     return history
 
 

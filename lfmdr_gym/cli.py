@@ -96,12 +96,44 @@ def _add_method_options(p: argparse.ArgumentParser, default: str) -> None:
                         "n_neighbors=7, sigma2=1, d=4")
 
 
-def _add_env_keywords(p: argparse.ArgumentParser, flag: str) -> None:
-    """The env keywords option (``--env`` for reproduce, ``--env-kw`` where --env is an id)."""
-    p.add_argument(flag, action="append", default=None, metavar="NAME=VALUE", dest="env_kwargs",
+_ENV_ID_HELP = ("environment id, one of lfmdr_gym.ENV_IDS (LFMDR-Visibility-v0, LFMDR-Bearing-v0, "
+                "LFMDR-Range-v0, LFMDR-RangeBearing-v0, LFMDR-VisibilityBearing-v0, "
+                "LFMDR-Camera-v0)")
+
+
+def _version() -> str:
+    """The installed package's version (its metadata), or a note that it is not installed."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("lfmdr")
+    except PackageNotFoundError:
+        return "(version unknown: the lfmdr package is not installed)"
+
+
+def _add_env_keywords(p: argparse.ArgumentParser) -> None:
+    """``--env-kw NAME=VALUE``: the env keywords, in every command that makes an env (``--env``
+    is always an env id)."""
+    p.add_argument("--env-kw", action="append", default=None, metavar="NAME=VALUE",
+                   dest="env_kwargs",
                    help="env keyword (repeatable), e.g. fov_deg=90, max_range=1.5, "
                         "bearing_noise_deg=2, miss_rate=0.5, line_of_sight=true: imperfect "
                         "sensing (see LFMDREnv); values are read as numbers, true/false or none")
+
+
+class _OldEnvKeyword(argparse.Action):
+    """``reproduce --env NAME=VALUE``, the older spelling of ``--env-kw``: still accepted, with a
+    deprecation message naming the new flag, in argparse's style on stderr (everywhere else
+    ``--env`` is an env id)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: Any, option_string: str | None = None) -> None:
+        if "=" not in str(values):
+            parser.error(f"argument --env: reproduce takes no env id ({values!r}): its env is "
+                         "chosen by --sensor; env keywords are given as --env-kw NAME=VALUE")
+        print(f"{parser.prog}: warning: --env {values} is deprecated, write --env-kw {values} "
+              "(--env is an env id in the other commands)", file=sys.stderr)
+        setattr(namespace, self.dest, [*(getattr(namespace, self.dest, None) or []), values])
 
 
 def _add_reproduce(sub: Any) -> None:
@@ -120,7 +152,7 @@ def _add_reproduce(sub: Any) -> None:
             "command resumes where it stopped, after Ctrl-C or a kill alike, and computes again "
             "any unit whose mapper failed. Other settings on the same --out are refused. "
             "Episodes are cached in --out/histories.",
-            "With --env keywords that limit sensing (fov_deg, max_range, noise, dropouts) the "
+            "With --env-kw keywords that limit sensing (fov_deg, max_range, noise, dropouts) the "
             "histories are masked and the methods default to those that map masked histories.",
         ),
     )
@@ -138,7 +170,9 @@ def _add_reproduce(sub: Any) -> None:
                         "comma-separated, case-insensitive (default: every method made for "
                         "complete histories)")
     p.add_argument("--seed", type=int, default=0, help="base seed of layouts and poses")
-    _add_env_keywords(p, "--env")
+    _add_env_keywords(p)
+    p.add_argument("--env", action=_OldEnvKeyword, dest="env_kwargs", metavar="NAME=VALUE",
+                   help=argparse.SUPPRESS)  # the older spelling of --env-kw (with a notice)
     p.add_argument("--jobs", type=_jobs, default=1,
                    help="worker processes on this machine (-1: all cores); BLAS is kept to one "
                         "thread per worker")
@@ -160,21 +194,21 @@ def _add_run(sub: Any) -> None:
             "MPE and MOE, and write history.npz, scores.csv, map.csv and map.png into --out."
         ),
     )
-    p.add_argument("--env", default="LFMDR-Visibility-v0", metavar="ID",
-                   help="environment id (LFMDR-Visibility-v0, LFMDR-Bearing-v0, LFMDR-Range-v0, "
-                        "LFMDR-RangeBearing-v0, LFMDR-VisibilityBearing-v0, LFMDR-Camera-v0)")
+    p.add_argument("--env", default="LFMDR-Visibility-v0", metavar="ID", help=_ENV_ID_HELP)
     p.add_argument("--steps", type=_positive_int, default=2000, help="episode length N")
     _add_method_options(p, "the default for the env's histories, as build_map chooses")
     p.add_argument("--seed", type=int, default=0, help="seed of layout, start pose and walk")
     p.add_argument("--every", type=_positive_int, default=None,
                    help="checkpoint interval; must divide --steps (default: 500 for visibility, "
                         "200 otherwise, plus N itself)")
-    _add_env_keywords(p, "--env-kw")
+    _add_env_keywords(p)
     p.add_argument("--out", default="lfmdr-run", metavar="DIR", help="output directory")
     p.add_argument("--online", action="store_true",
                    help="map online as the robot moves (mappers.OnlineMapper, updated every 10 "
-                        "steps) and write the growing map beside the robot as DIR/live.gif "
-                        "(needs matplotlib: pip install lfmdr[plots])")
+                        "steps); writes history.npz, scores.csv (the online map's error at every "
+                        "update), map.csv and map.png (the final online map) and live.gif (the "
+                        "growing map beside the robot; needs matplotlib: pip install "
+                        "'lfmdr[plots]')")
     p.add_argument("--policy", default="random-walk", metavar="NAME",
                    help=_POLICY_HELP)
     p.set_defaults(handler=_cmd_run)
@@ -209,11 +243,11 @@ def _add_collect(sub: Any) -> None:
         ),
     )
     p.add_argument("--env", default="LFMDR-Visibility-v0", metavar="ID",
-                   help="environment id (a fused one, e.g. LFMDR-RangeBearing-v0 or "
-                        "LFMDR-Camera-v0, records a fused history)")
+                   help=_ENV_ID_HELP + "; a fused one (LFMDR-RangeBearing-v0, "
+                        "LFMDR-VisibilityBearing-v0, LFMDR-Camera-v0) records a fused history")
     p.add_argument("--steps", type=_positive_int, default=2000, help="episode length N")
     p.add_argument("--seed", type=int, default=0, help="seed of layout, start pose and walk")
-    _add_env_keywords(p, "--env-kw")
+    _add_env_keywords(p)
     p.add_argument("--out", required=True, metavar="FILE.npz", help="history file to write")
     p.add_argument("--policy", default="random-walk", metavar="NAME",
                    help=_POLICY_HELP)
@@ -281,6 +315,8 @@ def _add_compare(sub: Any) -> None:
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``lfmdr`` (exposed for tests and documentation)."""
     parser = argparse.ArgumentParser(prog="lfmdr", description=_DESCRIPTION, formatter_class=_Formatter)
+    parser.add_argument("--version", action="version", version=f"lfmdr {_version()}",
+                        help="print the installed version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for add in (_add_reproduce, _add_run, _add_map, _add_collect, _add_mrclam, _add_compare):
         add(sub)
@@ -323,58 +359,63 @@ def _print_scores(rows: Sequence[dict[str, Any]]) -> None:
         print(line)
 
 
+def _print_warnings(notes: Sequence[str]) -> None:
+    """A map's warnings (``Map.warnings``), one line each."""
+    for note in notes:
+        print(f"warning: {note}")
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from lfmdr_gym.experiments.env_settings import parse_env_kwargs
     from lfmdr_gym.experiments.mapping import run_episode
+    from lfmdr_gym.experiments.params import method_label
 
     if args.online:
         return _cmd_run_online(args)
     rows = run_episode(args.env, args.steps, args.method, seed=args.seed, every=args.every,
                        params=args.param, out=args.out, policy=args.policy,
                        env_kwargs=parse_env_kwargs(args.env_kwargs))
-    print(f"{args.env}, seed {args.seed}, {rows[-1]['method']} ({rows[-1]['param']})")
+    print(f"{args.env}, seed {args.seed}, {method_label(rows[-1]['method'], rows[-1]['param'])}")
     _print_scores(rows)
+    _print_warnings(rows[-1]["warnings"])
     print(f"wrote {args.out}/history.npz, scores.csv, map.csv, map.png")
     return 0
 
 
 def _cmd_run_online(args: argparse.Namespace) -> int:
-    from lfmdr_gym.experiments.env_settings import check_env_kwargs, parse_env_kwargs
-    from lfmdr_gym.experiments.live import online_episode, save_gif
-    from lfmdr_gym.experiments.mapping import _sensor_of, checkpoints_for
-    from lfmdr_gym.experiments.params import user_params
-    from lfmdr_gym.experiments.store import ensure_writable_dir
-    from mappers import resolve_method
+    from lfmdr_gym.experiments.env_settings import parse_env_kwargs
+    from lfmdr_gym.experiments.live import run_online
+    from lfmdr_gym.experiments.params import method_label
 
-    sensor = _sensor_of(args.env)
-    points = set(checkpoints_for(args.steps, args.every, sensor))
-    out = ensure_writable_dir(args.out)
-    env_kwargs, masked = check_env_kwargs(sensor, parse_env_kwargs(args.env_kwargs))
-    label = resolve_method(args.method, sensor, masked=masked).label
-    frames, rows, _ = online_episode(args.env, args.steps, seed=args.seed, policy=args.policy,
-                                     method=args.method, params=user_params(label, args.param),
-                                     frame_every=max(args.steps // 50, 1), env_kwargs=env_kwargs)
-    print(f"{args.env}, seed {args.seed}, policy {args.policy}, online {label}")
+    run = run_online(args.env, args.steps, args.method, out=args.out, seed=args.seed,
+                     every=args.every, params=args.param, policy=args.policy,
+                     env_kwargs=parse_env_kwargs(args.env_kwargs))
+    print(f"{args.env}, seed {args.seed}, policy {args.policy}, online "
+          f"{method_label(run.method, run.params)}")
     print(f"{'steps':>6s} {'MPE non-anchor [m]':>19s} {'mapped':>7s}")
-    for r in rows:
-        if r["n_steps"] in points:
-            print(f"{r['n_steps']:6d} {r['mpe']:19.4f} {r['mapped']:7d}")
-    path = save_gif(frames, rows, out / "live.gif", title=f"{args.env} ({args.policy})")
-    print(f"wrote {path}")
+    unmapped = [r for r in run.checkpoints if r["note"]]
+    for r in run.checkpoints:
+        mpe = f"{r['mpe']:19.4f}" if not r["note"] else f"{'-':>19s}"
+        print(f"{r['n_steps']:6d} {mpe} {r['mapped']:7d}" + ("  no map yet" if r["note"] else ""))
+    if unmapped:  # why: what the mapper said at the last of them
+        print(f"no map at {unmapped[-1]['n_steps']} steps: {unmapped[-1]['note']}")
+    if not run.rows[-1]["note"]:  # (else the final map's warnings are that reason)
+        _print_warnings(run.map.warnings)
+    print("wrote " + ", ".join(str(p) for p in run.written))
     return 0
 
 
 def _cmd_map(args: argparse.Namespace) -> int:
     from lfmdr_gym.experiments.mapping import map_history_file
+    from lfmdr_gym.experiments.params import method_label
 
     info = map_history_file(args.history, args.method, params=args.param,
                             n_steps=args.steps, out=args.out)
     m = info["map"]
-    print(f"{info['history']!r}: {info['method']} ({info['param']})")
+    print(f"{info['history']!r}: {method_label(info['method'], info['param'])}")
     if m.unmapped:
         print(f"unmapped objects: {list(m.unmapped)}")
-    for w in getattr(m, "warnings", ()):
-        print(f"warning: {w}")
+    _print_warnings(m.warnings)
     if "mpe" in info:
         print(f"MPE {info['mpe']:.4f} m (non-anchor {info['mpe_nonanchor']:.4f} m), "
               f"MOE {info['moe']:.2f} %")
@@ -402,7 +443,7 @@ def _cmd_mrclam(args: argparse.Namespace) -> int:
 
     from lfmdr_gym.datasets.mrclam import MRCLAMDataWarning
     from lfmdr_gym.experiments.mrclam import map_mrclam_run
-    from lfmdr_gym.experiments.params import parse_params
+    from lfmdr_gym.experiments.params import method_label, parse_params
 
     kwargs: dict[str, Any] = {"out": args.out, "bin_width": args.bin_width,
                               "groundtruth_fixes": args.groundtruth_fixes,
@@ -415,11 +456,10 @@ def _cmd_mrclam(args: argparse.Namespace) -> int:
         warnings.simplefilter("ignore", MRCLAMDataWarning)  # they come back in result.warnings
         result = map_mrclam_run(args.run_dir, args.sensor, method=args.method, **kwargs,
                                 **parse_params(args.param))
-    params = ", ".join(f"{k}={v}" for k, v in result.params.items()) or "-"
-    print(f"{result.run} ({result.sensor}), {result.method} ({params}), anchors "
+    params = ", ".join(f"{k}={v}" for k, v in result.params.items())
+    print(f"{result.run} ({result.sensor}), {method_label(result.method, params)}, anchors "
           f"{list(result.anchor_subjects)}")
-    for w in result.warnings:
-        print(f"warning: {w}")
+    _print_warnings(result.warnings)
     non_anchor = ~np.isin(result.subjects, result.anchor_subjects)
     mapped = int(np.sum(non_anchor & np.isfinite(result.positions).all(axis=1)))
     which = ("the" if mapped == int(non_anchor.sum())

@@ -2,7 +2,7 @@
 
 :func:`draw_frame` is a pure function of the geometry and the current readings, so it draws
 logged data as well as the live environment. :class:`HumanViewer` shows frames in a pygame
-window for ``render_mode="human"`` (optional extra: ``pip install lfmdr[human]``).
+window for ``render_mode="human"`` (optional extra: ``pip install "lfmdr[human]"``).
 """
 
 from __future__ import annotations
@@ -159,17 +159,20 @@ def draw_map(
     truth: ArrayLike | None = None,
     anchor_ids: ArrayLike = (),
     size: int = 480,
+    view_half: float | None = None,
 ) -> np.ndarray:
     """Draw a map as an (size, size, 3) uint8 RGB image, in the arena's frame.
 
     The estimated positions (M, 2) are blue discs (NaN rows, objects not mapped yet, are left
     out); with ``truth`` (M, 2) the true objects are grey and a red line joins each estimate to
-    its truth; anchors are ringed in red at their (known) positions.
+    its truth; anchors are ringed in red at their (known) positions. ``view_half``: half-side
+    [m] of the square drawn, centred on the arena (default ``arena_half``; larger shows the
+    estimates that fall outside the arena, the walls then drawn smaller).
     """
     if size < 32:
         raise ValueError(f"size must be >= 32 pixels, got {size}")
     est = np.asarray(estimates, dtype=np.float64).reshape(-1, 2)
-    canvas = _Canvas(size, arena_half)
+    canvas = _Canvas(size, arena_half if view_half is None else max(view_half, arena_half))
     a = arena_half
     corners = np.array([(-a, -a), (a, -a), (a, a), (-a, a)])
     canvas.lines(corners, np.roll(corners, -1, axis=0), WALL)
@@ -186,9 +189,23 @@ def draw_map(
     return canvas.img
 
 
+class _RenderModes(list):
+    """The render modes this machine can show (iterating gives them: Gymnasium's ``check_env``
+    renders each), which also answers yes to ``"human" in modes`` where "human" cannot work,
+    so that ``gym.make(id, render_mode="human")`` hands "human" to the env, whose error says
+    what is missing (``pip install "lfmdr[human]"``, or a display), instead of wrapping the env
+    in Gymnasium's HumanRendering, which fails at the first step asking for
+    ``gymnasium[classic-control]``."""
+
+    def __contains__(self, mode: object) -> bool:
+        return mode == "human" or super().__contains__(mode)
+
+
 def available_render_modes() -> list[str]:
-    """``"rgb_array"`` always (pure numpy), ``"human"`` where pygame and a display exist."""
-    return ["rgb_array"] if human_rendering_error() is not None else ["rgb_array", "human"]
+    """``"rgb_array"`` always (pure numpy), ``"human"`` where pygame and a display exist (the
+    list answers yes to ``"human" in ...`` regardless: see :class:`_RenderModes`)."""
+    return _RenderModes(["rgb_array"] if human_rendering_error() is not None
+                        else ["rgb_array", "human"])
 
 
 def human_rendering_error() -> Exception | None:
@@ -199,7 +216,7 @@ def human_rendering_error() -> Exception | None:
         from gymnasium.error import DependencyNotInstalled
 
         return DependencyNotInstalled(
-            'render_mode="human" needs pygame: pip install lfmdr[human] '
+            'render_mode="human" needs pygame: pip install "lfmdr[human]" '
             '(or use render_mode="rgb_array", which needs nothing extra)'
         )
     if sys.platform.startswith("linux") and not (
@@ -207,7 +224,7 @@ def human_rendering_error() -> Exception | None:
     ):
         return RuntimeError(
             'render_mode="human" needs a display (no DISPLAY or WAYLAND_DISPLAY is set); '
-            'use render_mode="rgb_array" on a headless machine (pip install lfmdr[human] on a desktop)'
+            'use render_mode="rgb_array" on a headless machine (pip install "lfmdr[human]" on a desktop)'
         )
     return None
 

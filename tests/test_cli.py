@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
 import signal
@@ -55,6 +56,8 @@ def test_help_explains_every_option(command, capsys):
     text = capsys.readouterr().out
     sub = build_parser()._subparsers._group_actions[0].choices[command]
     for action in sub._actions:
+        if action.help == argparse.SUPPRESS:  # an older spelling kept working, not advertised
+            continue
         if action.option_strings and action.dest != "help":
             assert action.help, f"{command} {action.option_strings} has no help"
             assert action.option_strings[0] in text
@@ -336,3 +339,236 @@ def test_the_policy_help_names_every_registered_policy():
     from lfmdr_gym.cli import _POLICY_HELP
 
     assert _POLICY_HELP.endswith("(" + ", ".join(POLICIES) + ")")
+
+
+# ------------------------------------------------------------------ a new user's first tries (issue 32)
+def test_version_prints_the_package_version(capsys):
+    from importlib.metadata import version
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out.strip() == f"lfmdr {version('lfmdr')}"
+
+
+@pytest.mark.parametrize("command", ["collect", "run"])
+def test_an_unknown_env_id_is_a_clear_error_naming_the_registered_ids(command, tmp_path, capsys):
+    from lfmdr_gym import ENV_IDS
+
+    out = str(tmp_path / ("walk.npz" if command == "collect" else "run"))
+    err = _error([command, "--env", "LFMDR-Foo-v0", "--steps", "10", "--out", out], capsys)
+    assert err.startswith(f"lfmdr {command}: error: unknown env id 'LFMDR-Foo-v0'")
+    assert all(env_id in err for env_id in ENV_IDS)
+
+
+def test_the_env_id_help_names_every_registered_id():
+    from lfmdr_gym import ENV_IDS
+    from lfmdr_gym.cli import _ENV_ID_HELP
+
+    assert _ENV_ID_HELP.endswith("(" + ", ".join(ENV_IDS) + ")")
+
+
+def test_env_is_an_env_id_and_env_kw_an_env_keyword_in_every_command():
+    parser = build_parser()
+    commands = parser._subparsers._group_actions[0].choices
+    for name in ("reproduce", "run", "collect"):
+        shown = {a.option_strings[0]: a.dest for a in commands[name]._actions
+                 if a.option_strings and a.help != argparse.SUPPRESS}
+        assert shown["--env-kw"] == "env_kwargs", name
+        assert shown.get("--env", "env") == "env", name  # never the keywords
+    for name in ("run", "collect"):
+        args = parser.parse_args([name, "--env", "LFMDR-Bearing-v0", "--env-kw", "fov_deg=90",
+                                  "--out", "x.npz"])
+        assert (args.env, args.env_kwargs) == ("LFMDR-Bearing-v0", ["fov_deg=90"])
+    args = parser.parse_args(["reproduce", "--sensor", "bearing", "--env-kw", "fov_deg=90",
+                              "--env-kw", "max_range=1.5"])
+    assert args.env_kwargs == ["fov_deg=90", "max_range=1.5"]
+
+
+def test_reproduce_env_keyword_old_spelling_still_works_with_a_deprecation_message(capsys):
+    args = build_parser().parse_args(["reproduce", "--sensor", "bearing", "--env", "fov_deg=90",
+                                      "--env-kw", "max_range=1.5"])
+    assert args.env_kwargs == ["fov_deg=90", "max_range=1.5"]
+    err = capsys.readouterr().err
+    assert "--env fov_deg=90 is deprecated" in err and "--env-kw fov_deg=90" in err
+    with pytest.raises(SystemExit) as exc:  # an env id is not what reproduce's --env meant
+        build_parser().parse_args(["reproduce", "--sensor", "bearing", "--env", "LFMDR-Bearing-v0"])
+    assert exc.value.code == 2
+    assert "--env-kw NAME=VALUE" in capsys.readouterr().err
+
+
+def _promised_files(help_text: str) -> set[str]:
+    import re
+
+    return set(re.findall(r"\b[a-z_]+\.(?:npz|csv|png|gif)\b", " ".join(help_text.split())))
+
+
+def test_run_online_writes_every_file_its_help_promises(tmp_path, capsys):
+    pytest.importorskip("matplotlib")
+    from lfmdr_gym.histories.history import History
+
+    sub = build_parser()._subparsers._group_actions[0].choices["run"]
+    online = next(a for a in sub._actions if a.dest == "online")
+    promised = _promised_files(online.help)
+    assert {"history.npz", "scores.csv", "map.csv", "map.png", "live.gif"} <= promised
+    assert main(["run", "--online", "--env", "LFMDR-Bearing-v0", "--steps", "40", "--every", "20",
+                 "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    for name in promised:
+        assert (tmp_path / name).stat().st_size > 0, name
+        assert name in out
+    history = History.load(tmp_path / "history.npz")
+    assert history.sensor == "bearing" and history.n_steps == 40
+    scores = (tmp_path / "scores.csv").read_text().splitlines()
+    assert scores[0] == "n_steps,method,param,mpe_nonanchor,mapped,note" and len(scores) == 1 + 4
+    assert len((tmp_path / "map.csv").read_text().splitlines()) == 1 + history.n_objects
+    # the history written is the episode mapped: lfmdr map reads it like any other
+    assert main(["map", str(tmp_path / "history.npz"), "--out", str(tmp_path / "again")]) == 0
+
+
+def test_run_online_says_why_there_is_no_map_instead_of_nan(tmp_path, capsys):
+    pytest.importorskip("matplotlib")
+    assert main(["run", "--online", "--env-kw", "fov_deg=90", "--steps", "60", "--every", "30",
+                 "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    table = [line for line in out.splitlines() if line.strip()[:2].isdigit()]
+    assert table and all("nan" not in line for line in table), out
+    assert all(line.endswith("no map yet") for line in table), out
+    why = next(line for line in out.splitlines() if line.startswith("no map at 60 steps: "))
+    assert "sensed so far" in why  # the mapper's reason: too few anchors sensed yet
+    assert why.split(": ", 1)[1] in (tmp_path / "scores.csv").read_text()  # the note column
+
+
+def test_a_method_without_parameters_is_shown_by_its_name_alone(tmp_path, capsys):
+    path = tmp_path / "walk.npz"
+    assert main(["collect", "--steps", "100", "--out", str(path)]) == 0
+    assert main(["map", str(path), "--method", "CAL-SMA", "--out", str(tmp_path / "m")]) == 0
+    out = capsys.readouterr().out
+    assert ": CAL-SMA\n" in out and "(-)" not in out
+    assert main(["run", "--method", "LPCA", "--steps", "100", "--every", "100",
+                 "--out", str(tmp_path / "r")]) == 0
+    out = capsys.readouterr().out
+    assert "seed 0, LPCA\n" in out and "(-)" not in out
+
+
+def test_run_and_map_print_the_map_warnings(tmp_path, capsys, monkeypatch):
+    import mappers
+
+    real = mappers.build_map
+
+    def warned(*args, **kwargs):
+        import dataclasses
+
+        return dataclasses.replace(real(*args, **kwargs), warnings=("a note from the mapper",))
+
+    monkeypatch.setattr(mappers, "build_map", warned)
+    assert main(["run", "--steps", "100", "--every", "100", "--out", str(tmp_path / "r")]) == 0
+    assert "warning: a note from the mapper" in capsys.readouterr().out
+    assert "a note from the mapper" in (tmp_path / "r" / "scores.csv").read_text()
+    assert main(["map", str(tmp_path / "r" / "history.npz"), "--out", str(tmp_path / "m")]) == 0
+    assert "warning: a note from the mapper" in capsys.readouterr().out
+
+
+def test_the_live_gif_panels_show_the_walls_and_every_estimate(monkeypatch):
+    """The arena panel keeps its one-pixel walls when scaled down; the map panel widens beyond
+    the walls to show estimates that fall outside the arena (they used to be cut off)."""
+    from types import SimpleNamespace
+
+    import mappers
+    from lfmdr_gym.experiments.live import online_episode
+    from lfmdr_gym.render import ESTIMATE, WALL
+
+    class Far:  # a map whose estimates lie outside the arena, as an early online map's may
+        def __init__(self, anchor_ids, anchor_positions, **kwargs):
+            self.anchors = np.asarray(anchor_ids)
+
+        def update(self, columns, mask=None):
+            positions = np.tile([[2.0, 0.0]], (50, 1))
+            positions[self.anchors] = [[0.0, 0.0]]
+            return SimpleNamespace(positions=positions, warnings=())
+
+    monkeypatch.setattr(mappers, "OnlineMapper", Far)
+    frames, rows, _ = online_episode("LFMDR-Visibility-v0", 20, frame_every=20, size=240)
+    frame = frames[-1][1]
+    arena, picture = frame[:, :240], frame[:, 240:]
+    dark = np.all(arena < 200, axis=2)  # walls (drawn dark, averaged with the background)
+    assert dark[:, -8:].sum(axis=0).max() > 200 and dark[-8:].sum(axis=1).max() > 200
+    wall = np.argwhere(np.all(picture == WALL, axis=2))
+    blue = np.argwhere(np.all(picture == ESTIMATE, axis=2))
+    assert blue.size and blue[:, 1].max() > wall[:, 1].max()  # drawn, right of the east wall
+    assert rows[-1]["mapped"] == 50
+
+
+def test_the_table_footer_says_plainly_what_the_paper_text_lacks(tmp_path):
+    from lfmdr_gym.experiments.figures import write_table
+
+    rows = [{"method": "LPCA", "param": "-", "n_steps": 100, "mpe": 1.0, "moe": 10.0,
+             "mpe_nonanchor": 1.1, "error": ""}]
+    for sensor in ("visibility", "bearing"):
+        write_table(rows, tmp_path, sensor=sensor, n_steps=100, methods=["LPCA"])
+        footer = (tmp_path / "table.md").read_text().splitlines()[-1]
+        assert footer.startswith("Paper: Yairi 2007, Table") and "seed" not in footer
+    assert "numbers are missing" in footer
+    write_table(rows, tmp_path, sensor="visibility", n_steps=100, methods=["LPCA"])
+    footer = (tmp_path / "table.md").read_text().splitlines()[-1]
+    assert "only three of its five graph-based methods" in footer and "without saying" in footer
+
+
+@pytest.mark.parametrize("missing", ["pygame", "display"])
+def test_human_rendering_without_pygame_or_a_display_names_the_project_extra(missing, monkeypatch):
+    import gymnasium as gym
+
+    from lfmdr_gym import ENV_IDS
+
+    if missing == "pygame":
+        monkeypatch.setitem(sys.modules, "pygame", None)  # import pygame -> ImportError
+    else:
+        pytest.importorskip("pygame")
+        for name in ("DISPLAY", "WAYLAND_DISPLAY", "SDL_VIDEODRIVER"):
+            monkeypatch.delenv(name, raising=False)
+        monkeypatch.setattr(sys, "platform", "linux")
+    for env_id in ENV_IDS:
+        # gym.make hands "human" to the env (no HumanRendering wrapper, whose error asked for
+        # gymnasium[classic-control] at the first step): the env says what to install
+        with pytest.raises(Exception) as exc:
+            env = gym.make(env_id, render_mode="human")
+            env.reset(seed=0)
+            env.step(env.action_space.sample())
+        assert 'pip install "lfmdr[human]"' in str(exc.value), str(exc.value)
+        assert "classic-control" not in str(exc.value)
+
+
+def test_both_packages_ship_py_typed():
+    import tomllib
+
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    data = config["tool"]["setuptools"]["package-data"]
+    for package in ("lfmdr_gym", "mappers"):
+        assert (ROOT / package / "py.typed").is_file(), package
+        assert "py.typed" in data.get(package, []), package
+
+
+def test_the_policy_contract_gives_the_proximity_rays_layout_and_it_is_true():
+    import gymnasium as gym
+
+    from lfmdr_gym.exploration.random_walk import Policy
+
+    doc = " ".join(Policy.__doc__.split())
+    for fact in ("2 pi k / n_rays", "counter-clockwise", "ray 0 straight ahead",
+                 "proximity_range", "step_length + robot_radius", "[m]"):
+        assert fact in doc, fact
+    readme = " ".join((ROOT / "README.md").read_text().split())
+    assert "ray k points at `heading + 2 pi k / 32`" in readme
+    # the truth: the robot facing north (+y) near the east wall, nothing else around
+    env = gym.make("LFMDR-Visibility-v0")
+    a = env.unwrapped.world.arena_half
+    objects = np.array([[-a + 0.3 + 0.2 * (k % 5), -a + 0.3 + 0.2 * (k // 5)] for k in range(50)])
+    obs, _ = env.reset(seed=0, options={"object_positions": objects,
+                                        "robot_pose": np.array([a - 0.2, 0.5, np.pi / 2])})
+    ray = obs["proximity"]
+    n = env.unwrapped.n_proximity_rays
+    assert ray.shape == (n,) == (32,) and ray.dtype == np.float32
+    assert ray[3 * n // 4] == pytest.approx(0.2, abs=1e-5)  # to the right: the east wall, 0.2 m
+    assert ray[0] == ray[n // 4] == ray[n // 2] == pytest.approx(0.5)  # ahead, left, behind: free
+    assert ray.max() <= env.unwrapped.proximity_range == 0.5
+    env.close()

@@ -16,6 +16,7 @@ import pytest
 
 from lfmdr_gym.datasets import (
     MRCLAMDataWarning,
+    MRCLAMReport,
     check_groundtruth,
     corner_anchors,
     load_mrclam,
@@ -118,8 +119,9 @@ def test_synthetic_files_have_crlf_and_header(tmp_path):
 def test_loader_filters_and_counts(tmp_path):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        h, rep = load_mrclam(_tiny_run(tmp_path), "visibility", robots=(1, 2), bin_width=1.0,
-                             anchors=(6, 8, 9))
+        h = load_mrclam(_tiny_run(tmp_path), "visibility", robots=(1, 2), bin_width=1.0,
+                        anchors=(6, 8, 9))
+    rep = MRCLAMReport.from_meta(h.meta)
     said = [str(w.message) for w in caught if w.category is MRCLAMDataWarning]
     assert any("[10, 11] were never observed" in m for m in said)
     assert any("falls apart" in m for m in said)
@@ -149,8 +151,8 @@ def test_loader_bearing_and_range_with_masks(tmp_path):
     run = _tiny_run(tmp_path)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MRCLAMDataWarning)
-        hb, _ = load_mrclam(run, "bearing", robots=(1, 2), bin_width=1.0, anchors=(6, 8, 9))
-        hr, _ = load_mrclam(run, "range", robots=(1, 2), bin_width=1.0, anchors=(6, 8, 9))
+        hb = load_mrclam(run, "bearing", robots=(1, 2), bin_width=1.0, anchors=(6, 8, 9))
+        hr = load_mrclam(run, "range", robots=(1, 2), bin_width=1.0, anchors=(6, 8, 9))
     assert hb.matrix.shape == (6, 8) and hb.mask.shape == (6, 8)
     assert hb.mask[2].tolist() == [False, False, True, True, False, False, False, False]
     assert np.allclose(hb.matrix[2, 2:4], [np.cos(0.4), np.sin(0.4)])
@@ -160,12 +162,104 @@ def test_loader_bearing_and_range_with_masks(tmp_path):
     assert hr.mask.sum() == 5 and np.all(hr.matrix[~hr.mask] == 0)
 
 
+def test_loader_returns_a_history_and_fuses_range_and_bearing(tmp_path):
+    from lfmdr_gym.histories.history import History
+
+    run = _tiny_run(tmp_path)
+    kw = {"robots": (1, 2), "bin_width": 1.0, "anchors": (6, 8, 9)}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MRCLAMDataWarning)
+        single = {s: load_mrclam(run, s, **kw) for s in ("range", "bearing")}
+        fused = load_mrclam(run, "range-bearing", **kw)  # as lfmdr mrclam --sensor range-bearing
+    assert all(isinstance(h, History) for h in (*single.values(), fused))
+    assert fused.sensor == "range-bearing" and fused.fused and fused.meta["sensor"] == "range-bearing"
+    for s, h in single.items():
+        part = fused.parts[s]
+        assert np.array_equal(part.matrix, h.matrix) and np.array_equal(part.mask, h.mask)
+        assert np.array_equal(fused.timeline, h.timeline)
+    assert {k: v for k, v in fused.meta.items() if k != "sensor"} == {
+        k: v for k, v in single["range"].meta.items() if k != "sensor"}
+    report = MRCLAMReport.from_meta(fused.meta)
+    assert report.as_dict() == {k: fused.meta[k] for k in report.as_dict()}
+    assert report.per_robot_landmark_rows == {1: 4, 2: 2}
+    with pytest.raises(ValueError, match="bin width"):  # no default width for this set
+        load_mrclam(run, "visibility-bearing", robots=(1, 2))
+
+
+def test_map_warnings_name_landmark_subjects_not_rows(tmp_path):
+    from lfmdr_gym.experiments.mrclam import _in_subjects
+
+    subjects = np.arange(6, 21)
+    every = np.arange(15)
+    note = ("LOC-SMA: RigidityWarning: the measured pairs fall apart into 2 groups "
+            "[[0, 1, 2], [3, 14]] (a clustered layout?); 2 pair distance(s) [(3, 14), (4, 14)] "
+            "dropped; objects [5] not placed; sizes [8, 7] of 2 components")
+    said = _in_subjects(note, subjects, every)
+    assert "groups of landmarks [[6, 7, 8], [9, 20]]" in said
+    assert "pair distance(s) between landmarks [(9, 20), (10, 20)]" in said
+    assert "landmarks [11] not placed" in said
+    assert "sizes [8, 7] of 2 components" in said and "fall apart into 2 groups" in said
+    # a method's rows are those of the landmarks with data (here subject 6 had none)
+    assert "landmarks [8]" in _in_subjects("objects [1] x", subjects, every[1:])
+    # on a clustered run, the fused map's warning names the two groups of subjects
+    rng = np.random.default_rng(4)
+    truth = {}
+    for k, s in enumerate(range(6, 18)):
+        cx, cy = (0.0, 0.0) if k < 6 else (0.0, 12.0)
+        truth[s] = (cx + rng.uniform(-1, 1), cy + rng.uniform(-1, 1))
+    run = _write_run(tmp_path / "Clustered", truth,
+                     _simulate_rows(truth, n_images=1200, max_range=4.0, seed=5))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MRCLAMDataWarning)
+        res = map_mrclam_run(run, "range-bearing", robots=(1, 2, 3))
+    groups = "groups of landmarks [[6, 7, 8, 9, 10, 11], [12, 13, 14, 15, 16, 17]]"
+    assert any("LOC-SMA" in w and groups in w for w in res.warnings), res.warnings
+
+
+def test_map_png_keeps_its_title_and_every_warning_inside_the_figure(tmp_path, monkeypatch):
+    pytest.importorskip("matplotlib")
+    from lfmdr_gym.experiments import figures
+
+    drawn = {}
+    real = figures.atomic_savefig
+
+    def keep(fig, path, **kwargs):
+        drawn["fig"] = fig
+        return real(fig, path, **kwargs)
+
+    monkeypatch.setattr(figures, "atomic_savefig", keep)
+    rng = np.random.default_rng(4)
+    truth = {s: ((0.0, 0.0) if k < 6 else (0.0, 12.0)) + rng.uniform(-1, 1, 2)
+             for k, s in enumerate(range(6, 18))}
+    run = _write_run(tmp_path / "Clustered", truth,
+                     _simulate_rows(truth, n_images=1200, max_range=4.0, seed=5))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MRCLAMDataWarning)
+        res = map_mrclam_run(run, "visibility", robots=(1, 2, 3), out=tmp_path / "o")
+    assert len(res.warnings) >= 2 and res.png_path.is_file()
+    fig = drawn["fig"]
+    renderer = fig.canvas.get_renderer()
+    box = fig.bbox
+    title = fig.axes[0].title
+    notes = [t for t in fig.findobj(lambda a: hasattr(a, "get_text"))
+             if str(t.get_text()).startswith("warning: ")]
+    assert title.get_text().startswith("Clustered visibility") and len(notes) == 1
+    shown = " ".join(notes[0].get_text().replace("warning: ", "").split())
+    for w in res.warnings:  # every warning in full, not its first 80 characters
+        assert " ".join(w.split()) in shown, w
+    for t in (title, notes[0]):
+        ext = t.get_window_extent(renderer)
+        assert box.x0 - 1 <= ext.x0 and ext.x1 <= box.x1 + 1, t.get_text()[:60]
+        assert box.y0 - 1 <= ext.y0 and ext.y1 <= box.y1 + 1, t.get_text()[:60]
+    assert not fig.axes[0].get_window_extent(renderer).overlaps(notes[0].get_window_extent(renderer))
+
+
 def test_loader_robot_subset_and_bad_arguments(tmp_path):
     run = _tiny_run(tmp_path)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MRCLAMDataWarning)
-        h, rep = load_mrclam(run, "visibility", robots=(2,), bin_width=1.0, anchors=(6, 8, 9))
-    assert rep.rows == 2 and h.n_steps == 2 and h.meta["robots"] == [2]
+        h = load_mrclam(run, "visibility", robots=(2,), bin_width=1.0, anchors=(6, 8, 9))
+    assert MRCLAMReport.from_meta(h.meta).rows == 2 and h.n_steps == 2 and h.meta["robots"] == [2]
     with pytest.raises(ValueError, match="sensor must be one of"):
         load_mrclam(run, "sonar")
     with pytest.raises(ValueError, match="bin_width"):
@@ -235,7 +329,7 @@ def test_clustered_layout_warns_and_map_says_so(tmp_path):
     rows = _simulate_rows(truth, n_images=1200, max_range=4.0, seed=5)
     run = _write_run(tmp_path / "Clustered", truth, rows)
     with pytest.warns(MRCLAMDataWarning, match="falls apart"):
-        h, rep = load_mrclam(run, "visibility", robots=(1, 2, 3))
+        h = load_mrclam(run, "visibility", robots=(1, 2, 3))
     assert len(h.meta["co_observation_groups"]) == 2
     with pytest.warns(MRCLAMDataWarning):
         res = map_mrclam_run(run, "visibility", robots=(1, 2, 3))

@@ -3,7 +3,8 @@
 A run directory holds ``Barcodes.dat``, ``Landmark_Groundtruth.dat`` and
 ``Robot<N>_Measurement.dat`` (4-line ``#`` header, CRLF, whitespace separated; see the
 dataset's README). :func:`read_run` reads and filters the measurements; :func:`bin_run` and
-:func:`load_mrclam` bin them into per-landmark histories. This module only reads and bins:
+:func:`load_mrclam` bin them into per-landmark histories (:func:`load_mrclam` returns a
+:class:`History`: one sensor's, or range and bearing fused). This module only reads and bins:
 mapping a run and scoring it is :func:`lfmdr_gym.experiments.mrclam.map_mrclam_run`.
 
 Binning. Every robot is its own viewpoint, so bins are per robot: robot ``k``'s measurements
@@ -33,11 +34,17 @@ from typing import Any
 
 import numpy as np
 
-from lfmdr_gym.checks import check_real
 from lfmdr_gym.histories.history import History
+from lfmdr_gym.checks import check_real
 from mappers.core.align import check_anchor_ids
-from mappers.core.sensors import COLUMNS_PER_STEP, check_sensor
 from mappers.masked.coobservation import co_observation_components
+from mappers.core.sensors import (
+    COLUMNS_PER_STEP,
+    check_sensor,
+    check_sensor_set,
+    sensor_name,
+    sensors_of,
+)
 
 __all__ = [
     "DEFAULT_BIN_WIDTH",
@@ -109,6 +116,20 @@ class MRCLAMReport:
     per_robot_landmark_rows: dict[int, int]
     groundtruth_fix: str
     warnings: tuple[str, ...] = ()
+
+    @classmethod
+    def from_meta(cls, meta: dict[str, Any]) -> MRCLAMReport:
+        """The report of a loaded history, from its ``History.meta`` (:meth:`as_dict`'s fields)."""
+        return cls(
+            run=str(meta["run"]), robots=tuple(int(r) for r in meta["robots"]),
+            rows=int(meta["rows"]), robot_rows=int(meta["robot_rows"]),
+            unknown_barcode_rows=int(meta["unknown_barcode_rows"]),
+            repeat_rows=int(meta["repeat_rows"]), landmark_rows=int(meta["landmark_rows"]),
+            per_robot_landmark_rows={int(k): int(v)
+                                     for k, v in meta["per_robot_landmark_rows"].items()},
+            groundtruth_fix=str(meta["groundtruth_fix"]),
+            warnings=tuple(str(w) for w in meta["warnings"]),
+        )
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -392,10 +413,13 @@ def check_groundtruth(
 
 
 # ------------------------------------------------------------------------------ binning
-DEFAULT_BIN_WIDTH: dict[str, float] = {"visibility": 3.0, "bearing": 3.0, "range": 0.5}
+DEFAULT_BIN_WIDTH: dict[str, float] = {"visibility": 3.0, "bearing": 3.0, "range": 0.5,
+                                       "range-bearing": 0.25}
 """Bin width [s] per sensor when none is given: co-observation gains from a few seconds of camera
 sweep, while range pairs must come from (nearly) one viewpoint, so range bins stay near the
-camera period (about 0.24 s). ``benchmarks/bench_mrclam.py`` compares widths."""
+camera period (about 0.24 s); range and bearing fused (``"range-bearing"``) need both readings
+from one viewpoint, so their bins stay at the camera period. ``benchmarks/bench_mrclam.py``
+compares widths."""
 
 
 def corner_anchors(positions: np.ndarray, n_anchors: int = 4) -> np.ndarray:
@@ -508,12 +532,14 @@ def load_mrclam(
     groundtruth_fixes: str = "known",
     drop_empty_bins: bool = True,
     min_co: int = 3,
-) -> tuple[History, MRCLAMReport]:
-    """Load an MRCLAM run as a :class:`History` of one sensor, plus the filtering report.
+) -> History:
+    """Load an MRCLAM run as a :class:`History` (with its mask and timeline).
 
     Args:
         run_dir: the run's directory (``MRCLAM_DatasetN`` layout).
-        sensor: ``"visibility"``, ``"bearing"`` or ``"range"`` (``mode=``: the older name).
+        sensor: ``"visibility"``, ``"bearing"`` or ``"range"``; or ``"range-bearing"`` (both
+            readings of every sighting, binned alike: a fused History whose ``parts`` are the
+            range and the bearing histories, as ``lfmdr mrclam --sensor range-bearing`` maps).
         robots: robot subject numbers to use (their per-robot bins are concatenated).
         bin_width: seconds per bin; None = :data:`DEFAULT_BIN_WIDTH` of the sensor.
         anchors: landmark *subject numbers* of the anchors; None = the 4 landmarks nearest the
@@ -525,15 +551,23 @@ def load_mrclam(
 
     Row ``i`` of the history is landmark ``meta["subjects"][i]``; ``object_positions`` is the
     motion-capture ground truth (scoring only); ``timeline`` says which robot and bin each
-    column (pair) comes from.
+    column (pair) comes from. What the loader filtered and warned about is in ``meta`` (the
+    fields of :class:`MRCLAMReport`; :meth:`MRCLAMReport.from_meta` gives the report back).
     """
-    check_sensor(sensor)
+    key = check_sensor_set(sensor)
+    name = sensor_name(key)
+    parts = sensors_of(name)
+    if bin_width is None and name not in DEFAULT_BIN_WIDTH:
+        raise ValueError(f"no default bin width for {name!r}: give bin_width (seconds)")
     run = read_run(run_dir, robots, groundtruth_fixes=groundtruth_fixes)
-    bw = DEFAULT_BIN_WIDTH[sensor] if bin_width is None else bin_width
-    matrix, mask, info, timeline = bin_run(run, sensor, bw, drop_empty_bins=drop_empty_bins)
+    bw = DEFAULT_BIN_WIDTH[name] if bin_width is None else bin_width
+    binned = {s: bin_run(run, s, bw, drop_empty_bins=drop_empty_bins) for s in parts}
     anchor_ids = _resolve_anchors(run, anchors)
     msgs = list(run.report.warnings)
-    seen = mask[:, :: COLUMNS_PER_STEP[sensor]]
+    # co-observation from the sightings: the mask of a sensor that keeps every one of them
+    first = next(s for s in ("range", "visibility", "bearing") if s in binned)
+    _, mask, info, timeline = binned[first]
+    seen = mask[:, :: COLUMNS_PER_STEP[first]]
     comps = co_observation_components(seen, min_co)
     never = [int(run.subjects[i]) for i in np.flatnonzero(~seen.any(axis=1))]
     if never:
@@ -548,14 +582,18 @@ def load_mrclam(
     report = MRCLAMReport(**{**run.report.__dict__, "warnings": tuple(msgs)})
     meta = {
         "source": "MRCLAM",
-        "sensor": sensor,
+        "sensor": name,
         "subjects": run.subjects.tolist(),
         "anchor_subjects": run.subjects[anchor_ids].tolist(),
         "co_observation_groups": [[int(run.subjects[i]) for i in c] for c in comps],
         **report.as_dict(),
         **info,
     }
-    history = History(sensor=sensor, matrix=matrix, object_positions=run.truth,
-                      anchor_ids=anchor_ids, anchor_positions=run.truth[anchor_ids], mask=mask,
-                      meta=meta, timeline=timeline)
-    return history, report
+    if len(parts) == 1:
+        matrix, mask = binned[name][0], binned[name][1]
+    else:
+        matrix = {s: binned[s][0] for s in parts}
+        mask = {s: binned[s][1] for s in parts}
+    return History(sensor=name, matrix=matrix, object_positions=run.truth,
+                   anchor_ids=anchor_ids, anchor_positions=run.truth[anchor_ids], mask=mask,
+                   meta=meta, timeline=timeline)

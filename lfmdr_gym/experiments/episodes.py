@@ -45,11 +45,17 @@ class Episode:
 
 
 def make_env(env_id: str, steps: int, env_kwargs: Mapping[str, Any] | None = None) -> Any:
-    """``gym.make(env_id)`` with an episode limit of ``steps`` and the given env keywords."""
+    """``gym.make(env_id)`` with an episode limit of ``steps`` and the given env keywords.
+
+    An id Gymnasium does not know is a ValueError naming the registered LFMDR ids (any other
+    registered Gymnasium id is made as it is)."""
     import gymnasium as gym
 
     import lfmdr_gym  # noqa: F401 - registers the env ids
 
+    if env_id not in gym.registry:
+        raise ValueError(f"unknown env id {env_id!r}; the registered LFMDR env ids are "
+                         f"{list(lfmdr_gym.ENV_IDS)}")
     return gym.make(env_id, max_episode_steps=max(int(steps), 1), **dict(env_kwargs or {}))
 
 

@@ -33,8 +33,10 @@ __all__ = [
     "write_table",
 ]
 
-# The paper's figures as far as the seed's text conversion keeps them (Tables 1 and 2, figures 6, 7 and 9). Parameters are
-# in the paper's notation; "mpe"/"moe" None where the pairing was lost.
+# The paper's figures as far as the text of the paper we have keeps them (Tables 1 and 2,
+# figures 6, 7 and 9). Parameters are in the paper's notation. Table 1's text lists every
+# method's parameter in order, but MPE and MOE for only three of the five graph-based methods,
+# without saying which: those rows carry a "note" instead of "mpe"/"moe".
 PAPER: dict[str, dict[str, dict[str, Any]]] = {
     "visibility": {
         "LPCA": {"param": "-", "mpe": 1.055, "moe": 18.19},
@@ -55,9 +57,14 @@ PAPER: dict[str, dict[str, dict[str, Any]]] = {
     },
 }
 PAPER_SOURCE = {
-    "visibility": "Yairi 2007, Table 1 (graph-method pairings lost in the seed's conversion)",
-    "bearing": "Yairi 2007, Table 2 (numbers lost in the seed's conversion; remarks from §4.4.2)",
+    "visibility": "Yairi 2007, Table 1. The text of the paper we have gives every method's "
+                  "parameter, but MPE and MOE for only three of its five graph-based methods "
+                  "(0.177, 0.241 and 0.192 m) without saying which method each belongs to, so "
+                  "their rows give the range; its text says SDE's error is the lowest",
+    "bearing": "Yairi 2007, Table 2, whose numbers are missing from the text of the paper we "
+               "have; the remarks are from its §4.4.2",
 }
+"""The last line of ``table.md``: where the paper's column comes from, and what it lacks."""
 
 PAPER_EXAMPLES: dict[str, tuple[str, ...]] = {
     "visibility": ("LPCA", "SDE"),  # figures 6 and 7
@@ -251,16 +258,38 @@ def plot_curves(
         ax.set_ylabel("mean position error [m]")
         ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+        if ax.get_legend_handles_labels()[0]:  # (a panel whose methods all failed has none)
+            ax.legend(fontsize=8)
     fig.suptitle(f"{sensor.capitalize()}-only mapping: MPE against the number of observations")
     atomic_savefig(fig, path)
     return Path(path)
 
 
-def plot_map(positions: np.ndarray, history: History, path: Path, *, title: str = "") -> Path:
+def plot_map(positions: np.ndarray, history: History, path: Path, *, title: str = "",
+             notes: Sequence[str] = ()) -> Path:
     """An example map (paper figures 6, 7, 9) of a history: see :func:`plot_estimate`."""
     return plot_estimate(positions, history.object_positions, history.anchor_ids, path,
-                         title=title, trail=history.robot_poses)
+                         title=title, trail=history.robot_poses, notes=notes)
+
+
+# Characters per line of the map figure's title (fontsize 9) and notes (fontsize 7) on its
+# 6-inch width, and the height [in] of one line of each.
+_TITLE_CHARS, _NOTE_CHARS = 80, 100
+_TITLE_LINE, _NOTE_LINE = 9 * 1.25 / 72, 7 * 1.25 / 72
+
+
+def _wrapped(texts: Sequence[str], width: int, prefix: str = "") -> list[str]:
+    """Each text wrapped to ``width`` characters (its own line breaks kept), ``prefix`` before
+    its first line and its continuation lines indented."""
+    import textwrap
+
+    indent = "    " if prefix else ""
+    lines: list[str] = []
+    for text in texts:
+        for k, part in enumerate(str(text).splitlines() or [""]):
+            lines += textwrap.wrap(part, width, initial_indent=prefix if k == 0 else indent,
+                                   subsequent_indent=indent) or [""]
+    return lines
 
 
 def plot_estimate(
@@ -272,12 +301,15 @@ def plot_estimate(
     title: str = "",
     labels: Sequence[int] | np.ndarray | None = None,
     trail: np.ndarray | None = None,
+    notes: Sequence[str] = (),
 ) -> Path:
     """True positions, estimates, and a line between (paper figures 6, 7, 9), saved atomically.
 
     Anchors are drawn as squares; unmapped objects (NaN estimates) as grey crosses at the truth;
     objects are labelled by ``labels`` (default: their index); ``trail`` (N, >=2) draws the
-    robot's path faintly underneath, when the data has one.
+    robot's path faintly underneath, when the data has one. The title is wrapped to the
+    figure's width; ``notes`` (e.g. the map's warnings) are written in full below the plot,
+    each wrapped, and the figure grows to hold them.
     """
     est = np.asarray(positions, dtype=float)
     truth = np.asarray(truth, dtype=float)
@@ -285,7 +317,11 @@ def plot_estimate(
     anchors[np.asarray(anchor_ids, dtype=int)] = True
     labels = range(len(truth)) if labels is None else labels
     span = np.nanmax(truth, axis=0) - np.nanmin(truth, axis=0)
-    fig = _figure(6.0, float(np.clip(6.0 * span[1] / max(span[0], 1e-9), 4.0, 9.0)) + 0.2)
+    title_lines = _wrapped([title], _TITLE_CHARS) if title else []
+    note_lines = _wrapped(notes, _NOTE_CHARS, prefix="warning: ")
+    extra = max(len(title_lines) - 1, 0) * _TITLE_LINE + len(note_lines) * _NOTE_LINE
+    height = float(np.clip(6.0 * span[1] / max(span[0], 1e-9), 4.0, 9.0)) + 0.2
+    fig = _figure(6.0, height + extra + (0.15 if note_lines else 0.0))
     ax = fig.add_subplot()
     known = np.all(np.isfinite(truth), axis=1)
     mapped = np.all(np.isfinite(est), axis=1)
@@ -309,8 +345,11 @@ def plot_estimate(
     ax.set_ylabel("y [m]")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="upper right")
-    if title:
-        ax.set_title(title, fontsize=9)
+    if title_lines:
+        ax.set_title("\n".join(title_lines), fontsize=9)
+    if note_lines:  # below the plot, left-aligned; constrained layout keeps room for it
+        fig.supxlabel("\n".join(note_lines), fontsize=7, x=0.01, ha="left",
+                      multialignment="left", color="tab:red")
     atomic_savefig(fig, path)
     return Path(path)
 

@@ -15,7 +15,7 @@ import numpy as np
 from lfmdr_gym.atomic import atomic_write
 from lfmdr_gym.checks import check_int
 from lfmdr_gym.experiments.episodes import collect_history
-from lfmdr_gym.experiments.params import param_label, user_params
+from lfmdr_gym.experiments.params import method_label, param_label, user_params
 from lfmdr_gym.experiments.protocol import DEFAULT_EVERY
 from lfmdr_gym.experiments.scoring import evaluate, map_history, score_map
 from lfmdr_gym.experiments.store import ensure_writable_dir
@@ -55,7 +55,8 @@ def _sensor_of(env_id: str) -> str:
     from lfmdr_gym import ENV_IDS
 
     if env_id not in ENV_IDS:
-        raise ValueError(f"unknown env id {env_id!r}; choose from {list(ENV_IDS)}")
+        raise ValueError(f"unknown env id {env_id!r}; the registered LFMDR env ids are "
+                         f"{list(ENV_IDS)}")
     return ENV_IDS[env_id]
 
 
@@ -73,7 +74,8 @@ def run_episode(
 ) -> list[dict[str, Any]]:
     """One episode driven by the exploration policy named ``policy`` (:data:`lfmdr_gym.POLICIES`),
     mapped with ``method`` (None: the default for its history) at every
-    checkpoint; rows of scores per checkpoint. ``env_kwargs``: env keywords such as
+    checkpoint; rows of scores per checkpoint (``warnings``: the map's ``Map.warnings``).
+    ``env_kwargs``: env keywords such as
     ``{"fov_deg": 90}`` (checked; a sensing limit makes the history masked). With ``out``:
     writes ``history.npz``, ``scores.csv``, ``map.csv`` and ``map.png`` (the map at the last
     checkpoint) there."""
@@ -87,15 +89,16 @@ def run_episode(
     for n in points:
         result = evaluate(history.head(n), method, params)
         last = result.pop("map")
-        rows.append({"n_steps": n, "method": method, "param": param_label(params), **result})
+        rows.append({"n_steps": n, "method": method, "param": param_label(params), **result,
+                     "warnings": tuple(last.warnings) if last is not None else ()})
     if out is not None:
         history.save(out / "history.npz")
         _write_csv(out / "scores.csv", rows)
         if last is not None:
             r = rows[-1]
             _write_map(out, last.positions, history,
-                       f"{env_id}, {method} ({param_label(params)}), N={steps}: "
-                       f"MPE {r['mpe']:.3f} m, MOE {r['moe']:.2f} %")
+                       f"{env_id}, {method_label(method, params)}, N={steps}: "
+                       f"MPE {r['mpe']:.3f} m, MOE {r['moe']:.2f} %", notes=last.warnings)
     return rows
 
 
@@ -123,23 +126,27 @@ def map_history_file(
         result = map_history(history, method, params)
     info: dict[str, Any] = {"map": result, "history": history, "method": method,
                             "param": param_label(params), "out": out}
-    title = f"{Path(path).name}, {method} ({param_label(params)}), N={history.n_steps}"
+    title = f"{Path(path).name}, {method_label(method, params)}, N={history.n_steps}"
     if np.all(np.isfinite(history.object_positions)):
         info.update(score_map(result.positions, result.unmapped, history))
         title += f": MPE {info['mpe']:.3f} m, MOE {info['moe']:.2f} %"
-    info["figure"] = _write_map(out, result.positions, history, title)
+    info["figure"] = _write_map(out, result.positions, history, title, notes=result.warnings)
     return info
 
 
 def _write_csv(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
+    """Rows as CSV; a tuple of texts (a map's warnings) is one cell, joined by " | "."""
     with atomic_write(path) as fh:
         writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
         writer.writeheader()
-        writer.writerows(rows)
+        writer.writerows({k: " | ".join(v) if isinstance(v, tuple) else v for k, v in r.items()}
+                         for r in rows)
 
 
-def _write_map(out: Path, positions: np.ndarray, history: History, title: str) -> Path:
-    """``map.csv`` (object, estimate, truth, anchor flag) and ``map.png``; returns the figure."""
+def _write_map(out: Path, positions: np.ndarray, history: History, title: str,
+               notes: Sequence[str] = ()) -> Path:
+    """``map.csv`` (object, estimate, truth, anchor flag) and ``map.png`` (``notes``, the map's
+    warnings, below it); returns the figure."""
     import lfmdr_gym.experiments.figures as figures
 
     anchors = {int(i) for i in history.anchor_ids}
@@ -148,4 +155,4 @@ def _write_map(out: Path, positions: np.ndarray, history: History, title: str) -
         writer.writerow(["object", "x", "y", "true_x", "true_y", "anchor"])
         for j, (est, tru) in enumerate(zip(positions, history.object_positions, strict=True)):
             writer.writerow([j, *(f"{v:.6g}" for v in est), *(f"{v:.6g}" for v in tru), int(j in anchors)])
-    return figures.plot_map(positions, history, out / "map.png", title=title)
+    return figures.plot_map(positions, history, out / "map.png", title=title, notes=notes)

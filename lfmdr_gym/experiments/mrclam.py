@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import re
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -22,6 +23,7 @@ import numpy as np
 
 from lfmdr_gym.atomic import atomic_write_text
 from lfmdr_gym.datasets.mrclam import (
+    DEFAULT_BIN_WIDTH,
     ROBOT_SUBJECTS,
     MRCLAMDataWarning,
     MRCLAMReport,
@@ -42,7 +44,7 @@ DEFAULT_METHOD: dict[str, str] = {
 (``benchmarks/bench_mrclam.py``). Bearing uses the pattern of what was seen: no bearing-only
 statistic measured better (``docs/bearing-on-real-data.md``)."""
 
-FUSED_BIN_WIDTH: dict[str, float] = {"range-bearing": 0.25}
+FUSED_BIN_WIDTH: dict[str, float] = {"range-bearing": DEFAULT_BIN_WIDTH["range-bearing"]}
 """Bin width [s] of fused runs when none is given: the law of cosines needs both readings from
 one viewpoint, so bins stay near the camera period (chosen leave-one-run-out,
 ``benchmarks/bench_mrclam.py``)."""
@@ -67,7 +69,8 @@ class MRCLAMMap:
         mpe: mean position error [m] over the mapped non-anchor landmarks.
         moe: mean orientation error [%] over the mapped non-anchor landmarks.
         centroid_mpe: MPE of placing every non-anchor landmark at the anchors' centroid.
-        warnings: data and mapping warnings (also issued as :class:`MRCLAMDataWarning`).
+        warnings: data and mapping warnings (also issued as :class:`MRCLAMDataWarning`); the
+            landmarks they name are subject numbers (a mapper's object rows are translated).
         report: the loader's filtering report.
         history_meta: ``History.meta`` of the binned history.
         csv_path, png_path: files written (None when ``out`` is None).
@@ -129,25 +132,67 @@ def _plan(sensor: str, method: str | None, bin_width: float | None, params: dict
 
 
 def _load(run_dir, key, robots, bin_width, anchors, groundtruth_fixes):
-    """The run's History (a fused set: a dict sensor -> History, binned alike) and report."""
-    sensors = [key] if isinstance(key, str) else [s for s in ("range", "bearing", "visibility")
-                                                  if s in key]
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", MRCLAMDataWarning)
-        loaded = {s: load_mrclam(run_dir, s, robots=robots, bin_width=bin_width, anchors=anchors,
-                                 groundtruth_fixes=groundtruth_fixes) for s in sensors}
-    report = loaded[sensors[0]][1]
-    history = loaded[key][0] if isinstance(key, str) else {s: h for s, (h, _) in loaded.items()}
-    seen: set[str] = set()
-    for w in caught:  # re-issue what the loader said (once), so callers' filters still apply
-        if str(w.message) in seen:
+    """The run's History (a fused set: a dict sensor -> History, its parts, binned alike) and
+    the loader's report."""
+    history = load_mrclam(run_dir, sensor_name(key), robots=robots, bin_width=bin_width,
+                          anchors=anchors, groundtruth_fixes=groundtruth_fixes)
+    report = MRCLAMReport.from_meta(history.meta)
+    # a fused set is mapped from its parts (sensor -> History), as it always has been
+    return (history if isinstance(key, str) else dict(history.parts)), report
+
+
+# Phrases of the mappers' warnings followed by a bracketed list of object rows, and how they read
+# once the rows are landmark subject numbers.
+_ROW_PHRASES = {
+    r"objects": "landmarks",
+    r"object\(s\) \(rows\)": "landmark(s)",
+    r"groups": "groups of landmarks",
+    r"pair distance\(s\)": "pair distance(s) between landmarks",
+    r"anchors": "anchors",
+}
+_ROW_LIST = re.compile(r"\b(" + "|".join(_ROW_PHRASES) + r") (?=\[)")
+# a method's own warning, as build_map records it ("LOC-SMA: RigidityWarning: ..."): its rows
+# are those of the objects it was given (the ones with data), not the history's
+_METHOD_NOTE = re.compile(r"^[^\s:]+: [A-Za-z]*Warning: ")
+
+
+def _bracketed(text: str, start: int) -> int:
+    """The index just past the bracket that closes the one at ``text[start]``."""
+    depth = 0
+    for k in range(start, len(text)):
+        depth += {"[": 1, "(": 1, "]": -1, ")": -1}.get(text[k], 0)
+        if depth == 0:
+            return k + 1
+    return len(text)
+
+
+def _in_subjects(note: str, subjects: np.ndarray, rows: np.ndarray) -> str:
+    """``note`` with the object rows it names (after ``objects``, ``groups``, ``pair
+    distance(s)``, ``anchors``...) written as landmark subject numbers: row ``k`` is
+    ``subjects[rows[k]]``; a number outside ``rows`` is left as it is."""
+    out, at = [], 0
+    for match in _ROW_LIST.finditer(note):
+        if match.start() < at:
             continue
-        seen.add(str(w.message))
-        if issubclass(w.category, MRCLAMDataWarning):
-            warnings.warn(str(w.message), MRCLAMDataWarning, stacklevel=3)
-        else:
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    return history, report
+        end = _bracketed(note, match.end())
+        words = next(v for k, v in _ROW_PHRASES.items() if re.fullmatch(k, match.group(1)))
+        ids = re.sub(r"\d+", lambda m: (str(int(subjects[rows[int(m.group())]]))
+                                        if int(m.group()) < len(rows) else m.group()),
+                     note[match.end():end])
+        out += [note[at:match.start()], f"{words} {ids}"]
+        at = end
+    return "".join(out) + note[at:]
+
+
+def _with_data(histories: Any) -> np.ndarray:
+    """The rows ``build_map`` hands the method: the objects with an observed non-zero entry."""
+    parts = histories.values() if isinstance(histories, dict) else [histories]
+    rows = None
+    for h in parts:
+        X = np.asarray(h.matrix) != 0
+        has = np.any(X if h.mask is None else X & np.asarray(h.mask), axis=1)
+        rows = has if rows is None else rows | has
+    return np.flatnonzero(rows)
 
 
 def _scores(positions: np.ndarray, history: History) -> tuple[float, float, float]:
@@ -234,10 +279,12 @@ def map_mrclam_run(
     msgs = list(report.warnings)
     result = build_map(histories, history.anchor_ids, history.anchor_positions, method, **params)
     run = history.meta["run"]
-    for w in result.warnings:
+    subjects = np.asarray(history.meta["subjects"], dtype=np.int64)
+    fitted, every = _with_data(histories), np.arange(len(subjects))
+    for w in result.warnings:  # the objects they name as landmark subjects, not as rows
+        w = _in_subjects(w, subjects, fitted if _METHOD_NOTE.match(w) else every)
         msgs.append(f"{run} ({sensor}, {result.method}): {w}")
         warnings.warn(msgs[-1], MRCLAMDataWarning, stacklevel=2)
-    subjects = np.asarray(history.meta["subjects"], dtype=np.int64)
     if result.unmapped:
         msgs.append(f"{run} ({sensor}): subject(s) {subjects[list(result.unmapped)].tolist()} are "
                     "unmapped (empty in map.csv) and not scored")
@@ -269,10 +316,6 @@ def _write(result: MRCLAMMap, out: Path, plot: bool) -> MRCLAMMap:
         anchors = np.flatnonzero(np.isin(result.subjects, result.anchor_subjects))
         title = (f"{result.run} {result.sensor} ({result.method}): MPE {result.mpe:.2f} m, "
                  f"MOE {result.moe:.1f} %")
-        if result.warnings:
-            first = result.warnings[0]
-            title += (f"\nWARNING ({len(result.warnings)}): {first[:80]}"
-                      f"{'...' if len(first) > 80 else ''}")
         plot_estimate(result.positions, result.truth, anchors, png_path, title=title,
-                      labels=result.subjects)
+                      labels=result.subjects, notes=result.warnings)
     return dataclasses.replace(result, csv_path=csv_path, png_path=png_path)

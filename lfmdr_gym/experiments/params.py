@@ -16,6 +16,7 @@ __all__ = [
     "PARAM_ALIASES",
     "default_params",
     "grid_params",
+    "method_label",
     "param_label",
     "param_sort_key",
     "parse_params",
@@ -61,6 +62,14 @@ def param_label(params: Mapping[str, Any]) -> str:
     if not params:
         return "-"
     return ",".join(f"{k}={params[k]}" for k in sorted(params))
+
+
+def method_label(method: str, params: Mapping[str, Any] | str) -> str:
+    """How a method and its parameters are shown to a reader: ``"ISOMAP (n_neighbors=7)"``, and
+    just ``"CAL-SMA"`` when there is no parameter (``params`` a mapping, or a label of
+    :func:`param_label`, whose ``"-"`` stands for none)."""
+    label = params if isinstance(params, str) else param_label(params)
+    return method if label in ("", "-") else f"{method} ({label})"
 
 
 def number_or_text(text: str) -> Any:

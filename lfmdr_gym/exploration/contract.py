@@ -30,6 +30,28 @@ class Policy(Protocol):
     batch of B observations from a vector env. A policy that keeps state or randomness should also
     offer ``reset(seed=None)``, called at the start of each collected episode (optional, so it is
     not part of the runtime check).
+
+    The observation (a dict; each entry gains a leading axis of B from a vector env), as
+    :class:`~lfmdr_gym.env.LFMDREnv` documents it:
+
+    - ``"proximity"``: float32 (n_rays,), ``n_rays = env.n_proximity_rays`` (32 by default).
+      Ray ``k`` leaves the robot's centre at ``heading + 2 pi k / n_rays``, counter-clockwise:
+      ray 0 straight ahead, ray ``n_rays / 4`` to the left (+90 degrees), ``n_rays / 2``
+      behind, ``3 n_rays / 4`` to the right (the unit vectors in the robot frame:
+      :func:`lfmdr_gym.sim.sensors.ray_directions`). Its value is the distance [m] from the robot's
+      centre (its radius not subtracted) to the first obstacle on the ray, an object's surface
+      or a wall, capped at ``env.proximity_range`` (0.5 m by default): the cap means nothing
+      within that distance. A move along a ray's direction hits something on that ray when
+      its reading is below ``step_length + robot_radius`` (0.25 m by default); rays are thin,
+      so an object between two rays can still block a move (the physics then stops the robot
+      short).
+    - the mapping sensor's entry (``"visibility"``, ``"bearing"`` and/or ``"range"``, one row
+      per object) and, with a sensing limit on, ``"observed"``: a policy may use them too.
+
+    The action is the heading change [rad] before the move, in ``[-max_turn, max_turn]``
+    (``pi / 4`` by default; clipped). A policy never sees ``info`` (the ground truth); the
+    env's geometry (``max_turn``, ``step_length``, ``robot_radius``, ...) can be read once from
+    the env, as :meth:`RandomWalkPolicy.for_env` does.
     """
 
     def __call__(self, observation: Any) -> np.ndarray: ...
