@@ -34,10 +34,9 @@ from typing import Any
 
 import numpy as np
 
-from lfmdr_gym.histories.history import History
 from lfmdr_gym.checks import check_real
+from lfmdr_gym.histories.history import History
 from mappers.core.align import check_anchor_ids
-from mappers.masked.coobservation import co_observation_components
 from mappers.core.sensors import (
     COLUMNS_PER_STEP,
     check_sensor,
@@ -45,6 +44,7 @@ from mappers.core.sensors import (
     sensor_name,
     sensors_of,
 )
+from mappers.masked.coobservation import co_observation_components
 
 __all__ = [
     "DEFAULT_BIN_WIDTH",
