@@ -359,22 +359,22 @@ _BUILTINS: tuple[MethodSpec, ...] = (
                sensors=(frozenset({"visibility", "bearing"}),), normalize=False),
     # BEARING-BA's and VIEW-BA's defaults were chosen on tuning layouts
     # (docs/imperfect-sensing.md): no sweep.
-    MethodSpec("BEARING-BA", "mappers.viewpoints.bearing:_bearing_ba", {}, {},
+    MethodSpec("BEARING-BA", "mappers.viewpoints.bearing:BearingAdjustment", {}, {},
                "the bearing default's map refined by estimating the viewpoints (bearing-only "
                "bundle adjustment), anchors fixed", sensors=("bearing",), **_MASKED),
-    MethodSpec("VIS-BA", "mappers.viewpoints.visibility:_vis_ba", {},
+    MethodSpec("VIS-BA", "mappers.viewpoints.visibility:VisibilityAdjustment", {},
                {"max_rounds": [3, 5, 8], "grid_cells": [6, 8]},
                "the visibility default's map refined by estimating the viewpoints (visibility "
                "bundle adjustment: a range threshold with misses), anchors fixed",
                sensors=("visibility",), uses_timeline=True, **_MASKED),
-    MethodSpec("VIS-BA-WALK", "mappers.viewpoints.visibility:_vis_ba",
+    MethodSpec("VIS-BA-WALK", "mappers.viewpoints.visibility:VisibilityAdjustment",
                {"continuity": True, "align": True, "overrelax": 1.0, "grid_cells": 4,
                 "prior_iters": 1, "model_rounds": 2},
                {"max_rounds": [3, 5, 8], "grid_cells": [4, 6]},
                "VIS-BA with the walk's continuity prior (the steps' viewpoints an HMM: "
                "consecutive steps close together): the default for flickering visibility "
                "histories", sensors=("visibility",), uses_timeline=True, **_MASKED),
-    MethodSpec("VIEW-BA", "mappers.viewpoints.view_cone:_view_ba", {}, {},
+    MethodSpec("VIEW-BA", "mappers.viewpoints.view_cone:ViewAdjustment", {}, {},
                "a limited view's masked visibility map refined by estimating each step's "
                "viewpoint and heading from the observed sets (view-cone bundle adjustment), "
                "anchors fixed", uses_anchors=True, sensors=("visibility",), normalize=False,
