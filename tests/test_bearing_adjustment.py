@@ -7,12 +7,11 @@ import pytest
 from synthetic_camera import camera_bearings
 from threadpoolctl import threadpool_limits
 
-import mappers.viewpoints.bearing as ba
-from mappers.viewpoints import engine
 from mappers import build_map
 from mappers.catalog import methods_for, resolve_method
 from mappers.defaults import DEFAULT_METHODS
 from mappers.pipeline import default_method
+from mappers.viewpoints import engine
 from mappers.viewpoints.bearing import BearingAdjustment, BearingAdjustmentWarning
 
 
