@@ -330,20 +330,20 @@ _BUILTINS: tuple[MethodSpec, ...] = (
     MethodSpec("masked-euclidean", "mappers.masked.pair_maps:_masked_euclidean",
                description="RMS history difference over co-observed steps, weighted SMACOF",
                **_MASKED),
-    MethodSpec("covis-ensemble", "mappers.masked.ensemble:_covis_ensemble",
+    MethodSpec("covis-ensemble", "mappers.masked.ensemble:CovisEnsemble",
                description="mean of anchored co-observation maps over windows of consecutive "
                            "steps", uses_timeline=True, **_MASKED),
-    MethodSpec("covis-cal", "mappers.masked.covis_auto:_covis_cal",
+    MethodSpec("covis-cal", "mappers.masked.covis_auto:CovisCalibrated",
                description="CAL-SMA of 1 - (angle-weighted) co-observation rates, anchored",
                sensors=_COVIS_SENSORS, **_MASKED),
-    MethodSpec("covis-auto", "mappers.masked.covis_auto:_covis_auto",
+    MethodSpec("covis-auto", "mappers.masked.covis_auto:CovisAuto",
                description="covis-cal when most pairs are seen together, else covis-angle",
                sensors=("bearing",), **_MASKED),
-    MethodSpec("covis-sparse", "mappers.masked.covis_sparse:_covis_sparse", {},
+    MethodSpec("covis-sparse", "mappers.masked.covis_sparse:SparseCovis", {},
                {"n_neighbors": [8, 12, 16]},
                "covis-cal's model on sparse co-observed pairs: masked histories of thousands of "
                "objects", sensors=_COVIS_SENSORS, sparse=True, max_objects=None, **_MASKED),
-    MethodSpec("dropout-blend", "mappers.masked.dropout_blend:_dropout_blend",
+    MethodSpec("dropout-blend", "mappers.masked.dropout_blend:DropoutBlend",
                description="mean of CAL-SMA on 3-step averaged rows and covis-nonmetric, anchored",
                sensors=("visibility",), uses_timeline=True, **_MASKED),
     MethodSpec("LOC-SMA", "mappers.fused.loc_sma:_loc_sma", {},
@@ -359,22 +359,22 @@ _BUILTINS: tuple[MethodSpec, ...] = (
                sensors=(frozenset({"visibility", "bearing"}),), normalize=False),
     # BEARING-BA's and VIEW-BA's defaults were chosen on tuning layouts
     # (docs/imperfect-sensing.md): no sweep.
-    MethodSpec("BEARING-BA", "mappers.viewpoints.bearing:_bearing_ba", {}, {},
+    MethodSpec("BEARING-BA", "mappers.viewpoints.bearing:BearingAdjustment", {}, {},
                "the bearing default's map refined by estimating the viewpoints (bearing-only "
                "bundle adjustment), anchors fixed", sensors=("bearing",), **_MASKED),
-    MethodSpec("VIS-BA", "mappers.viewpoints.visibility:_vis_ba", {},
+    MethodSpec("VIS-BA", "mappers.viewpoints.visibility:VisibilityAdjustment", {},
                {"max_rounds": [3, 5, 8], "grid_cells": [6, 8]},
                "the visibility default's map refined by estimating the viewpoints (visibility "
                "bundle adjustment: a range threshold with misses), anchors fixed",
                sensors=("visibility",), uses_timeline=True, **_MASKED),
-    MethodSpec("VIS-BA-WALK", "mappers.viewpoints.visibility:_vis_ba",
+    MethodSpec("VIS-BA-WALK", "mappers.viewpoints.visibility:VisibilityAdjustment",
                {"continuity": True, "align": True, "overrelax": 1.0, "grid_cells": 4,
                 "prior_iters": 1, "model_rounds": 2},
                {"max_rounds": [3, 5, 8], "grid_cells": [4, 6]},
                "VIS-BA with the walk's continuity prior (the steps' viewpoints an HMM: "
                "consecutive steps close together): the default for flickering visibility "
                "histories", sensors=("visibility",), uses_timeline=True, **_MASKED),
-    MethodSpec("VIEW-BA", "mappers.viewpoints.view_cone:_view_ba", {}, {},
+    MethodSpec("VIEW-BA", "mappers.viewpoints.view_cone:ViewAdjustment", {}, {},
                "a limited view's masked visibility map refined by estimating each step's "
                "viewpoint and heading from the observed sets (view-cone bundle adjustment), "
                "anchors fixed", uses_anchors=True, sensors=("visibility",), normalize=False,

@@ -6,7 +6,6 @@ import warnings
 
 import numpy as np
 import pytest
-from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from mappers import METHODS, build_map, mean_orientation_error, mean_position_error
 from mappers.calibrated.cal_sma import (
@@ -246,12 +245,6 @@ def test_rejects_bad_histories(world):
         CalibratedSMACOF(dissimilarity="precomputed").fit(X, **kw)
     with pytest.raises(ValueError, match="unknown parameter"):
         build_map(X, ids, pts[ids], method="CAL-SMA", sigma2=0.5)
-
-
-@pytest.mark.filterwarnings("ignore::mappers.calibrated.cal_sma.FoldWarning")
-@parametrize_with_checks([CalibratedSMACOF(n_rounds=1, n_init=0, max_iter=10)])
-def test_sklearn_compatible(estimator, check):
-    check(estimator)
 
 
 def test_example_runs(capsys):

@@ -50,7 +50,7 @@ def test_angle_weighted_coefficient_by_hand():
 
 def test_covis_cal_recovers_a_layout_seen_through_a_90_degree_view():
     P, X, mask, a = _camera(90)
-    Y = CovisCalibrated().fit_transform(X, mask, sensor="bearing", anchor_ids=a,
+    Y = CovisCalibrated().fit_transform(X, mask=mask, sensor="bearing", anchor_ids=a,
                                         anchor_positions=P[a])
     assert np.allclose(Y[a], P[a])
     assert non_anchor_error(Y, P, a) < 0.2  # 2.5 m arena; a random map is ~1 m off
@@ -69,7 +69,7 @@ def test_covis_angle_recovers_a_layout_seen_with_a_range_limit():
 def test_covis_auto_chooses_by_the_share_of_pairs_never_seen_together(max_range, branch):
     P, X, mask, a = _camera(90, max_range=max_range, seed=2)
     est = CovisAuto()
-    Y = est.fit_transform(X, mask, sensor="bearing", anchor_ids=a, anchor_positions=P[a])
+    Y = est.fit_transform(X, mask=mask, sensor="bearing", anchor_ids=a, anchor_positions=P[a])
     assert est.branch_ == branch
     assert (est.local_share_ <= 0.1) == (branch == "covis-cal")
     assert non_anchor_error(Y, P, a) < (0.2 if branch == "covis-cal" else 0.08)
@@ -88,18 +88,21 @@ def test_covis_auto_maps_masked_bearing_through_build_map():
 
 def test_bad_input_is_refused_with_its_name():
     P, X, mask, a = _camera(90, n_steps=300)
-    with pytest.raises(ValueError, match="min_co"):
-        CovisCalibrated(min_co=0)
-    with pytest.raises(ValueError, match="local_share"):
-        CovisAuto(local_share=1.5)
+    fit = dict(mask=mask, sensor="bearing", anchor_ids=a, anchor_positions=P[a])
+    # parameters are checked when fitting (scikit-learn's contract: __init__ only stores them)
+    for est, match in ((CovisCalibrated(min_co=0), "min_co"), (CovisCalibrated(min_co=True), "min_co"),
+                       (CovisAuto(local_share=1.5), "local_share"),
+                       (CovisCalibrated(links=("cubic",)), "links")):
+        with pytest.raises(ValueError, match=match):
+            est.fit(X, **fit)
     with pytest.raises(ValueError, match="sensor"):
-        CovisCalibrated().fit_transform(X[:, ::2], None, sensor="range")
+        CovisCalibrated().fit_transform(X[:, ::2], sensor="range")
     with pytest.raises(ValueError, match="covis-angle.*bearing"):
         masked_embedding(mask[:, ::2].astype(float), None, "visibility", "covis-angle")
-    with pytest.raises(ValueError, match="links"):
-        CovisCalibrated(links=("cubic",))
     with pytest.raises(ValueError, match="bearing"):
-        CovisAuto().fit_transform(mask[:, ::2].astype(float), None, sensor="visibility")
+        CovisAuto().fit_transform(mask[:, ::2].astype(float), sensor="visibility")
+    with pytest.raises(ValueError, match="mask=..."):  # the mask is a keyword argument
+        CovisAuto().fit(X, mask, sensor="bearing")
     for label in ("covis-cal", "covis-auto", "covis-angle"):
         with pytest.raises(ValueError, match="range"):
             resolve_method(label, "range", masked=True)

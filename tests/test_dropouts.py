@@ -142,11 +142,12 @@ def test_dropout_blend_refuses_what_it_cannot_map():
                                      anchor_positions=np.eye(3, 2))
     with pytest.raises(ValueError, match="anchors"):
         DropoutBlend().fit_transform(X, sensor="visibility")
-    with pytest.raises(ValueError, match="window"):
-        DropoutBlend(window=0)
+    fit = dict(sensor="visibility", anchor_ids=[0, 1, 2], anchor_positions=np.eye(3, 2))
+    with pytest.raises(ValueError, match="window"):  # parameters are checked when fitting
+        DropoutBlend(window=0).fit(X, **fit)
     for bad in (0, -0.1, True, "0.1", float("nan")):
         with pytest.raises(ValueError, match="max_disagreement"):
-            DropoutBlend(max_disagreement=bad)
+            DropoutBlend(max_disagreement=bad).fit(X, **fit)
 
 
 def test_an_object_flung_away_by_one_member_keeps_the_cal_sma_position(monkeypatch):
@@ -247,7 +248,7 @@ def test_unordered_viewpoints_are_blended_even_when_the_members_disagree():
     X = (np.linalg.norm(P[:, None] - R[None], axis=2) < 0.55).astype(float)
     est = DropoutBlend()
     with pytest.warns(UserWarning, match="folded"):  # CAL-SMA's own fold guard says so too
-        Y = est.fit_transform(X, X > 0, sensor="visibility", anchor_ids=[0, 1, 2, 3],
+        Y = est.fit_transform(X, mask=X > 0, sensor="visibility", anchor_ids=[0, 1, 2, 3],
                               anchor_positions=P[:4])
     assert not est.walk_ordered_ and est.blended_
     assert est.disagreement_ > est.max_disagreement  # the check would have fired on a walk

@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from mappers import GraphRepairWarning, MaximumVarianceUnfolding, apply_affine, fit_affine
 from mappers.paper.mvu import mvu_constraint_matrix
@@ -73,10 +72,3 @@ def test_bad_solver_and_deterministic_signs():
     a = MaximumVarianceUnfolding(n_neighbors=5).fit_transform(X)
     b = MaximumVarianceUnfolding(n_neighbors=5).fit_transform(X)
     np.testing.assert_allclose(a, b)
-
-
-# Loose tolerance and a small iteration cap keep the ~50 checks fast; they test the estimator
-# contract, not the accuracy (tested above).
-@parametrize_with_checks([MaximumVarianceUnfolding(n_neighbors=3, tol=1e-2, max_iters=300)])
-def test_sklearn_estimator_checks(estimator, check):
-    check(estimator)

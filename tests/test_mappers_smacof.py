@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from mappers import WeightedSMACOF, weighted_smacof
 from mappers.smacof.weighted import classical_mds, raw_stress
@@ -159,13 +158,6 @@ def test_default_start_unfolds_where_lpca_start_may_not():
             errors[init].append(mean_position_error(apply_affine(Y, fit_affine(Y[anchors], P[anchors])), P))
     assert max(errors["unweighted"]) < 0.3, errors
     assert np.mean(errors["unweighted"]) < np.mean(errors["lpca"]), errors
-
-
-@parametrize_with_checks(
-    [WeightedSMACOF(max_iter=50), WeightedSMACOF(n_neighbors=3, max_iter=50, n_init=2, random_state=0)]
-)
-def test_sklearn_estimator_checks(estimator, check):
-    check(estimator)
 
 
 def test_euclidean_distance_matrix_matches_sklearn():

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from mappers import (
     DEFAULT_METHODS,
@@ -92,17 +91,3 @@ def test_registered_for_range_only_and_left_out_of_other_tables():
         with pytest.raises(ValueError, match="sensors must be None or a non-empty tuple"):
             register_method(MethodSpec("BAD-SENSORS", ClassicalUnfolding, sensors=bad))
     assert "BAD-SENSORS" not in METHODS
-
-
-def _two_steps_are_rank_one(estimator):
-    # sklearn's generic checks use data with 2 features = 2 steps: the double-centred squared
-    # ranges are then rank 1, so there is no 2-D unfolding (a clear error, by design)
-    return {name: "2 steps give a rank-1 matrix: no 2-D unfolding" for name in (
-        "check_estimators_overwrite_params", "check_estimators_fit_returns_self",
-        "check_readonly_memmap_input", "check_fit2d_1feature", "check_fit_idempotent",
-        "check_fit_check_is_fitted", "check_n_features_in")}
-
-
-@parametrize_with_checks([ClassicalUnfolding()], expected_failed_checks=_two_steps_are_rank_one)
-def test_sklearn_estimator_checks(estimator, check):
-    check(estimator)

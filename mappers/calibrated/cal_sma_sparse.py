@@ -26,6 +26,7 @@ from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
+from sklearn.utils.validation import validate_data
 
 from mappers.calibrated.cal_sma import fit_calibration
 from mappers.core.align import apply_affine, check_anchors, fit_affine
@@ -129,9 +130,7 @@ class SparseCalibratedSMACOF(TransformerMixin, BaseEstimator):
     def fit(self, X, y=None, *, anchor_ids=None, anchor_positions=None):
         """Map the history rows ``X`` (M, D), dense or scipy sparse; anchors as CAL-SMA."""
         self._validate_params()
-        X = X if sp.issparse(X) else np.asarray(X, dtype=np.float64)
-        if X.ndim != 2 or X.shape[0] < 3:
-            raise ValueError(f"X must be (M >= 3, D), got shape {X.shape}")
+        X = validate_data(self, X, accept_sparse="csr", dtype=np.float64, ensure_min_samples=3)
         m = X.shape[0]
         ids = pos = None
         if anchor_ids is not None or anchor_positions is not None:
@@ -200,6 +199,11 @@ class SparseCalibratedSMACOF(TransformerMixin, BaseEstimator):
     def fit_transform(self, X, y=None, *, anchor_ids=None, anchor_positions=None) -> np.ndarray:
         """Fit and return the (M, 2) embedding (world coordinates when anchors are given)."""
         return self.fit(X, anchor_ids=anchor_ids, anchor_positions=anchor_positions).embedding_
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.input_tags.sparse = True
+        return tags
 
 
 def _cal_sma_sparse(n_neighbors: int | None = None, n_rounds: int = 10, position_degree: int = 2,

@@ -36,6 +36,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from mappers.core.align import check_anchors
+from mappers.core.validation import check_fused_input
 from mappers.fused.law_of_cosines import (
     frame_triangles,
     frame_values,
@@ -149,6 +150,7 @@ class LawOfCosinesSMACOF(TransformerMixin, BaseEstimator):
         """Map the fused histories ``X`` ({"range": (M, N), "bearing": (M, 2N)}; ``masks`` keyed
         alike, None = complete) with the anchors (rows of X) at their positions."""
         self._validate_params()
+        check_fused_input(self, X, ("range", "bearing"))
         masks = dict(masks or {})
         r, theta = frame_values(X, masks)
         m = r.shape[0]

@@ -36,9 +36,10 @@ from __future__ import annotations
 from numbers import Real
 
 import numpy as np
-from sklearn.utils._param_validation import Interval
+from sklearn.utils._param_validation import Interval, StrOptions
 
 from mappers.calibrated import CalibratedSMACOF
+from mappers.core.validation import check_fused_input
 from mappers.viewpoints import BearingAdjustment
 
 __all__ = ["VisibilityBearingSMACOF", "joined_rows"]
@@ -64,7 +65,8 @@ class VisibilityBearingSMACOF(CalibratedSMACOF):
         refine: refine the blend by bearing-only bundle adjustment of the bearing part
             (:class:`mappers.viewpoints.bearing.BearingAdjustment` with its defaults; False: the
             paper-era VB-SMA).
-        The other parameters are CAL-SMA's (:class:`mappers.calibrated.cal_sma.CalibratedSMACOF`).
+        The other parameters are CAL-SMA's (:class:`mappers.calibrated.cal_sma.CalibratedSMACOF`),
+        for both its maps (the joined rows' and the bearing rows').
 
     Fitted attributes beyond CAL-SMA's: ``fused_embedding_`` (the joined rows' map) and
     ``bearing_embedding_`` (the bearing rows' map; None when ``bearing_share`` is 0);
@@ -75,16 +77,22 @@ class VisibilityBearingSMACOF(CalibratedSMACOF):
     """
 
     _parameter_constraints: dict = {**CalibratedSMACOF._parameter_constraints,
+                                    "dissimilarity": [StrOptions({"auto", "cosine", "euclidean"})],
                                     "bearing_weight": [Interval(Real, 0, None, closed="neither")],
                                     "bearing_share": [Interval(Real, 0, 1, closed="left")],
                                     "refine": ["boolean"]}
 
     def __init__(self, *, bearing_weight: float = 3.0, bearing_share: float = 0.3,
-                 refine: bool = True, n_neighbors: int | None = None, n_rounds: int = 20,
-                 position_degree: int = 2, fold_threshold: float = 0.05, random_state=None) -> None:
-        super().__init__(n_neighbors=n_neighbors, n_rounds=n_rounds,
-                         position_degree=position_degree, fold_threshold=fold_threshold,
-                         random_state=random_state)
+                 refine: bool = True, n_neighbors: int | None = None, dissimilarity: str = "auto",
+                 n_rounds: int = 20, position_degree: int = 2, dissimilarity_degree: int = 2,
+                 far_weight: float = 0.02, far_factor: float = 0.7, n_init: int = 4,
+                 fold_threshold: float = 0.05, init: np.ndarray | None = None,
+                 max_iter: int = 100, tol: float = 1e-6, random_state=None) -> None:
+        super().__init__(n_neighbors=n_neighbors, dissimilarity=dissimilarity, n_rounds=n_rounds,
+                         position_degree=position_degree,
+                         dissimilarity_degree=dissimilarity_degree, far_weight=far_weight,
+                         far_factor=far_factor, n_init=n_init, fold_threshold=fold_threshold,
+                         init=init, max_iter=max_iter, tol=tol, random_state=random_state)
         self.bearing_weight = bearing_weight
         self.bearing_share = bearing_share
         self.refine = refine
@@ -92,9 +100,10 @@ class VisibilityBearingSMACOF(CalibratedSMACOF):
     def fit(self, X, y=None, *, masks=None, anchor_ids=None, anchor_positions=None):
         """Map the fused histories ``X`` ({"visibility": (M, N), "bearing": (M, 2N)}; complete:
         ``masks`` must be None or all None)."""
+        self._validate_params()
+        check_fused_input(self, X, ("visibility", "bearing"))
         if masks and any(m is not None for m in masks.values()):
             raise ValueError("VB-SMA maps complete histories only: masks must be None")
-        self._validate_params()
         Z = joined_rows(X["visibility"], X["bearing"], self.bearing_weight)
         super().fit(Z, anchor_ids=anchor_ids, anchor_positions=anchor_positions)
         self.fused_embedding_ = self.embedding_
@@ -106,10 +115,8 @@ class VisibilityBearingSMACOF(CalibratedSMACOF):
                 raise ValueError("VB-SMA blends in the bearing-only map, which needs every "
                                  "object's bearing history; some are empty (bearing_share=0 "
                                  "maps the joined rows alone)")
-            alone = CalibratedSMACOF(n_neighbors=self.n_neighbors, n_rounds=self.n_rounds,
-                                     position_degree=self.position_degree,
-                                     fold_threshold=self.fold_threshold,
-                                     random_state=self.random_state)
+            alone = CalibratedSMACOF(**{name: getattr(self, name)
+                                        for name in CalibratedSMACOF._get_param_names()})
             self.bearing_embedding_ = alone.fit_transform(B / norm, anchor_ids=anchor_ids,
                                                           anchor_positions=anchor_positions)
             s = self.bearing_share

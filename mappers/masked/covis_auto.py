@@ -31,11 +31,15 @@ never seen together).
 from __future__ import annotations
 
 import warnings
+from numbers import Integral, Real
 
 import numpy as np
+from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.utils._param_validation import Interval
 
 from mappers.calibrated import CalibratedSMACOF
 from mappers.core.sensors import step_observations
+from mappers.core.validation import check_history, check_no_bools
 from mappers.masked.coobservation import (
     angle_covisibility_dissimilarity,
     covisibility_dissimilarity,
@@ -62,60 +66,113 @@ def co_observation_coefficient(X, mask, sensor: str) -> tuple[np.ndarray, np.nda
     return och, C
 
 
-def _check_min_co(min_co) -> int:
-    if isinstance(min_co, bool) or not isinstance(min_co, (int, np.integer)) or min_co < 1:
-        raise ValueError(f"min_co must be an integer >= 1, got {min_co!r}")
-    return int(min_co)
+def _links(links) -> tuple[str, ...]:
+    links = (links,) if isinstance(links, str) else tuple(links)
+    if not links or not set(links) <= {"linear", "log"}:
+        raise ValueError(f"links must be a non-empty tuple of 'linear' and 'log', got {links!r}")
+    return links
 
 
-class CovisCalibrated:
+class CovisCalibrated(TransformerMixin, BaseEstimator):
     """``"covis-cal"``: CAL-SMA on ``1 -`` the co-observation coefficient (module docstring).
 
-    ``fit_transform(X, mask=None, *, sensor, anchor_ids=None, anchor_positions=None)`` returns
-    the (M, 2) map (in the anchors' frame when anchors are given: without anchors the members'
-    frames differ, so give one link only); ``cals_`` are the fitted
-    :class:`~mappers.calibrated.cal_sma.CalibratedSMACOF` per link (``fold_score_``, ``folded_``, ...).
+    Parameters:
+        min_co: a pair seen together in fewer steps is only "far" (never a neighbour target).
+        n_neighbors: CAL-SMA's neighbour pairs per object (None: CAL-SMA's own default).
+        links: ``"linear"`` (``1 - och``) and/or ``"log"`` (``-log och``): the mean of their maps.
+        random_state: CAL-SMA's seed.
+
+    ``fit(X, mask=None, *, sensor=None, anchor_ids=None, anchor_positions=None)`` maps a
+    visibility or bearing history (the sensor inferred when not given), in the anchors' frame
+    when anchors are given (without anchors the links' frames differ, so give one link only).
+
+    Attributes:
+        embedding_ (M, 2); cals_ the fitted :class:`~mappers.calibrated.cal_sma.CalibratedSMACOF`
+        per link (``fold_score_``, ``folded_``, ...); n_features_in_.
     """
 
-    def __init__(self, *, min_co: int = 3, n_neighbors: int = 12,
-                 links: tuple[str, ...] = ("linear", "log"), random_state=0) -> None:
-        self.min_co = _check_min_co(min_co)
-        links = (links,) if isinstance(links, str) else tuple(links)
-        if not links or not set(links) <= {"linear", "log"}:
-            raise ValueError(f"links must be a non-empty tuple of 'linear' and 'log', got {links!r}")
-        self.n_neighbors, self.links, self.random_state = n_neighbors, links, random_state
+    _parameter_constraints: dict = {
+        "min_co": [Interval(Integral, 1, None, closed="left")],
+        "n_neighbors": [Interval(Integral, 2, None, closed="left"), None],
+        "links": [str, tuple, list],
+        "random_state": ["random_state"],
+    }
 
-    def fit_transform(self, X, mask=None, *, sensor: str, anchor_ids=None, anchor_positions=None):
+    def __init__(self, *, min_co: int = 3, n_neighbors: int | None = 12,
+                 links: tuple[str, ...] = ("linear", "log"), random_state=0) -> None:
+        self.min_co = min_co
+        self.n_neighbors = n_neighbors
+        self.links = links
+        self.random_state = random_state
+
+    def fit(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
+            anchor_positions=None):
+        """Map the history ``X`` (M, D) (``mask`` True where observed; None: complete)."""
+        self._validate_params()
+        check_no_bools(self, "min_co")
+        links = _links(self.links)
+        X, mask, sensor = check_history(self, X, y, mask=mask, sensor=sensor, sensors=_SENSORS)
         och, C = co_observation_coefficient(X, mask, sensor)
         far = C < self.min_co
         np.fill_diagonal(far, False)
         self.cals_ = []
-        for link in self.links:
+        for link in links:
             D = 1.0 - och if link == "linear" else -np.log(np.maximum(och, 1e-6))
             D[far] = D.max()  # the saturation value: "far", never a neighbour target
             np.fill_diagonal(D, 0.0)
             cal = CalibratedSMACOF(dissimilarity="precomputed", n_neighbors=self.n_neighbors,
                                    random_state=self.random_state)
             self.cals_.append(cal.fit(D, anchor_ids=anchor_ids, anchor_positions=anchor_positions))
-        return np.mean([cal.embedding_ for cal in self.cals_], axis=0)
+        self.embedding_ = np.mean([cal.embedding_ for cal in self.cals_], axis=0)
+        return self
+
+    def fit_transform(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
+                      anchor_positions=None):
+        """Fit and return the (M, 2) map."""
+        return self.fit(X, mask=mask, sensor=sensor, anchor_ids=anchor_ids,
+                        anchor_positions=anchor_positions).embedding_
 
 
-class CovisAuto:
+class CovisAuto(TransformerMixin, BaseEstimator):
     """``"covis-auto"``: ``covis-cal`` for a global view, the ordinal map for a local one
-    (module docstring). ``branch_`` is the label used, ``local_share_`` the measured share of
-    pairs seen together in fewer than ``min_co`` steps."""
+    (module docstring).
 
-    def __init__(self, *, min_co: int = 3, local_share: float = 0.1, n_neighbors: int = 12,
+    Parameters:
+        min_co: as ``covis-cal``'s, and the count below which a pair is "not seen together".
+        local_share: the largest share of pairs not seen together for which ``covis-cal`` maps.
+        n_neighbors, random_state: ``covis-cal``'s.
+        max_iter: ``covis-angle``'s SMACOF updates.
+
+    ``fit(X, mask=None, *, sensor=None, anchor_ids=None, anchor_positions=None)`` maps a bearing
+    history.
+
+    Attributes:
+        embedding_ (M, 2); branch_ the label used; local_share_ the measured share of pairs (of
+        sensed objects) seen together in fewer than ``min_co`` steps; n_features_in_.
+    """
+
+    _parameter_constraints: dict = {
+        "min_co": [Interval(Integral, 1, None, closed="left")],
+        "local_share": [Interval(Real, 0, 1, closed="both")],
+        "n_neighbors": [Interval(Integral, 2, None, closed="left"), None],
+        "max_iter": [Interval(Integral, 1, None, closed="left")],
+        "random_state": ["random_state"],
+    }
+
+    def __init__(self, *, min_co: int = 3, local_share: float = 0.1, n_neighbors: int | None = 12,
                  max_iter: int = 300, random_state=0) -> None:
-        self.min_co = _check_min_co(min_co)
-        if not 0.0 <= local_share <= 1.0:
-            raise ValueError(f"local_share must be in [0, 1], got {local_share!r}")
-        self.local_share = float(local_share)
-        self.n_neighbors, self.max_iter, self.random_state = n_neighbors, max_iter, random_state
+        self.min_co = min_co
+        self.local_share = local_share
+        self.n_neighbors = n_neighbors
+        self.max_iter = max_iter
+        self.random_state = random_state
 
-    def fit_transform(self, X, mask=None, *, sensor: str, anchor_ids=None, anchor_positions=None):
-        if sensor != "bearing":
-            raise ValueError(f"covis-auto maps bearing histories, got sensor {sensor!r}")
+    def fit(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
+            anchor_positions=None):
+        """Map the bearing history ``X`` (M, 2N) (``mask`` True where observed)."""
+        self._validate_params()
+        check_no_bools(self, "min_co")
+        X, mask, sensor = check_history(self, X, y, mask=mask, sensor=sensor, sensors=("bearing",))
         _, C = co_observation_coefficient(X, mask, sensor)
         sensed = np.diag(C) > 0
         Cs = C[np.ix_(sensed, sensed)]
@@ -125,24 +182,21 @@ class CovisAuto:
             self.branch_ = "covis-cal"
             est = CovisCalibrated(min_co=self.min_co, n_neighbors=self.n_neighbors,
                                   random_state=self.random_state)
-            return est.fit_transform(X, mask, sensor=sensor, anchor_ids=anchor_ids,
-                                     anchor_positions=anchor_positions)
+            self.embedding_ = est.fit_transform(X, mask=mask, sensor=sensor,
+                                                anchor_ids=anchor_ids,
+                                                anchor_positions=anchor_positions)
+            return self
         self.branch_ = "covis-angle"
         result = masked_embedding(X, mask, sensor, self.branch_, anchor_ids=anchor_ids,
                                   anchor_positions=anchor_positions, max_iter=self.max_iter,
                                   min_co=self.min_co)
         for msg in result.warnings:
             warnings.warn(msg, MaskedMapWarning, stacklevel=2)
-        return result.positions
+        self.embedding_ = result.positions
+        return self
 
-
-def _covis_cal(min_co=3, n_neighbors=12, links=("linear", "log"),
-               random_state=0) -> CovisCalibrated:
-    return CovisCalibrated(min_co=min_co, n_neighbors=n_neighbors, links=links,
-                           random_state=random_state)
-
-
-def _covis_auto(min_co=3, local_share=0.1, n_neighbors=12, max_iter=300,
-                random_state=0) -> CovisAuto:
-    return CovisAuto(min_co=min_co, local_share=local_share, n_neighbors=n_neighbors,
-                     max_iter=max_iter, random_state=random_state)
+    def fit_transform(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
+                      anchor_positions=None):
+        """Fit and return the (M, 2) map (NaN rows: unmapped)."""
+        return self.fit(X, mask=mask, sensor=sensor, anchor_ids=anchor_ids,
+                        anchor_positions=anchor_positions).embedding_

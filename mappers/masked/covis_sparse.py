@@ -27,11 +27,16 @@ over the arena (the global layout rests on them).
 
 from __future__ import annotations
 
+from numbers import Integral
+
 import numpy as np
 import scipy.sparse as sp
+from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.utils._param_validation import Interval
 
 from mappers.calibrated import SparseCalibratedSMACOF
 from mappers.core.sensors import COLUMNS_PER_STEP
+from mappers.core.validation import check_history, check_no_bools
 
 __all__ = ["SparseCovis", "sparse_co_observation"]
 
@@ -108,24 +113,50 @@ def sparse_co_observation(X, mask=None, *, sensor: str):
     return i, j, np.clip(och, 0.0, 1.0), count, n
 
 
-class SparseCovis:
+class SparseCovis(TransformerMixin, BaseEstimator):
     """``"covis-sparse"``: CAL-SMA-SPARSE on ``-log`` of the co-observation coefficient of the
     pairs sensed together in at least ``min_co`` steps (module docstring).
 
-    ``fit_transform(X, mask=None, *, sensor, anchor_ids=None, anchor_positions=None)`` takes a
-    dense or scipy sparse history and mask and returns the (M, 2) map (NaN rows: objects with no
-    usable pair); ``cal_`` is the fitted :class:`~mappers.calibrated.cal_sma_sparse.SparseCalibratedSMACOF`.
+    Parameters:
+        min_co: a pair needs this many steps that sensed both to be used.
+        n_neighbors, n_rounds, position_degree, random_state: CAL-SMA-SPARSE's.
+
+    ``fit(X, mask=None, *, sensor=None, anchor_ids=None, anchor_positions=None)`` takes a dense
+    or scipy sparse visibility or bearing history and mask.
+
+    Attributes:
+        embedding_ (M, 2) (NaN rows: objects with no usable pair); cal_ the fitted
+        :class:`~mappers.calibrated.cal_sma_sparse.SparseCalibratedSMACOF`; n_features_in_.
     """
 
-    def __init__(self, *, min_co: int = 3, n_neighbors: int = 12, n_rounds: int = 10,
-                 position_degree: int = 2, random_state=0) -> None:
-        if isinstance(min_co, bool) or not isinstance(min_co, int | np.integer) or min_co < 1:
-            raise ValueError(f"min_co must be an integer >= 1, got {min_co!r}")
-        self.min_co = int(min_co)
-        self.n_neighbors, self.n_rounds = n_neighbors, n_rounds
-        self.position_degree, self.random_state = position_degree, random_state
+    _parameter_constraints: dict = {
+        "min_co": [Interval(Integral, 1, None, closed="left")],
+        "n_neighbors": [Interval(Integral, 2, None, closed="left"), None],
+        "n_rounds": [Interval(Integral, 1, None, closed="left")],
+        "position_degree": [Interval(Integral, 0, 3, closed="both")],
+        "random_state": ["random_state"],
+    }
 
-    def fit_transform(self, X, mask=None, *, sensor: str, anchor_ids=None, anchor_positions=None):
+    def __init__(self, *, min_co: int = 3, n_neighbors: int | None = 12, n_rounds: int = 10,
+                 position_degree: int = 2, random_state=0) -> None:
+        self.min_co = min_co
+        self.n_neighbors = n_neighbors
+        self.n_rounds = n_rounds
+        self.position_degree = position_degree
+        self.random_state = random_state
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.input_tags.sparse = True
+        return tags
+
+    def fit(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
+            anchor_positions=None):
+        """Map the history ``X`` (M, D), dense or sparse (``mask`` True where observed)."""
+        self._validate_params()
+        check_no_bools(self, "min_co")
+        X, mask, sensor = check_history(self, X, y, mask=mask, sensor=sensor, sensors=_SENSORS,
+                                        accept_sparse=True)
         m = X.shape[0]
         i, j, och, count, _ = sparse_co_observation(X, mask, sensor=sensor)
         use = (count >= self.min_co) & (och > _FLOOR)
@@ -148,10 +179,11 @@ class SparseCovis:
                             anchor_ids=None if ids is None else local[ids],
                             anchor_positions=pos)
         out[rows] = self.cal_.embedding_
-        return out
+        self.embedding_ = out
+        return self
 
-
-def _covis_sparse(min_co=3, n_neighbors=12, n_rounds=10, position_degree=2,
-                  random_state=0) -> SparseCovis:
-    return SparseCovis(min_co=min_co, n_neighbors=n_neighbors, n_rounds=n_rounds,
-                       position_degree=position_degree, random_state=random_state)
+    def fit_transform(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
+                      anchor_positions=None):
+        """Fit and return the (M, 2) map (NaN rows: objects with no usable pair)."""
+        return self.fit(X, mask=mask, sensor=sensor, anchor_ids=anchor_ids,
+                        anchor_positions=anchor_positions).embedding_

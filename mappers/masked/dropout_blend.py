@@ -38,13 +38,16 @@ members; Kruskal (1964) for the ordinal fit of ``covis-nonmetric``.
 from __future__ import annotations
 
 import warnings
-from numbers import Real
+from numbers import Integral, Real
 
 import numpy as np
 from scipy.ndimage import uniform_filter1d
+from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.utils._param_validation import Interval
 
 from mappers.calibrated import CalibratedSMACOF
 from mappers.core.flicker import persistence, step_runs
+from mappers.core.validation import check_history, check_no_bools
 from mappers.masked.pair_maps import MaskedMapper, MaskedMapWarning
 
 __all__ = ["WALK_PERSISTENCE", "DropoutBlend", "smooth_steps"]
@@ -67,37 +70,56 @@ def smooth_steps(X, window: int, timeline=None) -> np.ndarray:
     return out
 
 
-class DropoutBlend:
+class DropoutBlend(TransformerMixin, BaseEstimator):
     """``"dropout-blend"``: the mean of two anchored maps (module docstring).
 
-    ``fit_transform(X, mask=None, *, sensor, anchor_ids, anchor_positions, timeline=None)``
-    returns the (M, 2) map in the anchors' frame; ``maps_`` holds the two members' maps
-    (``"CAL-SMA"``, ``"covis-nonmetric"``), ``disagreement_`` their median distance over the
-    objects both place as a share of the anchors' spread, and ``blended_`` whether the map is
-    their mean (False: CAL-SMA's alone, the steps being walk-ordered (``walk_ordered_``) and
-    the disagreement above ``max_disagreement``; None disables that check).
+    Parameters:
+        window: steps of the moving average of CAL-SMA's rows.
+        n_neighbors, random_state: CAL-SMA's.
+        min_co, max_iter: ``covis-nonmetric``'s.
+        max_disagreement: the members' median distance, as a share of the anchors' spread,
+            above which a walk's map is CAL-SMA's alone (None: never).
+
+    ``fit(X, mask=None, *, sensor=None, anchor_ids, anchor_positions, timeline=None)`` maps a
+    visibility history in the anchors' frame (the anchors are needed: the two maps meet there).
+
+    Attributes:
+        embedding_ (M, 2); maps_ the two members' maps (``"CAL-SMA"``, ``"covis-nonmetric"``);
+        disagreement_ their median distance over the objects both place as a share of the
+        anchors' spread; walk_ordered_ whether the steps are walk-ordered
+        (:data:`WALK_PERSISTENCE`); blended_ whether the map is their mean (False: CAL-SMA's
+        alone, the steps being walk-ordered and the disagreement above ``max_disagreement``);
+        n_features_in_.
     """
+
+    _parameter_constraints: dict = {
+        "window": [Interval(Integral, 1, None, closed="left")],
+        "n_neighbors": [Interval(Integral, 2, None, closed="left"), None],
+        "min_co": [Interval(Integral, 1, None, closed="left")],
+        "max_iter": [Interval(Integral, 1, None, closed="left")],
+        "max_disagreement": [Interval(Real, 0, None, closed="neither"), None],
+        "random_state": ["random_state"],
+    }
 
     def __init__(self, *, window: int = 3, n_neighbors: int | None = None, min_co: int = 3,
                  max_iter: int = 300, max_disagreement: float | None = 0.25,
                  random_state=0) -> None:
-        smooth_steps(np.zeros((1, 1)), window)  # checks window
-        if max_disagreement is not None and (
-                isinstance(max_disagreement, bool) or not isinstance(max_disagreement, Real)
-                or not max_disagreement > 0):
-            raise ValueError(f"max_disagreement must be a number > 0 or None, got "
-                             f"{max_disagreement!r}")
-        self.window, self.n_neighbors, self.min_co = int(window), n_neighbors, min_co
-        self.max_iter, self.random_state = max_iter, random_state
+        self.window = window
+        self.n_neighbors = n_neighbors
+        self.min_co = min_co
+        self.max_iter = max_iter
         self.max_disagreement = max_disagreement
+        self.random_state = random_state
 
-    def fit_transform(self, X, mask=None, *, sensor: str, anchor_ids=None, anchor_positions=None,
-                      timeline=None):
-        if sensor != "visibility":
-            raise ValueError(f"dropout-blend maps visibility histories, got sensor {sensor!r}")
+    def fit(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
+            anchor_positions=None, timeline=None):
+        """Map the visibility history ``X`` (M, N) (``mask`` True where observed)."""
+        self._validate_params()
+        check_no_bools(self, "window", "min_co", "max_disagreement")
+        X, mask, sensor = check_history(self, X, y, mask=mask, sensor=sensor,
+                                        sensors=("visibility",))
         if anchor_ids is None or anchor_positions is None:
             raise ValueError("dropout-blend needs anchors: its two maps meet in the anchors' frame")
-        X = np.asarray(X, dtype=float)
         if mask is not None:
             X = np.where(mask, X, 0.0)
         S = smooth_steps(X, self.window, timeline)
@@ -105,10 +127,10 @@ class DropoutBlend:
         if np.any(norms == 0):
             raise ValueError("dropout-blend: an object is never visible (empty history row)")
         cal = CalibratedSMACOF(n_neighbors=self.n_neighbors, random_state=self.random_state)
-        order = MaskedMapper("covis-nonmetric", min_co=self.min_co, max_iter=self.max_iter)
+        order = MaskedMapper(method="covis-nonmetric", min_co=self.min_co, max_iter=self.max_iter)
         # covis-nonmetric first: it is the one that fails on sparse data (its pairs fall apart),
         # and it finds that out before its solve, CAL-SMA only after a whole fit
-        ordinal = order.fit_transform(X, mask, sensor=sensor, anchor_ids=anchor_ids,
+        ordinal = order.fit_transform(X, mask=mask, sensor=sensor, anchor_ids=anchor_ids,
                                       anchor_positions=anchor_positions)
         self.maps_ = {
             "CAL-SMA": cal.fit_transform(S / norms, anchor_ids=anchor_ids,
@@ -135,7 +157,8 @@ class DropoutBlend:
                           f"{self.disagreement_:.2f} of the anchors' spread (median; above "
                           f"max_disagreement = {self.max_disagreement:g}): the map is CAL-SMA's",
                           MaskedMapWarning, stacklevel=2)
-            return a.copy()
+            self.embedding_ = a.copy()
+            return self
         Y = np.where(np.isnan(a), b, np.where(np.isnan(b), a, 0.5 * (a + b)))
         # covis-nonmetric's lower bounds can fling a weakly tied object kilometres away on very
         # sparse data (N = 300 at miss_rate 0.7); an object whose two positions lie farther
@@ -147,10 +170,13 @@ class DropoutBlend:
             warnings.warn(f"dropout-blend: objects {np.flatnonzero(apart).tolist()} lie farther "
                           f"apart in the two maps than the anchors' spread ({spread:.2f} m); "
                           "they keep the CAL-SMA position", MaskedMapWarning, stacklevel=2)
-        return Y
+        self.embedding_ = Y
+        return self
+
+    def fit_transform(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
+                      anchor_positions=None, timeline=None):
+        """Fit and return the (M, 2) map in the anchors' frame."""
+        return self.fit(X, mask=mask, sensor=sensor, anchor_ids=anchor_ids,
+                        anchor_positions=anchor_positions, timeline=timeline).embedding_
 
 
-def _dropout_blend(window=3, n_neighbors=None, min_co=3, max_iter=300, max_disagreement=0.25,
-                   random_state=0) -> DropoutBlend:
-    return DropoutBlend(window=window, n_neighbors=n_neighbors, min_co=min_co, max_iter=max_iter,
-                        max_disagreement=max_disagreement, random_state=random_state)

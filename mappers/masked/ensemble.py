@@ -19,12 +19,16 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
+from numbers import Integral, Real
 from typing import Any
 
 import numpy as np
 from scipy.sparse import csr_matrix
+from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.utils._param_validation import Interval, StrOptions
 
 from mappers.core.sensors import check_timeline, step_observations
+from mappers.core.validation import check_history
 from mappers.masked.pair_maps import MaskedMap, MaskedMapWarning, masked_embedding
 
 __all__ = ["CovisEnsemble", "ensemble_embedding", "window_steps"]
@@ -103,42 +107,69 @@ def ensemble_embedding(
     )
 
 
-class CovisEnsemble:
-    """``"covis-ensemble"``: the mean of ``member`` maps (``"covis-power"`` or
-    ``"covis-nonmetric"``) of the history merged over each of ``windows`` ticks, for each
-    ``min_co``; ``power`` is covis-power's exponent (None: its default). Uses only the pattern of
-    what was observed, so any sensor's history serves."""
+class CovisEnsemble(TransformerMixin, BaseEstimator):
+    """``"covis-ensemble"``: the mean of anchored co-observation maps over windows of steps.
+
+    Parameters:
+        windows: the windows [ticks] the history is merged over, one member map each.
+        min_co: the members' ``min_co``, one member map each (with each window).
+        member: ``"covis-power"`` or ``"covis-nonmetric"``.
+        power: covis-power's exponent (None: its default; only with ``member="covis-power"``).
+        max_iter: the members' SMACOF updates.
+
+    Uses only the pattern of what was observed, so any sensor's history serves.
+    ``fit(X, mask=None, *, sensor=None, anchor_ids, anchor_positions, timeline=None)`` needs the
+    anchors: the members meet in their frame.
+
+    Attributes:
+        embedding_ (M, 2) (NaN rows: unmapped); result_ the :class:`MaskedMap` of the mean (its
+        notes issued as :class:`MaskedMapWarning`); n_features_in_.
+    """
+
+    _parameter_constraints: dict = {
+        "windows": ["array-like", Interval(Integral, 1, None, closed="left")],
+        "min_co": ["array-like", Interval(Integral, 1, None, closed="left")],
+        "member": [StrOptions(set(MEMBERS))],
+        "power": [Interval(Real, 0, None, closed="neither"), None],
+        "max_iter": [Interval(Integral, 1, None, closed="left")],
+    }
 
     def __init__(self, *, windows: Sequence[int] = (2, 3, 4, 6, 8, 10),
                  min_co: Sequence[int] = (3, 5), member: str = "covis-power",
                  power: float | None = None, max_iter: int = 300) -> None:
-        self.windows = tuple(int(w) for w in np.atleast_1d(windows))
-        self.min_co = tuple(int(m) for m in np.atleast_1d(min_co))
-        if not self.windows or min(self.windows) < 1 or not self.min_co:
-            raise ValueError(f"windows must be positive integers and min_co non-empty, got "
-                             f"windows={windows!r}, min_co={min_co!r}")
-        if member not in MEMBERS:
-            raise ValueError(f"member must be one of {MEMBERS}, got {member!r}")
-        if power is not None and member != "covis-power":
-            raise ValueError("power applies to member='covis-power' only")
-        self.member, self.power, self.max_iter = member, power, max_iter
+        self.windows = windows
+        self.min_co = min_co
+        self.member = member
+        self.power = power
+        self.max_iter = max_iter
 
-    def fit_transform(self, X, mask=None, *, sensor: str, anchor_ids, anchor_positions,
-                      timeline=None) -> np.ndarray:
+    def fit(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
+            anchor_positions=None, timeline=None):
+        """Map the history ``X`` (M, D) (``mask`` True where observed) with the anchors."""
+        self._validate_params()
+        windows = tuple(int(w) for w in np.atleast_1d(self.windows))
+        min_co = tuple(int(m) for m in np.atleast_1d(self.min_co))
+        if not windows or min(windows) < 1 or not min_co:
+            raise ValueError(f"windows must be positive integers and min_co non-empty, got "
+                             f"windows={self.windows!r}, min_co={self.min_co!r}")
+        if self.power is not None and self.member != "covis-power":
+            raise ValueError("power applies to member='covis-power' only")
+        X, mask, sensor = check_history(self, X, y, mask=mask, sensor=sensor)
         seen, _ = step_observations(X, mask, sensor)
         extra = {} if self.power is None else {"power": float(self.power)}
-        hists = [(window_steps(seen, w, timeline).astype(float), None) for w in self.windows]
+        hists = [(window_steps(seen, w, timeline).astype(float), None) for w in windows]
         self.result_ = ensemble_embedding(
             hists, "visibility", self.member, anchor_ids=anchor_ids,
             anchor_positions=anchor_positions, max_iter=self.max_iter,
-            param_sets=[{"min_co": m, **extra} for m in self.min_co],
+            param_sets=[{"min_co": m, **extra} for m in min_co],
         )
         for msg in self.result_.warnings:
             warnings.warn(msg, MaskedMapWarning, stacklevel=2)
-        return self.result_.positions
+        self.embedding_ = self.result_.positions
+        return self
 
-
-def _covis_ensemble(windows=(2, 3, 4, 6, 8, 10), min_co=(3, 5), member="covis-power",
-                    power=None, max_iter=300) -> CovisEnsemble:
-    return CovisEnsemble(windows=windows, min_co=min_co, member=member, power=power,
-                         max_iter=max_iter)
+    def fit_transform(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
+                      anchor_positions=None, timeline=None) -> np.ndarray:
+        """Fit and return the (M, 2) map (NaN rows: unmapped)."""
+        return self.fit(X, mask=mask, sensor=sensor, anchor_ids=anchor_ids,
+                        anchor_positions=anchor_positions, timeline=timeline).embedding_

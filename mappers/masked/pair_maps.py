@@ -64,14 +64,18 @@ from __future__ import annotations
 import inspect
 import warnings
 from dataclasses import dataclass, field
+from numbers import Integral, Real
 from typing import Any
 
 import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import shortest_path
+from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.utils._param_validation import Interval, StrOptions
 
 from mappers.core.align import apply_affine, check_anchors, fit_affine
 from mappers.core.sensors import step_observations
+from mappers.core.validation import check_history
 from mappers.masked.coobservation import (
     angle_covisibility_dissimilarity,
     covisibility_dissimilarity,
@@ -338,51 +342,108 @@ def masked_embedding(
     )
 
 
-class MaskedMapper:
-    """The estimator behind each masked label: ``fit_transform(X, mask=None, *, sensor,
-    anchor_ids=None, anchor_positions=None)`` returns :func:`masked_embedding`'s positions (NaN
-    rows unmapped) and keeps the whole result in ``result_``; its notes are issued as
-    :class:`MaskedMapWarning` so that ``build_map`` lists them in ``Map.warnings``."""
+class MaskedMapper(TransformerMixin, BaseEstimator):
+    """The estimator behind each masked label of this module (module docstring).
 
-    def __init__(self, method: str, **params: Any) -> None:
+    Parameters:
+        method: a key of :data:`MASKED_METHODS`; None: ``range-quantile`` for range histories,
+            else ``covis-nonmetric`` (as :func:`masked_embedding`).
+        quantile, min_pairs, weight_cap: ``range-quantile`` and ``range-bounds``' pair
+            distances (``min_pairs`` also ``masked-euclidean``'s).
+        slack, fov, upper_quantile: ``range-bounds``' upper bounds.
+        min_co: the co-observation methods' smallest count of a measured pair.
+        power, n_rounds: ``covis-power``'s link and its rounds.
+        max_iter: SMACOF updates.
+
+    A parameter the chosen method does not use is ignored. ``fit(X, mask=None, *, sensor=None,
+    anchor_ids=None, anchor_positions=None)`` maps the history (the sensor inferred from the
+    observed entries when not given; the anchors held at their positions when given).
+
+    Attributes:
+        embedding_ (M, 2): :func:`masked_embedding`'s positions (NaN rows: unmapped); result_
+        the whole :class:`MaskedMap` (its notes are issued as :class:`MaskedMapWarning`, so that
+        ``build_map`` lists them in ``Map.warnings``); n_features_in_.
+    """
+
+    _parameter_constraints: dict = {
+        "method": [StrOptions({"range-quantile", "range-bounds", *_COVIS, "masked-euclidean"}), None],
+        "quantile": [Interval(Real, 0, 1, closed="both")],
+        "min_pairs": [Interval(Integral, 1, None, closed="left")],
+        "weight_cap": [Interval(Real, 0, None, closed="neither")],
+        "slack": [Interval(Real, 0, None, closed="left")],
+        "fov": [Interval(Real, 0, None, closed="neither")],
+        "upper_quantile": [Interval(Real, 0, 1, closed="both")],
+        "min_co": [Interval(Integral, 1, None, closed="left")],
+        "power": [Interval(Real, 0, None, closed="neither")],
+        "n_rounds": [Interval(Integral, 1, None, closed="left")],
+        "max_iter": [Interval(Integral, 1, None, closed="left")],
+    }
+
+    def __init__(self, *, method: str | None = None, quantile: float = 0.98, min_pairs: int = 5,
+                 weight_cap: float = 50, slack: float = 1.0, fov: float = 1.22,
+                 upper_quantile: float = 0.02, min_co: int = 3, power: float = 0.5,
+                 n_rounds: int = 60, max_iter: int = 300) -> None:
         self.method = method
-        self.params = params
+        self.quantile = quantile
+        self.min_pairs = min_pairs
+        self.weight_cap = weight_cap
+        self.slack = slack
+        self.fov = fov
+        self.upper_quantile = upper_quantile
+        self.min_co = min_co
+        self.power = power
+        self.n_rounds = n_rounds
+        self.max_iter = max_iter
 
-    def fit_transform(self, X, mask=None, *, sensor: str, anchor_ids=None, anchor_positions=None):
-        self.result_ = masked_embedding(X, mask, sensor, self.method, anchor_ids=anchor_ids,
-                                        anchor_positions=anchor_positions, **self.params)
+    def fit(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
+            anchor_positions=None):
+        """Map the history ``X`` (M, D) (``mask`` True where observed; None: complete)."""
+        self._validate_params()
+        X, mask, sensor = check_history(self, X, y, mask=mask, sensor=sensor)
+        method = _OWN_DEFAULT[sensor] if self.method is None else self.method
+        params = {name: getattr(self, name) for name in MASKED_METHODS[method]}
+        self.result_ = masked_embedding(X, mask, sensor, method, anchor_ids=anchor_ids,
+                                        anchor_positions=anchor_positions,
+                                        max_iter=self.max_iter, **params)
         for msg in self.result_.warnings:
             warnings.warn(msg, MaskedMapWarning, stacklevel=2)
-        return self.result_.positions
+        self.embedding_ = self.result_.positions
+        return self
+
+    def fit_transform(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
+                      anchor_positions=None):
+        """Fit and return the (M, 2) map (NaN rows: unmapped)."""
+        return self.fit(X, mask=mask, sensor=sensor, anchor_ids=anchor_ids,
+                        anchor_positions=anchor_positions).embedding_
 
 
 def _range_quantile(quantile=0.98, min_pairs=5, weight_cap=50, max_iter=300):
-    return MaskedMapper("range-quantile", quantile=quantile, min_pairs=min_pairs,
+    return MaskedMapper(method="range-quantile", quantile=quantile, min_pairs=min_pairs,
                         weight_cap=weight_cap, max_iter=max_iter)
 
 
 def _range_bounds(quantile=0.98, min_pairs=5, weight_cap=50, slack=1.0, fov=1.22,
                   upper_quantile=0.02, max_iter=300):
-    return MaskedMapper("range-bounds", quantile=quantile, min_pairs=min_pairs,
+    return MaskedMapper(method="range-bounds", quantile=quantile, min_pairs=min_pairs,
                         weight_cap=weight_cap, slack=slack, fov=fov,
                         upper_quantile=upper_quantile, max_iter=max_iter)
 
 
 def _covis_nonmetric(min_co=3, max_iter=300):
-    return MaskedMapper("covis-nonmetric", min_co=min_co, max_iter=max_iter)
+    return MaskedMapper(method="covis-nonmetric", min_co=min_co, max_iter=max_iter)
 
 
 def _covis_power(min_co=3, power=0.5, n_rounds=60, max_iter=300):
-    return MaskedMapper("covis-power", min_co=min_co, power=power, n_rounds=n_rounds,
+    return MaskedMapper(method="covis-power", min_co=min_co, power=power, n_rounds=n_rounds,
                         max_iter=max_iter)
 
 
 def _covis_angle(min_co=3, max_iter=300):
-    return MaskedMapper("covis-angle", min_co=min_co, max_iter=max_iter)
+    return MaskedMapper(method="covis-angle", min_co=min_co, max_iter=max_iter)
 
 
 def _masked_euclidean(min_pairs=5, max_iter=300):
-    return MaskedMapper("masked-euclidean", min_pairs=min_pairs, max_iter=max_iter)
+    return MaskedMapper(method="masked-euclidean", min_pairs=min_pairs, max_iter=max_iter)
 
 
 _FACTORIES = {

@@ -50,6 +50,7 @@ from numbers import Integral, Real
 import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval, StrOptions
+from sklearn.utils.validation import validate_data
 
 from mappers.defaults import localisation_free
 from mappers.viewpoints.engine import (
@@ -147,6 +148,9 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         self._validate_params()
         if sensor != "bearing":
             raise ValueError(f"BEARING-BA maps bearing histories, got a {sensor} history")
+        # (with a mask the unobserved entries may hold anything)
+        X = validate_data(self, X, dtype=np.float64, ensure_min_samples=3,
+                          ensure_all_finite=mask is None)
         theta, seen = bearing_angles(X, mask)
         m = theta.shape[1]
         ids, pos, P0 = anchored_start(
@@ -272,12 +276,3 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         return self.fit(X, mask=mask, sensor=sensor, anchor_ids=anchor_ids,
                         anchor_positions=anchor_positions,
                         start_positions=start_positions).embedding_
-
-
-def _bearing_ba(*, start=None, loss="huber", robust_scale=2.0, max_rounds=6, tol=1e-7,
-                pose_iters=2, min_step_objects=3, min_views=5, min_spread=1e-3,
-                solver="joint", random_state=0) -> BearingAdjustment:
-    return BearingAdjustment(start=start, loss=loss, robust_scale=robust_scale,
-                             max_rounds=max_rounds, tol=tol, pose_iters=pose_iters,
-                             min_step_objects=min_step_objects, min_views=min_views,
-                             min_spread=min_spread, solver=solver, random_state=random_state)

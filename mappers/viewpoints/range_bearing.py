@@ -37,6 +37,7 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval, StrOptions
 
+from mappers.core.validation import check_fused_input
 from mappers.viewpoints.bearing import BearingAdjustmentWarning
 from mappers.viewpoints.engine import (
     bearing_angles,
@@ -122,6 +123,7 @@ class RangeBearingAdjustment(TransformerMixin, BaseEstimator):
         ``X`` ({"range": (M, N), "bearing": (M, 2N)}, ``masks`` keyed alike, None: complete);
         the anchors (rows of X) are held at their positions."""
         self._validate_params()
+        check_fused_input(self, X, ("range", "bearing"))
         masks = dict(masks or {})
         theta, seen = bearing_angles(X["bearing"], masks.get("bearing"))
         R = np.asarray(X["range"], dtype=float).T

@@ -58,6 +58,7 @@ from scipy.optimize import minimize_scalar
 from scipy.special import log_expit
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval
+from sklearn.utils.validation import validate_data
 
 from mappers.catalog import METHODS
 from mappers.defaults import localisation_free
@@ -322,7 +323,9 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         self._validate_params()
         if sensor != "visibility":
             raise ValueError(f"VIEW-BA maps visibility histories, got sensor {sensor!r}")
-        X = np.asarray(X, dtype=float)
+        # (with a mask the unobserved entries may hold anything)
+        X = validate_data(self, X, dtype=np.float64, ensure_min_samples=3,
+                          ensure_all_finite=mask is None)
         if mask is None or np.all(mask):
             raise ValueError("VIEW-BA needs the mask of a limited view (which objects each step "
                              "observed); this history observed every object at every step: map "
@@ -451,12 +454,3 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         return self.fit(X, mask=mask, sensor=sensor, anchor_ids=anchor_ids,
                         anchor_positions=anchor_positions, timeline=timeline,
                         start_positions=start_positions).embedding_
-
-
-def _view_ba(*, start=None, fov_deg=None, rounds=6, softness=0.05,
-             range_softness=0.02, miss_rate=0.1, grid=10, headings=24, pose_iters=3,
-             max_start_loss=0.35, random_state=0) -> ViewAdjustment:
-    return ViewAdjustment(start=start, fov_deg=fov_deg, rounds=rounds, softness=softness,
-                          range_softness=range_softness, miss_rate=miss_rate, grid=grid,
-                          headings=headings, pose_iters=pose_iters,
-                          max_start_loss=max_start_loss, random_state=random_state)

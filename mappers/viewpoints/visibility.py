@@ -66,6 +66,7 @@ from numbers import Integral, Real
 import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval
+from sklearn.utils.validation import validate_data
 
 from mappers.core.flicker import step_runs
 from mappers.defaults import choose_for_history, localisation_free
@@ -278,6 +279,9 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
                              "which only continuity=True models")
         if sensor != "visibility":
             raise ValueError(f"VIS-BA maps visibility histories, got sensor {sensor!r}")
+        # (with a mask the unobserved entries may hold anything)
+        X = validate_data(self, X, dtype=np.float64, ensure_min_samples=3,
+                          ensure_all_finite=mask is None)
         seen, observed = visibility_bits(X, mask)
         m = seen.shape[1]
         self.start_method_ = None if start_positions is None else "given"
@@ -455,16 +459,3 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
         return self.fit(X, mask=mask, sensor=sensor, anchor_ids=anchor_ids,
                         anchor_positions=anchor_positions, timeline=timeline,
                         start_positions=start_positions).embedding_
-
-
-def _vis_ba(*, start=None, max_rounds=5, inner_iters=3, tol=1e-4, min_step_objects=1,
-            min_views=5, grid_cells=6, prior_iters=2, occlusion=True,
-            prior_blur=2.0, continuity=False, step_sigma=None, align=False, overrelax=0.0,
-            model_rounds=None, random_state=0) -> VisibilityAdjustment:
-    return VisibilityAdjustment(start=start, max_rounds=max_rounds, inner_iters=inner_iters,
-                                tol=tol, min_step_objects=min_step_objects, min_views=min_views,
-                                grid_cells=grid_cells,
-                                prior_iters=prior_iters, occlusion=occlusion,
-                                prior_blur=prior_blur, continuity=continuity,
-                                step_sigma=step_sigma, align=align, overrelax=overrelax,
-                                model_rounds=model_rounds, random_state=random_state)
