@@ -551,13 +551,13 @@ def test_both_packages_ship_py_typed():
 def test_the_policy_contract_gives_the_proximity_rays_layout_and_it_is_true():
     import gymnasium as gym
 
-    from lfmdr_gym.exploration.random_walk import Policy
+    from lfmdr_gym.exploration.contract import Policy
 
     doc = " ".join(Policy.__doc__.split())
     for fact in ("2 pi k / n_rays", "counter-clockwise", "ray 0 straight ahead",
                  "proximity_range", "step_length + robot_radius", "[m]"):
         assert fact in doc, fact
-    readme = " ".join((ROOT / "README.md").read_text().split())
+    readme = " ".join((ROOT / "docs" / "guide" / "extending.md").read_text().split())
     assert "ray k points at `heading + 2 pi k / 32`" in readme
     # the truth: the robot facing north (+y) near the east wall, nothing else around
     env = gym.make("LFMDR-Visibility-v0")
