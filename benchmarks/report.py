@@ -7,7 +7,7 @@ generated, not written: edit this script (or rerun a benchmark and commit its CS
     python benchmarks/report.py            # rewrite docs/benchmarks.md
     python benchmarks/report.py --check    # exit 1 if the committed page is not what the CSVs give
 
-``tests/test_benchmarks_page.py`` runs the check, so the page cannot go stale. Standard library
+``tests/benchmarks/test_benchmarks_page.py`` runs the check, so the page cannot go stale. Standard library
 only: the page does not depend on where the package's modules live.
 """
 

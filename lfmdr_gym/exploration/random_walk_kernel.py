@@ -7,8 +7,8 @@ cached on disk (``cache=True``); numba itself is imported on first use
 (:func:`mappers.core.jit.compiled_on_first_use`).
 It makes the same decisions, with the same formulas in the same order, as the vectorised
 reference :meth:`lfmdr_gym.exploration.random_walk.RandomWalkPolicy._plan`
-(``tests/test_policies.py``), and every walk recorded before is recorded again bit for bit
-(``tests/test_trajectory_identity.py``).
+(``tests/gym/exploration/test_policies.py``), and every walk recorded before is recorded again bit for bit
+(``tests/gym/histories/test_trajectory_identity.py``).
 """
 
 from __future__ import annotations

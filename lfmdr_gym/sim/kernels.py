@@ -13,8 +13,8 @@ Each kernel computes the same geometry as the vectorised numpy code it replaced,
 formulas in the same order; the two differ at most in the last bit of a value where numpy's
 matrix product went through BLAS, which may fuse a multiply and an add (these loops round each
 operation). Every history recorded before is recorded again bit for bit
-(``tests/test_trajectory_identity.py``); the sensors are tested against brute-force geometry
-(``tests/test_sensors.py``).
+(``tests/gym/histories/test_trajectory_identity.py``); the sensors are tested against brute-force geometry
+(``tests/gym/sim/test_sensors.py``).
 """
 from __future__ import annotations
 

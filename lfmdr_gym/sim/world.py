@@ -67,7 +67,7 @@ _BATCH = 64  # candidates drawn per rejection-sampling round (fixed, so layouts 
 
 GRID_SAMPLER_MIN_OBJECTS = 400
 """From this many objects random layouts are sampled with a background grid (O(M) rather than
-O(M^2) distance checks); the draws and decisions are the same either way (tests/test_world.py)."""
+O(M^2) distance checks); the draws and decisions are the same either way (tests/gym/sim/test_world.py)."""
 
 
 def wrap_angle(angle: float) -> float:

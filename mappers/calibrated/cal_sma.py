@@ -33,7 +33,7 @@ Reasons for each choice:
   stress. The score counts intrusions (pairs far apart in the histories but close in the map:
   overlap, collapse) and strained objects (neighbour distances off their calibrated targets by
   more than 20 %: the crease of a fold that does not overlap): about 0 on an unfolded map and
-  well above the threshold on planted folds (``tests/test_calibrated.py``). It always looks through at least the default
+  well above the threshold on planted folds (``tests/mappers/calibrated/test_cal_sma.py``). It always looks through at least the default
   neighbourhood, so a small ``n_neighbors`` cannot hide a floppy map. If every start looks
   folded, random anchored starts are tried; if the kept map still looks folded, a
   :class:`FoldWarning` is raised (``build_map`` lists it in ``Map.warnings``) and

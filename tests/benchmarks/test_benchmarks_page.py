@@ -2,11 +2,10 @@
 
 import runpy
 import shutil
-from pathlib import Path
 
 import pytest
+from paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 REPORT = runpy.run_path(str(ROOT / "benchmarks" / "report.py"))
 
 

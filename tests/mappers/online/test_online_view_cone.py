@@ -7,6 +7,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from map_errors import map_error
+from paths import ROOT
 
 import lfmdr_gym  # noqa: F401 - registers the envs
 import mappers.online.mapper as online
@@ -100,9 +101,8 @@ def test_the_online_example_maps_a_limited_view_and_refuses_a_bad_keyword():
     import os
     import subprocess
     import sys
-    from pathlib import Path
 
-    root = Path(__file__).resolve().parents[1]
+    root = ROOT
     script = [sys.executable, str(root / "examples" / "online_map.py")]
     env = {**os.environ, "PYTHONPATH": str(root)}
     out = subprocess.run([*script, "--env-kw", "fov_deg=90", "--steps", "700"], cwd=root, env=env,

@@ -7,11 +7,11 @@ import math
 
 import numpy as np
 import pytest
+from test_even import RANGE, _ring
 
 from lfmdr_gym.exploration.even import EvenPolicy
 from lfmdr_gym.exploration.obstacles import ObstacleMap, advance
 from lfmdr_gym.exploration.walls import WallFrame
-from tests.test_even import RANGE, _ring
 
 R = 0.024  # the env's objects' radius
 

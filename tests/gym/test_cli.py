@@ -13,12 +13,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from paths import ROOT, SHARED_DATA
 
 from lfmdr_gym.cli import build_parser, main
 from lfmdr_gym.experiments.store import JOURNAL, read_results
 from mappers import METHODS
 
-ROOT = Path(__file__).resolve().parents[1]
 SMALL = ["--sensor", "visibility", "--layouts", "1", "--poses", "2", "--steps", "200",
          "--every", "100", "--methods", "LPCA", "SMA(WGT)", "ISOMAP", "--no-progress"]
 # Longer, for the interrupt tests: enough units that a kill lands in the middle.
@@ -322,7 +322,7 @@ def test_mrclam_bad_robots_is_an_argparse_error(capsys):
     assert "expected numbers like 1,2,3" in capsys.readouterr().err
 
 
-MRCLAM_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "mrclam"
+MRCLAM_DATA = SHARED_DATA / "mrclam"
 
 
 def test_mrclam_on_a_real_run(tmp_path, capsys):

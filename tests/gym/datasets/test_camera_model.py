@@ -8,11 +8,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from paths import SHARED_DATA
 
 from lfmdr_gym.datasets.camera_model import image_residuals, main, measure_camera
 from lfmdr_gym.sim.camera import CAMERA_PRESET
 
-DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "mrclam"
+DATA = SHARED_DATA / "mrclam"
 HEADER = "# synthetic\n# run\n# for\n# tests\n"
 
 

@@ -6,15 +6,14 @@ from __future__ import annotations
 import dataclasses
 import runpy
 import sys
-from pathlib import Path
 
 import pytest
+from paths import ROOT, SHARED_DATA
 
 import mappers
 
-ROOT = Path(__file__).resolve().parents[1]
 NOTE = "a note from the mapper"
-MRCLAM = ROOT.parent / "shared" / "data" / "mrclam" / "MRCLAM_Dataset2"
+MRCLAM = SHARED_DATA / "mrclam" / "MRCLAM_Dataset2"
 
 # example -> its arguments for a short run (None: a script without main, run as it is)
 EXAMPLES = {

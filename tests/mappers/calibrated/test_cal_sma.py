@@ -6,6 +6,7 @@ import warnings
 
 import numpy as np
 import pytest
+from paths import EXAMPLES
 
 from mappers import METHODS, build_map, mean_orientation_error, mean_position_error
 from mappers.calibrated.cal_sma import (
@@ -250,9 +251,8 @@ def test_rejects_bad_histories(world):
 def test_example_runs(capsys):
     import runpy
     import sys
-    from pathlib import Path
 
-    path = Path(__file__).resolve().parents[1] / "examples" / "calibrated_map.py"
+    path = EXAMPLES / "calibrated_map.py"
     old = sys.argv
     sys.argv = [str(path), "--steps", "800"]
     try:

@@ -239,7 +239,7 @@ def test_the_median_disagreement_ignores_one_flung_object(monkeypatch):
 def test_unordered_viewpoints_are_blended_even_when_the_members_disagree():
     """On viewpoints drawn at random CAL-SMA's window mixes unrelated steps and it is the member
     that fails: the disagreement check applies to walk-ordered steps only."""
-    rng = np.random.default_rng(0)  # tests/test_mappers_pipeline.py's world: a jittered grid
+    rng = np.random.default_rng(0)  # tests/mappers/test_pipeline.py's world: a jittered grid
     g = np.linspace(-1.0, 1.0, 7)
     grid = np.array([(x, y) for x in g for y in g])
     idx = np.concatenate([[0, 6, 42, 48], rng.choice(np.arange(1, 42), 36, replace=False)])

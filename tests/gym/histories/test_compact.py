@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from paths import TEST_DATA
 
 import mappers
 from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
@@ -14,7 +13,7 @@ from lfmdr_gym.histories.compact import DenseTooLargeError
 from lfmdr_gym.histories.history import History
 from lfmdr_gym.histories.recording import collect
 
-DATA = Path(__file__).parent / "data"
+DATA = TEST_DATA
 
 
 @pytest.mark.parametrize(

@@ -9,6 +9,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
+from paths import EXAMPLES
 
 import lfmdr_gym  # noqa: F401  (registers the ids)
 from lfmdr_gym.env import LFMDREnv
@@ -294,9 +295,8 @@ def test_build_map_maps_a_masked_history_with_the_masked_default():
 
 def test_limited_camera_example(tmp_path, capsys):
     import runpy
-    from pathlib import Path
 
-    script = Path(__file__).resolve().parents[1] / "examples" / "limited_camera.py"
+    script = EXAMPLES / "limited_camera.py"
     history = runpy.run_path(str(script))["main"](["--steps", "800", "--out", str(tmp_path / "m.png")])
     out = capsys.readouterr().out
     assert history.mask is not None and (tmp_path / "m.png").is_file()

@@ -1,13 +1,14 @@
 """The mapper example runs and prints a row per method (examples double as documentation)."""
 
 import runpy
-from pathlib import Path
+
+from paths import EXAMPLES
 
 from mappers import METHODS, methods_for
 
 
 def test_map_synthetic_example_runs(capsys):
-    runpy.run_path(str(Path(__file__).resolve().parents[1] / "examples" / "map_synthetic.py"))
+    runpy.run_path(str(EXAMPLES / "map_synthetic.py"))
     out = capsys.readouterr().out
     table, _, tail = out.partition("\n\n")
     rows = [line.split() for line in table.splitlines()[1:]

@@ -7,6 +7,7 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
+from paths import EXAMPLES
 
 import lfmdr_gym  # noqa: F401  (registers the ids)
 from lfmdr_gym.exploration.contract import Policy, PredictPolicy, as_policy
@@ -198,9 +199,8 @@ def test_random_walk_makes_blocked_moves_rare():
 # ----------------------------------------------------------------------------- examples
 def _load_example(name: str):
     import importlib.util
-    from pathlib import Path
 
-    path = Path(__file__).resolve().parents[1] / "examples" / f"{name}.py"
+    path = EXAMPLES / f"{name}.py"
     spec = importlib.util.spec_from_file_location(f"example_{name}", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

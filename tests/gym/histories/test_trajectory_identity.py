@@ -16,15 +16,15 @@ change to a trajectory moves many readings by far more than the tolerance.
 
 import hashlib
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
+from paths import TEST_DATA
 
 from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
 from lfmdr_gym.histories.recording import collect
 
-DIGESTS = json.loads((Path(__file__).parent / "data" / "trajectory_digests.json").read_text())
+DIGESTS = json.loads((TEST_DATA / "trajectory_digests.json").read_text())
 
 CASES = {
     "visibility": ("LFMDR-Visibility-v0", {}),

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from paths import EXAMPLES, SHARED_DATA
 
 from lfmdr_gym.datasets import (
     MRCLAMDataWarning,
@@ -24,7 +25,7 @@ from lfmdr_gym.datasets import (
 )
 from lfmdr_gym.experiments.mrclam import map_mrclam_run
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "mrclam"
+DATA = SHARED_DATA / "mrclam"
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"MRCLAM data not found at {DATA}")
 
 HEADER = (
@@ -439,7 +440,7 @@ def test_the_mrclam_example_maps_a_real_run(capsys):
     import runpy
     import sys
 
-    script = Path(__file__).resolve().parents[1] / "examples" / "mrclam_map.py"
+    script = EXAMPLES / "mrclam_map.py"
     argv = sys.argv
     sys.argv = [str(script), str(DATA / "MRCLAM_Dataset2"), "--sensor", "range"]
     try:

@@ -1,11 +1,12 @@
 """The quick start example runs and says what it measured, with label and unit."""
 
 import runpy
-from pathlib import Path
+
+from paths import EXAMPLES
 
 
 def test_quickstart_prints_labelled_scores(tmp_path, capsys):
-    script = Path(__file__).resolve().parents[1] / "examples" / "quickstart.py"
+    script = EXAMPLES / "quickstart.py"
     main = runpy.run_path(str(script))["main"]
     history = main(["--steps", "600", "--out", str(tmp_path / "h.npz")])
     out = capsys.readouterr().out

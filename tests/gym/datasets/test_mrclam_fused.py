@@ -4,16 +4,15 @@ visibility + bearing fusion (VB-SMA)."""
 import subprocess
 import sys
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
+from paths import ROOT
 
 from lfmdr_gym.datasets.mrclam import MRCLAMDataWarning
 from lfmdr_gym.experiments.mrclam import map_mrclam_run
 from mappers import build_map, mean_position_error
 
-ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "mrclam"
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"MRCLAM data not found at {DATA}")
 

@@ -8,6 +8,7 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
+from paths import EXAMPLES
 
 import lfmdr_gym
 from lfmdr_gym import History, RandomWalkPolicy, collect, collect_vector
@@ -195,9 +196,8 @@ def test_compact_fused_histories_round_trip(tmp_path, env_id):
 
 def test_mrclam_camera_example(tmp_path, capsys):
     import runpy
-    from pathlib import Path
 
-    script = Path(__file__).resolve().parents[1] / "examples" / "mrclam_camera.py"
+    script = EXAMPLES / "mrclam_camera.py"
     out_file = tmp_path / "cam.npz"
     history = runpy.run_path(str(script))["main"](["--steps", "600", "--out", str(out_file)])
     out = capsys.readouterr().out

@@ -6,20 +6,18 @@ import importlib.util
 import math
 import sys
 import warnings
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
+from paths import ROOT
 
 import lfmdr_gym
 from lfmdr_gym import POLICIES, collect
 from lfmdr_gym.exploration.agent_view import AgentView, ViewConfig
 from lfmdr_gym.exploration.rl import MLPExplorationPolicy, load_mlp, mlp_forward
 from lfmdr_gym.wrappers import MappingRewardWrapper
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def _load_example():
