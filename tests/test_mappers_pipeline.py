@@ -131,7 +131,8 @@ def test_infer_sensor_of_a_sparse_history_reads_the_stored_values_only(monkeypat
     for dense, expected in cases:
         assert infer_sensor(sp.csr_array(dense)) == expected
     B, _, _ = world(sensor="bearing", n_steps=300)
-    from mappers.fitting import check_inputs  # build_map's input check, where the sensor is inferred
+    # build_map's input check, where the sensor is inferred
+    from mappers.fitting import check_inputs
 
     assert check_inputs(sp.csr_array(B), None, None, None)[2] == "bearing"
 

@@ -1,4 +1,5 @@
-"""CAL-SMA on a sparse graph of pairs (label ``"CAL-SMA-SPARSE"``): maps of thousands of objects.
+"""CAL-SMA on a sparse graph of pairs (label ``"CAL-SMA"`` with ``sparse=True``): maps of thousands
+of objects.
 
 The same model as :mod:`mappers.calibrated.cal_sma` (CAL-SMA): a log-polynomial calibration of the
 history dissimilarity into metres, fitted on neighbour pairs from the current map, alternated
@@ -200,9 +201,3 @@ class SparseCalibratedSMACOF(TransformerMixin, BaseEstimator):
     def fit_transform(self, X, y=None, *, anchor_ids=None, anchor_positions=None) -> np.ndarray:
         """Fit and return the (M, 2) embedding (world coordinates when anchors are given)."""
         return self.fit(X, anchor_ids=anchor_ids, anchor_positions=anchor_positions).embedding_
-
-
-def _cal_sma_sparse(n_neighbors: int | None = None, n_rounds: int = 10, position_degree: int = 2,
-                    random_state=None) -> SparseCalibratedSMACOF:
-    return SparseCalibratedSMACOF(n_neighbors=n_neighbors, n_rounds=n_rounds,
-                                  position_degree=position_degree, random_state=random_state)

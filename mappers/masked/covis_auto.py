@@ -1,5 +1,6 @@
 """Co-observation maps for masked histories: calibrated when the view is global, ordinal when it
-is local (labels ``"covis-cal"`` and ``"covis-auto"``).
+is local (label ``"COVIS-AUTO"``; its calibrated branch :class:`CovisCalibrated`, ``covis-cal``,
+is a building block).
 
 A limited field of view with no range limit sees most pairs of landmarks together some time:
 the co-observation coefficient (the Ochiai coefficient of :mod:`mappers.masked.coobservation`,
@@ -11,7 +12,7 @@ its link to distance changes with the horizon, and only its order is trusted (th
 ``covis-nonmetric`` / ``covis-angle`` of :mod:`mappers.masked.pair_maps`, with lower bounds for the pairs
 never seen together).
 
-``"covis-cal"`` (visibility, bearing)
+``covis-cal``, :class:`CovisCalibrated` (visibility, bearing; a building block)
     CAL-SMA on ``1 - och_ij`` and on ``-log och_ij`` (precomputed; pairs seen together in fewer
     than ``min_co`` steps at the saturation value: never neighbours, only "far"), and the mean
     of the two anchored maps. The two differ only by a monotone transform, which the calibration
@@ -20,7 +21,7 @@ never seen together).
     assumes of a history dissimilarity: a smooth, monotone link to distance that varies slowly
     over the arena.
 
-``"covis-auto"`` (bearing)
+``"COVIS-AUTO"`` (bearing)
     ``covis-cal`` when the share of pairs (of sensed objects) seen together in fewer than
     ``min_co`` steps is at most ``local_share``, else the ordinal ``covis-angle``. The share is
     read from the data; the chosen branch is in ``branch_``. *Assumes*: what the chosen branch
@@ -69,7 +70,8 @@ def _check_min_co(min_co) -> int:
 
 
 class CovisCalibrated:
-    """``"covis-cal"``: CAL-SMA on ``1 -`` the co-observation coefficient (module docstring).
+    """``covis-cal``: CAL-SMA on ``1 -`` the co-observation coefficient (module docstring); the
+    global branch of ``COVIS-AUTO``, called directly (no longer a label of its own).
 
     ``fit_transform(X, mask=None, *, sensor, anchor_ids=None, anchor_positions=None)`` returns
     the (M, 2) map (in the anchors' frame when anchors are given: without anchors the members'
@@ -101,9 +103,9 @@ class CovisCalibrated:
 
 
 class CovisAuto:
-    """``"covis-auto"``: ``covis-cal`` for a global view, the ordinal map for a local one
-    (module docstring). ``branch_`` is the label used, ``local_share_`` the measured share of
-    pairs seen together in fewer than ``min_co`` steps."""
+    """``"COVIS-AUTO"``: ``covis-cal`` for a global view, the ordinal map for a local one
+    (module docstring). ``branch_`` is the branch used (``"covis-cal"`` or ``"covis-angle"``),
+    ``local_share_`` the measured share of pairs seen together in fewer than ``min_co`` steps."""
 
     def __init__(self, *, min_co: int = 3, local_share: float = 0.1, n_neighbors: int = 12,
                  max_iter: int = 300, random_state=0) -> None:
@@ -115,7 +117,7 @@ class CovisAuto:
 
     def fit_transform(self, X, mask=None, *, sensor: str, anchor_ids=None, anchor_positions=None):
         if sensor != "bearing":
-            raise ValueError(f"covis-auto maps bearing histories, got sensor {sensor!r}")
+            raise ValueError(f"COVIS-AUTO maps bearing histories, got sensor {sensor!r}")
         _, C = co_observation_coefficient(X, mask, sensor)
         sensed = np.diag(C) > 0
         Cs = C[np.ix_(sensed, sensed)]

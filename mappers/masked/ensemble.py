@@ -1,4 +1,4 @@
-"""The covisibility ensemble (label ``"covis-ensemble"``): the mean of anchored co-observation
+"""The covisibility ensemble (label ``"COVIS-ENSEMBLE"``): the mean of anchored co-observation
 maps over several windows of consecutive steps.
 
 Two landmarks caught in one camera frame are close; caught within a few seconds of each other,
@@ -104,9 +104,11 @@ def ensemble_embedding(
 
 
 class CovisEnsemble:
-    """``"covis-ensemble"``: the mean of ``member`` maps (``"covis-power"`` or
-    ``"covis-nonmetric"``) of the history merged over each of ``windows`` ticks, for each
-    ``min_co``; ``power`` is covis-power's exponent (None: its default). Uses only the pattern of
+    """``"COVIS-ENSEMBLE"``: the mean of ``member`` maps (``"covis-power"`` or
+    ``"covis-nonmetric"``, methods of :func:`~mappers.masked.pair_maps.masked_embedding`) of the
+    history merged over each of ``windows`` ticks, for each ``min_co`` (``windows=(1,)``,
+    ``min_co=(3,)``: one member, the map of ``masked_embedding(..., "covis-power")``); ``power``
+    is covis-power's exponent (None: its default). Uses only the pattern of
     what was observed, so any sensor's history serves."""
 
     def __init__(self, *, windows: Sequence[int] = (2, 3, 4, 6, 8, 10),

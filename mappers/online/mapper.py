@@ -97,7 +97,7 @@ _BUNDLE = "BEARING-BA"  # updated incrementally from the incremental CAL-SMA map
 _VIEW = "VIEW-BA"  # masked visibility, updated incrementally between its refits (online_view)
 _REFIT_GROWTH = 4.0  # refit_growth's default
 # ... for VIEW-BA: its refits, from a new start map, are what find a better basin; every 1.25x
-# (about 7 in a run to N = 2,000) since dropout-blend, their start, drops a failed member
+# (about 7 in a run to N = 2,000) since DROPOUT-BLEND, their start, drops a failed member
 # (2 before: docs/online-and-exploration.md)
 _VIEW_REFIT_GROWTH = 1.25
 # a warm map that looks folded is refitted from scratch once the steps have grown by this factor

@@ -1,9 +1,9 @@
-"""Visibility bundle adjustment of a visibility map (label ``"VIS-BA"``).
+"""Visibility bundle adjustment of a visibility map (label ``"VIS-BA-WALK"``: with the walk prior).
 
 The paper's methods, and the other visibility mappers here, never estimate where the robot was.
 This one does: it starts from the map the visibility default draws (``start``: CAL-SMA for a
-complete history, ``dropout-blend`` for a masked one; for a flickering one, whose default is
-VIS-BA-WALK, the complete default CAL-SMA, and so for any history whose default is a VIS-BA)
+complete history, ``DROPOUT-BLEND`` for a masked one; for a flickering one, whose default is
+VIS-BA-WALK, the complete default CAL-SMA, and so for any history whose default adjusts viewpoints)
 and refines it by treating each step's viewpoint as a latent position. A visibility bit is read
 as a noisy range threshold: at distance ``d`` between viewpoint and object
 
@@ -51,7 +51,7 @@ round's move of the objects by that factor (over-relaxed EM, from the second rou
 ``model_rounds`` refits the sensor model and the walk's width in the first rounds only. At
 ``miss_rate = 0.5`` (N = 2000, tuning layouts 100..119) the start CAL-SMA's 0.075 m becomes
 0.045 (independent steps: 0.057; continuity alone 0.051, alignment alone 0.052), on the 25
-fresh layouts 0.049 (largest run 0.068) against ``dropout-blend``'s 0.069, in 0.70 s per map
+fresh layouts 0.049 (largest run 0.068) against ``DROPOUT-BLEND``'s 0.069, in 0.70 s per map
 (``docs/imperfect-sensing.md``).
 
 Guards: an object seen from fewer than ``min_views`` usable steps keeps its start position (its
@@ -366,8 +366,8 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
 
     Parameters:
         start: label of the method that draws the start map (None: the visibility default
-            ``build_map`` picks for the history; when that is a VIS-BA, CAL-SMA for a complete
-            history and ``dropout-blend`` for a masked one).
+            ``build_map`` picks for the history; when that adjusts viewpoints, CAL-SMA for a
+            complete history and ``DROPOUT-BLEND`` for a masked one).
         max_rounds: EM rounds (E-step, objects, model).
         inner_iters: Fisher-scoring iterations of the objects per round.
         tol: stop when no object moves more than this [m] in a round.
@@ -443,16 +443,17 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
 
     def _start_map(self, X, mask, ids, pos, timeline) -> np.ndarray:
         if self.start is not None and self.start.strip().upper() in ("VIS-BA", "VIS-BA-WALK"):
-            raise ValueError(f"start must name another method than VIS-BA, got {self.start!r}")
-        label = self.start
+            raise ValueError("start must name another method than the visibility adjustment "
+                             f"(VIS-BA-WALK), got {self.start!r}")
+        label, params = self.start, {}
         if label is None:  # the default's choice; were it an adjustment, the map before it
             Xc, maskc, _, steps = check_inputs(X, "visibility", mask, timeline)
-            label = choose_for_history(Xc, maskc, "visibility", steps)
-            if label in ("VIS-BA", "VIS-BA-WALK", "VIEW-BA"):
-                label = localisation_free("visibility", mask is not None)[0]
+            label, params = choose_for_history(Xc, maskc, "visibility", steps)
+            if label in ("VIS-BA-WALK", "VIEW-BA"):
+                label, params = localisation_free("visibility", mask is not None)
         P, self.start_method_ = fit_start(label, X, ids, pos, sensor="visibility", mask=mask,
                                           timeline=timeline, random_state=self.random_state,
-                                          category=VisibilityAdjustmentWarning)
+                                          category=VisibilityAdjustmentWarning, params=params)
         return P
 
     def fit(self, X, y=None, *, mask=None, sensor: str = "visibility", anchor_ids=None,
@@ -465,12 +466,13 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
             raise ValueError(f"step_sigma={self.step_sigma!r} is the width of the walk's steps, "
                              "which only continuity=True models")
         if sensor != "visibility":
-            raise ValueError(f"VIS-BA maps visibility histories, got sensor {sensor!r}")
+            raise ValueError("the visibility adjustment (VIS-BA-WALK) maps visibility histories, "
+                             f"got sensor {sensor!r}")
         seen, observed = visibility_bits(X, mask)
         m = seen.shape[1]
         self.start_method_ = None if start_positions is None else "given"
         ids, pos, P0 = anchored_start(
-            "VIS-BA", anchor_ids, anchor_positions, m, start_positions,
+            "the visibility adjustment", anchor_ids, anchor_positions, m, start_positions,
             lambda ids, pos: self._start_map(np.asarray(X, dtype=float), mask, ids, pos, timeline),
         )
         self.start_ = P0.copy()
@@ -538,7 +540,7 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
             return post, ll
         if len(G) * len(S) > _MAX_POSTERIOR:
             raise ValueError(
-                f"VIS-BA's E-step holds {len(S)} steps x {len(G)} candidate viewpoints "
+                f"the visibility adjustment's E-step holds {len(S)} steps x {len(G)} candidate viewpoints "
                 f"(more than {_MAX_POSTERIOR:.0e}): the objects span {np.ptp(P[use], axis=0)} "
                 f"m against a visibility radius of about {theta[0]:.3g} m; lower grid_cells, or "
                 "map fewer steps"
