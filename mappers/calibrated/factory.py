@@ -9,15 +9,32 @@ pairs, which takes ``scipy.sparse`` histories and thousands of objects (the ``la
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 from mappers.calibrated.cal_sma import CalibratedSMACOF
 from mappers.calibrated.cal_sma_sparse import SparseCalibratedSMACOF
 
-__all__: list[str] = []
+__all__ = ["dense_keywords"]
 
 _N_ROUNDS = {False: 20, True: 10}
 # The defaults (K = 12 for visibility, 10 for bearing/range, via n_neighbors=None) were tuned on
 # seeds of our own, never on the protocol's; the grid lets the protocol sweep K like the others.
 _FOLD_THRESHOLD = 0.05
+
+
+def dense_keywords(params: Mapping[str, Any]) -> dict[str, Any]:
+    """CAL-SMA's parameters as the label takes them (``spec.resolved_params()``) as keywords of
+    the dense estimator, :class:`~mappers.calibrated.cal_sma.CalibratedSMACOF`: the None defaults
+    filled in, ``sparse`` dropped (True: ValueError, the sparse form is another estimator)."""
+    kw = dict(params)
+    if kw.pop("sparse", False):
+        raise ValueError("sparse=True is CAL-SMA's sparse form, not the dense estimator")
+    if kw.get("n_rounds") is None:
+        kw["n_rounds"] = _N_ROUNDS[False]
+    if kw.get("fold_threshold") is None:
+        kw["fold_threshold"] = _FOLD_THRESHOLD
+    return kw
 
 
 def _cal_sma(
