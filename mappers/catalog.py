@@ -8,6 +8,12 @@ environments: the catalog imports no method, and no method imports the catalog b
 pipeline, the protocol and the command line choose and check methods by the spec alone
 (:func:`resolve_method`); which label is the default for which data is
 :mod:`mappers.defaults`' one table.
+
+Labels: the paper's ten keep its spellings (``LPCA`` ... ``SDE``), ours are upper case with
+hyphens (``CAL-SMA``, ``COVIS-AUTO``, ``VIS-BA-WALK``); an option of a method is a parameter
+(``CAL-SMA`` with ``sparse=True``), not a label. Labels of older releases resolve through
+:data:`ALIASES` (with a FutureWarning) or are refused with the reason (:data:`RETIRED`: the
+dead ends, whose figures are in ``docs/dead-ends.md``, and the building blocks of other methods).
 """
 
 from __future__ import annotations
