@@ -9,14 +9,14 @@ walk's true poses and layout:
 
 * ``camera60``: a camera with a 60-degree field of view and a 1 m range limit, bearing noise
   2 deg and range noise 2 cm (Gaussian), mapped fused (``LOC-SMA``) and by range alone
-  (``range-quantile``, masked) and by bearing alone (``BEARING-BA``, masked) — the conditions
+  (``RANGE-QUANTILE``, masked) and by bearing alone (``BEARING-BA``, masked) — the conditions
   of a real robot's camera;
 * ``camera360``: a 360-degree view without range limit, 5 deg / 5 cm noise, fused vs range
   alone (``UNFOLD``) and bearing alone (``BEARING-BA``);
 * ``camera-env``: a walk of ``LFMDR-Camera-v0`` itself (the MRCLAM camera's field of view,
   range limit and noise, line of sight on; :data:`lfmdr_gym.sim.camera.CAMERA_PRESET`), its fused
   history mapped as collected (``LOC-SMA``) and each of its parts alone (masked defaults:
-  ``range-quantile`` for range, ``BEARING-BA`` for bearing);
+  ``RANGE-QUANTILE`` for range, ``BEARING-BA`` for bearing);
 * ``vis-bearing``: the walk's own bearing history and the visibility bits of the same poses
   (:func:`lfmdr_gym.sim.sensors.visibility`, the env's defaults), each alone (its default:
   ``CAL-SMA`` for visibility, ``BEARING-BA`` for bearing) and fused (``VB-SMA``, and VB-SMA without

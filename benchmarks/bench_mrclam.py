@@ -1,7 +1,7 @@
 """MRCLAM: map every run with every sensor and print MPE / MOE per run, with baselines.
 
     python benchmarks/bench_mrclam.py [--data DIR] [--sensors visibility,bearing,range,range-bearing]
-        [--candidates covis-ensemble,range-quantile]
+        [--candidates COVIS-ENSEMBLE,RANGE-QUANTILE]
 
 For each run and sensor (4 corner anchors, all 5 robots, scores over the 11 non-anchor landmarks):
 
@@ -9,20 +9,24 @@ For each run and sensor (4 corner anchors, all 5 robots, scores over the 11 non-
 * ``naive``: the straightforward pipeline on 1 s bins (zero-filled history, L2-normalised rows,
   unweighted SMACOF from classical MDS, affine fit to the anchors);
 * ``masked-euclidean`` (bearing, range): RMS history difference over co-observed bins only,
-  weighted SMACOF over the pairs that have it (the masked form of the paper's recipe);
-* each masked method (mappers/masked/pair_maps.py) that suits the sensor, with its default settings;
+  weighted SMACOF over the pairs that have it (the masked form of the paper's recipe; a dead
+  end, docs/dead-ends.md, registered here for this table only);
+* each masked method (mappers/masked/pair_maps.py) that suits the sensor, with its default
+  settings: ``covis-nonmetric`` at one bin width (a building block: ``COVIS-ENSEMBLE`` with one
+  ``covis-nonmetric`` member), ``RANGE-QUANTILE`` and ``range-bounds`` (a dead end, registered
+  here for this table only);
 * ``<method> LOO``: the method with the setting chosen *without* the run (lowest mean MPE over
   the other runs in a small grid), i.e. a score on a run the setting was not tuned on.
 
-* ``covis-ensemble/nonmetric``: the mean of the covis-nonmetric maps over bin widths
+* ``COVIS-ENSEMBLE/nonmetric``: the mean of the covis-nonmetric maps over bin widths
   {1, 1.5, 2, 3, 4, 5} s x min_co {3, 5} (anchors fixed, one frame);
-* ``covis-ensemble`` (visibility, bearing; the default of both): the same with covis-power
-  members (metric link distance = a * (-log co-observation rate) ** 0.5; a run whose usable
-  pairs fall apart keeps the covis-nonmetric members, with a warning).
+* ``COVIS-ENSEMBLE`` (visibility, bearing; the default of both on logged runs): the same with
+  covis-power members (metric link distance = a * (-log co-observation rate) ** 0.5; a run whose
+  usable pairs fall apart keeps the covis-nonmetric members, with a warning).
 
 Settings grids: covis-nonmetric (visibility, bearing): bin width {1, 2, 3, 5} s x min_co {3, 5};
-covis-ensemble/nonmetric: the set of bin widths, {1, 2, 3, 5} / {1, 1.5, 2, 3, 4, 5} /
-{0.5, ..., 8} s; covis-ensemble: power {0.35, 0.5, 0.7, 1}; range-quantile: bin width
+COVIS-ENSEMBLE/nonmetric: the set of bin widths, {1, 2, 3, 5} / {1, 1.5, 2, 3, 4, 5} /
+{0.5, ..., 8} s; COVIS-ENSEMBLE: power {0.35, 0.5, 0.7, 1}; RANGE-QUANTILE: bin width
 {0.25, 0.5, 1} s x quantile {0.95, 0.98, 0.99}; range-bounds: the same x slack {0.5, 1}.
 LOC-SMA (range-bearing, the default of both measurements fused): bin width {0.25, 0.5} s x
 min_count {3, 10} x trim {None (weighted median), 3}.
@@ -39,14 +43,25 @@ from pathlib import Path
 
 import numpy as np
 
-from lfmdr_gym.datasets.mrclam import MRCLAMDataWarning
+from lfmdr_gym.datasets.mrclam import DEFAULT_BIN_WIDTH, MRCLAMDataWarning
 from lfmdr_gym.experiments.mrclam import map_mrclam_run
+from mappers import MethodSpec, register_method
+
+# The dead ends of the table, no longer labels of the catalog (docs/dead-ends.md): their building
+# blocks registered here, for this benchmark only, with the specs they had.
+_MASKED = {"uses_anchors": True, "normalize": False, "histories": ("complete", "masked")}
+DEAD_ENDS = {
+    "masked-euclidean": MethodSpec("MASKED-EUCLIDEAN", "mappers.masked.pair_maps:_masked_euclidean",
+                                   **_MASKED),
+    "range-bounds": MethodSpec("RANGE-BOUNDS", "mappers.masked.pair_maps:_range_bounds",
+                               sensors=("range",), **_MASKED),
+}
 
 GRIDS = {
     "covis-nonmetric": [
         {"bin_width": bw, "min_co": mc} for bw, mc in itertools.product([1.0, 2.0, 3.0, 5.0], [3, 5])
     ],
-    "range-quantile": [
+    "RANGE-QUANTILE": [
         {"bin_width": bw, "quantile": q}
         for bw, q in itertools.product([0.25, 0.5, 1.0], [0.95, 0.98, 0.99])
     ],
@@ -54,8 +69,8 @@ GRIDS = {
         {"bin_width": bw, "quantile": q, "slack": sl}
         for bw, q, sl in itertools.product([0.25, 0.5, 1.0], [0.95, 0.98, 0.99], [0.5, 1.0])
     ],
-    "covis-ensemble": [{"power": pw} for pw in (0.35, 0.5, 0.7, 1.0)],
-    "covis-ensemble/nonmetric": [
+    "COVIS-ENSEMBLE": [{"power": pw} for pw in (0.35, 0.5, 0.7, 1.0)],
+    "COVIS-ENSEMBLE/nonmetric": [
         {"bin_widths": bws}
         for bws in [(1.0, 2.0, 3.0, 5.0), (1.0, 1.5, 2.0, 3.0, 4.0, 5.0),
                     (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 8.0)]
@@ -67,17 +82,23 @@ GRIDS = {
     ],
 }
 CANDIDATES = {
-    "visibility": ["covis-nonmetric", "covis-ensemble/nonmetric", "covis-ensemble"],
-    "bearing": ["masked-euclidean", "covis-nonmetric", "covis-ensemble/nonmetric",
-                "covis-ensemble"],
-    "range": ["masked-euclidean", "range-quantile", "range-bounds"],
+    "visibility": ["covis-nonmetric", "COVIS-ENSEMBLE/nonmetric", "COVIS-ENSEMBLE"],
+    "bearing": ["masked-euclidean", "covis-nonmetric", "COVIS-ENSEMBLE/nonmetric",
+                "COVIS-ENSEMBLE"],
+    "range": ["masked-euclidean", "RANGE-QUANTILE", "range-bounds"],
     "range-bearing": ["LOC-SMA"],
 }
 
 
 def _run(run_dir: Path, sensor: str, method: str | None, **kw):
-    if method == "covis-ensemble/nonmetric":
-        method, kw = "covis-ensemble", {**kw, "member": "covis-nonmetric"}
+    if method == "COVIS-ENSEMBLE/nonmetric":
+        method, kw = "COVIS-ENSEMBLE", {**kw, "member": "covis-nonmetric"}
+    elif method == "covis-nonmetric":  # the building block at one bin width: one member
+        width, min_co = kw.pop("bin_width", DEFAULT_BIN_WIDTH[sensor]), kw.pop("min_co", 3)
+        method = "COVIS-ENSEMBLE"
+        kw = {**kw, "member": "covis-nonmetric", "bin_widths": (width,), "min_co": min_co}
+    elif method in DEAD_ENDS:
+        method = register_method(DEAD_ENDS[method], replace=True).label
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MRCLAMDataWarning)
         return map_mrclam_run(run_dir, sensor, method=method, **kw)

@@ -14,7 +14,8 @@ method that refuses a size prints its reason; one that runs past ``--timeout`` i
     python benchmarks/bench_scale.py --full --plot docs/scale.png --json scale.json
 
 ``--plot`` draws CPU time and peak memory against M for collect and each method (log-log; a
-method that cannot run at a size has no point there), ``--json`` keeps every row.
+method that cannot run at a size has no point there), ``--json`` keeps every row. A method is a
+label with optional parameters, ``"CAL-SMA:sparse=True"`` (CAL-SMA's scalable form).
 
 With ``--max-range`` (a sensing limit of issue #11) the histories are masked and recorded
 sparse at M = 1,000 (the observed entries and the mask), and the methods are those of
@@ -34,10 +35,11 @@ import time
 from pathlib import Path
 
 STEPS = {50: 2000, 200: 8000, 1000: 20000, 10000: 400000}
-METHODS = ("CAL-SMA-SPARSE", "CAL-SMA", "SMA(WGT)", "ISOMAP", "LEM")
-MASKED_METHODS = ("default", "covis-sparse", "covis-auto")
-"""With ``--max-range`` the histories are masked: build_map's default (covis-auto up to 500
-objects, covis-sparse above), the sparse path and the dense masked default."""
+METHODS = ("CAL-SMA:sparse=True", "CAL-SMA", "SMA(WGT)", "ISOMAP", "LEM")
+MASKED_METHODS = ("default", "COVIS-SPARSE", "COVIS-AUTO")
+"""With ``--max-range`` the histories are masked: build_map's default (BEARING-BA, which starts
+from COVIS-AUTO, up to 500 objects, COVIS-SPARSE above), the sparse path and the dense
+co-observation map."""
 ENV_IDS = {"visibility": "LFMDR-Visibility-v0", "bearing": "LFMDR-Bearing-v0"}
 
 
@@ -67,6 +69,7 @@ def run_collect(m: int, path: str, sensor: str, max_range: float | None, seed: i
 def run_method(path: str, method: str) -> dict:
     """Map the saved history with ``method``; time, peak memory, MPE and MOE (non-anchors)."""
     import mappers
+    from lfmdr_gym.experiments.params import parse_params
     from lfmdr_gym.histories.history import History
     from mappers.core.scores import (
         mean_orientation_error,
@@ -75,13 +78,15 @@ def run_method(path: str, method: str) -> dict:
     )
 
     h = History.load(path)
-    label = None if method == "default" else method  # "default": build_map's own choice
+    label, _, given = method.partition(":")
+    params = parse_params(given.split(",") if given else None)
+    label = None if label == "default" else label  # "default": build_map's own choice
     _ = mappers.METHODS["CAL-SMA" if label is None else label]  # load the registry before timing
     base = _rss_mb()
     t0 = time.perf_counter()
     cpu0 = time.process_time()
     try:
-        m = mappers.build_map(h, h.anchor_ids, h.anchor_positions, method=label)
+        m = mappers.build_map(h, h.anchor_ids, h.anchor_positions, method=label, **params)
     except ValueError as exc:
         return {"refused": str(exc)}
     out = {"method": m.method, "seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - cpu0,
@@ -115,7 +120,8 @@ def main() -> None:
     parser.add_argument("--full", action="store_true", help="also M = 10,000 (N = 400,000)")
     parser.add_argument("--sizes", type=int, nargs="*", default=None, help="values of M")
     parser.add_argument("--methods", nargs="*", default=None,
-                        help="method labels; 'default' = build_map's choice (method=None)")
+                        help="method labels, with parameters as LABEL:NAME=VALUE,...; 'default' = "
+                             "build_map's choice (method=None)")
     parser.add_argument("--sensor", choices=sorted(ENV_IDS), default="visibility")
     parser.add_argument("--max-range", type=float, default=None)
     parser.add_argument("--seed", type=int, default=101, help="episode seed (not tuned on)")
@@ -154,10 +160,10 @@ def main() -> None:
                 r = _child(["map", path, method], args.timeout)
                 rows.append({"M": m, "what": method, **r})
                 if "refused" in r:
-                    print(f"         {method:<15} cannot run: {r['refused'][:150]}")
+                    print(f"         {method:<18} cannot run: {r['refused'][:150]}")
                     continue
                 name = method if method != "default" else f"default ({r['method']})"
-                print(f"         {name:<15} {r['seconds']:8.1f} s ({r['cpu_seconds']:.1f}) peak "
+                print(f"         {name:<18} {r['seconds']:8.1f} s ({r['cpu_seconds']:.1f}) peak "
                       f"{r['peak_mb']:7.0f} MB ({r['base_mb']:.0f})  MPE {r['mpe']:.4f} m  "
                       f"MOE {r['moe']:.3f} % ({r['moe_how']}, {r['moe_seconds']:.1f} s)")
             sys.stdout.flush()

@@ -51,9 +51,9 @@ PANELS: dict[str, tuple[str, str, tuple[Any, ...], dict[str, Any]]] = {
     "visibility field of view [deg]": ("visibility", "fov_deg", (360, 180, 90, 60), {}),
     "visibility miss rate": ("visibility", "miss_rate", (0.0, 0.1, 0.3, 0.5, 0.7), {}),
 }
-# covis-ensemble groups consecutive steps and takes tens of seconds per map at N = 2000: too
+# COVIS-ENSEMBLE groups consecutive steps and takes tens of seconds per map at N = 2000: too
 # slow for a sweep of hundreds of maps; name it with --methods to include it.
-SLOW = ("covis-ensemble",)
+SLOW = ("COVIS-ENSEMBLE",)
 FIELDS = ("panel", "sensor", "setting", "value", "env_kwargs", "run", "method", "kind",
           "mpe_nonanchor", "unmapped", "seconds", "error", "default")
 

@@ -3,7 +3,7 @@
 Our env places objects with a spacing rule, hides objects behind others and walks the robot
 with its own policy; a mapper tuned on its histories can lose its margin elsewhere. This
 benchmark draws histories from a different, deliberately simple world and maps them with the
-masked visibility default before (``dropout-blend``) and with ``VIEW-BA``:
+masked visibility default before (``DROPOUT-BLEND``) and with ``VIEW-BA``:
 
 - ``--objects`` objects uniform in a 2.4 m square, no spacing rule, no occlusion; four anchors
   at (+-0.9, +-0.9);
@@ -61,7 +61,7 @@ def main(argv=None) -> None:
     ap.add_argument("--objects", type=int, default=50, help="objects per layout (default 50)")
     ap.add_argument("--fov", type=float, default=90.0, help="field of view [deg] (default 90)")
     args = ap.parse_args(argv)
-    methods = ("dropout-blend", "VIEW-BA")
+    methods = ("DROPOUT-BLEND", "VIEW-BA")
     rows = {k: [] for k in methods}
     with threadpool_limits(limits=1), warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -90,7 +90,9 @@ def _add_method_options(p: argparse.ArgumentParser, default: str) -> None:
     """--method and --param, shared by `run`, `map` and `mrclam`."""
     p.add_argument("--method", default=None,
                    help="a registered method that maps this kind of history, case-insensitive "
-                        f"(e.g. CAL-SMA, 'SMA(WGT)', covis-power; default: {default})")
+                        f"(e.g. CAL-SMA, 'SMA(WGT)', COVIS-AUTO; default: {default}); an older "
+                        "label maps with a warning naming its new one, or is refused naming what "
+                        "to use (e.g. VIS-BA, covis-power: docs/dead-ends.md)")
     p.add_argument("--param", action="append", default=None, metavar="NAME=VALUE",
                    help="method parameter overriding its default (repeatable), e.g. K=7 or "
                         "n_neighbors=7, sigma2=1, d=4")
@@ -269,7 +271,7 @@ def _add_mrclam(sub: Any) -> None:
                           "every sighting, fused)", fused=("range-bearing",))
     p.add_argument("--robots", type=_int_list, default=None, metavar="1,2,3,4,5",
                    help="robot subject numbers whose logs are used (default: all five)")
-    _add_method_options(p, "covis-ensemble for visibility and bearing, range-quantile for "
+    _add_method_options(p, "COVIS-ENSEMBLE for visibility and bearing, RANGE-QUANTILE for "
                            "range, LOC-SMA for range-bearing; 'naive' is SMA(UNWGT) with "
                            "--zero-fill")
     p.add_argument("--zero-fill", action="store_true",

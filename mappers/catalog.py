@@ -8,14 +8,25 @@ environments: the catalog imports no method, and no method imports the catalog b
 pipeline, the protocol and the command line choose and check methods by the spec alone
 (:func:`resolve_method`); which label is the default for which data is
 :mod:`mappers.defaults`' one table.
+
+Labels: the paper's ten keep its spellings (``LPCA`` ... ``SDE``), ours are upper case with
+hyphens (``CAL-SMA``, ``COVIS-AUTO``, ``VIS-BA-WALK``); an option of a method is a parameter
+(``CAL-SMA`` with ``sparse=True``), not a label. Labels of older releases resolve through
+:data:`ALIASES` (with a FutureWarning) or are refused with the reason (:data:`RETIRED`: the
+dead ends, whose figures are in ``docs/dead-ends.md``, and the building blocks of other methods).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import inspect
+import os
+import sys
+import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any
 
 from mappers.core.errors import MappingError
@@ -23,11 +34,15 @@ from mappers.core.sensors import SENSORS, check_sensor_set, sensor_name
 from mappers.defaults import DENSE_MAX_OBJECTS, choose_method
 
 __all__ = [
+    "ALIASES",
     "HISTORY_KINDS",
     "METHODS",
+    "RETIRED",
+    "Alias",
     "MappingError",
     "MethodSpec",
     "check_size",
+    "implied_params",
     "methods_for",
     "register_method",
     "resolve_method",
@@ -67,6 +82,10 @@ class MethodSpec:
             histories over without building the dense matrix.
         max_objects: the largest M the method is given (None: no limit); ``build_map`` refuses
             more with an error naming the scalable methods.
+        scalable: the parameters that switch the method to its scalable form (``{"sparse":
+            True}`` for CAL-SMA), an option of one algorithm rather than a second one; with them
+            ``fit_transform`` accepts a ``scipy.sparse`` X and any number of objects, whatever
+            ``sparse`` and ``max_objects`` say of the default form (empty: no such form).
     """
 
     label: str
@@ -81,6 +100,7 @@ class MethodSpec:
     uses_timeline: bool = False
     sparse: bool = False
     max_objects: int | None = DENSE_MAX_OBJECTS
+    scalable: Mapping[str, Any] = field(default_factory=dict)
 
     def load(self) -> Callable[..., Any]:
         """The factory itself: ``factory``, or the object its entry point names (imported on
@@ -118,6 +138,28 @@ class MethodSpec:
     def build(self, **params: Any) -> Any:
         """The estimator with ``defaults`` updated by ``params`` (unknown names: ValueError)."""
         return self.load()(**self.resolved_params(params))
+
+    def with_defaults(self, params: Mapping[str, Any]) -> MethodSpec:
+        """This spec with ``defaults`` updated by ``params`` (unknown names: ValueError): what
+        :func:`resolve_method` returns for an old label that implies parameters, or for a
+        default chosen with them (``CAL-SMA`` with ``sparse=True``)."""
+        if not params:
+            return self
+        self.check_params(params)
+        return dataclasses.replace(self, defaults={**self.defaults, **params})
+
+    def is_scalable(self, params: Mapping[str, Any]) -> bool:
+        """Whether ``params`` (the resolved parameters) select the scalable form (``scalable``)."""
+        return bool(self.scalable) and all(
+            k in params and params[k] == v for k, v in self.scalable.items())
+
+    def takes_sparse(self, params: Mapping[str, Any]) -> bool:
+        """Whether ``fit_transform`` takes a ``scipy.sparse`` X with these resolved parameters."""
+        return self.sparse or self.is_scalable(params)
+
+    def object_limit(self, params: Mapping[str, Any]) -> int | None:
+        """The largest M the method is given with these resolved parameters (None: no limit)."""
+        return None if self.is_scalable(params) else self.max_objects
 
     @property
     def takes_masks(self) -> bool:
@@ -178,14 +220,30 @@ class _Registry(Mapping[str, MethodSpec]):
 METHODS: Mapping[str, MethodSpec] = _Registry()
 """Label -> :class:`MethodSpec`, in registration order (read-only view; use register_method)."""
 
-def check_size(spec: MethodSpec, n_objects: int) -> None:
-    """ValueError when ``spec`` does not take ``n_objects`` objects, naming the methods that do."""
-    if spec.max_objects is not None and n_objects > spec.max_objects:
-        scalable = [label for label, s in METHODS.items()
-                    if s.max_objects is None or s.max_objects >= n_objects]
+def _params_text(params: Mapping[str, Any]) -> str:
+    return ", ".join(f"{k}={v!r}" for k, v in params.items())
+
+
+def scalable_methods(n_objects: int) -> list[str]:
+    """The registered methods that map ``n_objects`` objects, each with the parameters of its
+    scalable form where it needs them (``"CAL-SMA with sparse=True"``)."""
+    return [label if s.max_objects is None or s.max_objects >= n_objects
+            else f"{label} with {_params_text(s.scalable)}"
+            for label, s in _METHODS.items()
+            if s.max_objects is None or s.max_objects >= n_objects or s.scalable]
+
+
+def check_size(spec: MethodSpec, n_objects: int, params: Mapping[str, Any] | None = None) -> None:
+    """ValueError when ``spec`` with the resolved ``params`` does not take ``n_objects``
+    objects, naming its scalable form (if it has one) and the methods that take them."""
+    limit = spec.object_limit(params or {})
+    if limit is not None and n_objects > limit:
+        form = (f"pass {_params_text(spec.scalable)} (its scalable form) or "
+                if spec.scalable else "")
         raise ValueError(
-            f"method {spec.label!r} maps at most {spec.max_objects} objects (it holds M x M "
-            f"matrices), got {n_objects}; use a scalable method: {scalable}"
+            f"method {spec.label!r} maps at most {limit} objects (it holds M x M "
+            f"matrices), got {n_objects}; {form}use a scalable method: "
+            f"{scalable_methods(n_objects)}"
         )
 
 
@@ -211,7 +269,8 @@ def register_method(spec: MethodSpec, *, replace: bool = False) -> MethodSpec:
             f"{spec.label!r}: histories must be a non-empty tuple of {HISTORY_KINDS}, "
             f"got {spec.histories!r}"
         )
-    for what, names in (("defaults", spec.defaults), ("grid", spec.grid)):
+    for what, names in (("defaults", spec.defaults), ("grid", spec.grid),
+                        ("scalable", spec.scalable)):
         unknown = sorted(set(names) - set(spec.parameters))
         if unknown:
             raise ValueError(f"{spec.label!r}: {what} name(s) {unknown} not accepted by factory")
@@ -240,23 +299,127 @@ def methods_for(sensor=None, masked: bool | None = None) -> tuple[str, ...]:
     )
 
 
+@dataclass(frozen=True)
+class Alias:
+    """An old label's new spelling: the label and the parameters it stands for."""
+
+    label: str
+    params: Mapping[str, Any] = field(default_factory=dict)
+
+
+_DEAD_ENDS = "docs/dead-ends.md"
+
+ALIASES: Mapping[str, Alias] = MappingProxyType({
+    "CAL-SMA-SPARSE": Alias("CAL-SMA", MappingProxyType({"sparse": True})),
+    "range-quantile": Alias("RANGE-QUANTILE"),
+    "covis-ensemble": Alias("COVIS-ENSEMBLE"),
+    "covis-auto": Alias("COVIS-AUTO"),
+    "covis-sparse": Alias("COVIS-SPARSE"),
+    "dropout-blend": Alias("DROPOUT-BLEND"),
+})
+"""Old label -> :class:`Alias`: labels that stored results, the README or older code used and
+that now have another spelling, or are one method with a parameter. :func:`resolve_method`
+resolves them (in any case but the new label's own spelling) with a FutureWarning naming the
+new label."""
+
+RETIRED: Mapping[str, str] = MappingProxyType({
+    "range-bounds": (
+        f"a dead end (its figures: {_DEAD_ENDS}); use RANGE-QUANTILE, the same map without the "
+        "field-of-view bounds; the building block stays: mappers.masked_embedding(X, mask, "
+        "'range', 'range-bounds')"),
+    "masked-euclidean": (
+        f"a dead end (its figures: {_DEAD_ENDS}); use the masked default of the sensor "
+        "(method=None: VIEW-BA, BEARING-BA or RANGE-QUANTILE); the building block stays: "
+        "mappers.masked_embedding(X, mask, sensor, 'masked-euclidean')"),
+    "covis-power": (
+        f"a dead end as a method of its own (its figures: {_DEAD_ENDS}); use COVIS-ENSEMBLE, "
+        "whose member it is (with windows=(1,), min_co=(3,) it gives covis-power's map); the "
+        "building block stays: mappers.masked_embedding(X, mask, sensor, 'covis-power')"),
+    "VIS-BA": (
+        f"a dead end (its figures: {_DEAD_ENDS}); use VIS-BA-WALK, the same adjustment with "
+        "the walk's continuity prior (with continuity=False, align=False, overrelax=0.0, "
+        "grid_cells=6, prior_iters=2, model_rounds=None it gives VIS-BA's map, as does "
+        "mappers.VisibilityAdjustment())"),
+    "covis-nonmetric": (
+        "a building block, not a method of its own: DROPOUT-BLEND's ordinal member; use "
+        "DROPOUT-BLEND (visibility) or COVIS-AUTO (bearing), or call "
+        "mappers.masked_embedding(X, mask, sensor, 'covis-nonmetric')"),
+    "covis-angle": (
+        "a building block, not a method of its own: COVIS-AUTO's branch for a local view; use "
+        "COVIS-AUTO, or call mappers.masked_embedding(X, mask, 'bearing', 'covis-angle')"),
+    "covis-cal": (
+        "a building block, not a method of its own: COVIS-AUTO's branch for a global view; use "
+        "COVIS-AUTO (bearing) or COVIS-SPARSE (visibility, bearing), or call "
+        "mappers.masked.CovisCalibrated()"),
+})
+"""Old label -> why it is no longer a label and what to use instead: the dead ends (their
+figures are in ``docs/dead-ends.md``) and the building blocks of other methods, which stay
+callable in their modules. :func:`resolve_method` refuses them with that text."""
+
+_OLD_LABELS: dict[str, str] = {k.lower(): k for k in (*ALIASES, *RETIRED)}
+
+
+def _caller_level() -> int:
+    """The ``stacklevel`` that names the first caller outside this package."""
+    here = os.path.dirname(os.path.abspath(__file__)) + os.sep
+    frame, level = sys._getframe(1), 1
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(here):
+        frame, level = frame.f_back, level + 1
+    return level
+
+
+def _canonical(method: str) -> tuple[str | None, dict[str, Any]]:
+    """The registered label ``method`` names and the parameters it implies: an exact label; an
+    old label (:data:`ALIASES`, with a FutureWarning; :data:`RETIRED`: ValueError) in any case
+    but its new label's own spelling; else a label matched case-insensitively (None: none)."""
+    if method in _METHODS:
+        return method, {}
+    folded = method.strip().lower()
+    registered = {k.lower(): k for k in _METHODS}.get(folded)
+    old = _OLD_LABELS.get(folded)
+    if old in ALIASES and registered in (None, ALIASES[old].label):
+        new = ALIASES[old]
+        given = f" with {_params_text(new.params)}" if new.params else ""
+        warnings.warn(f"method {method!r} is now spelled {new.label!r}{given}; the old label will "
+                      "stop resolving in a future release", FutureWarning,
+                      stacklevel=_caller_level())
+        return new.label, dict(new.params)
+    if old in RETIRED and registered is None:
+        raise ValueError(f"method {method!r} is no longer a label: {RETIRED[old]}")
+    return registered, {}
+
+
+def implied_params(spec: MethodSpec) -> dict[str, Any]:
+    """The parameters :func:`resolve_method` put in ``spec``'s defaults beyond the registered
+    spec's (an old label's, such as ``CAL-SMA-SPARSE``'s ``sparse=True``, or a default's): what
+    to pass with ``spec.label`` to build the same method."""
+    registered = _METHODS[spec.label].defaults if spec.label in _METHODS else {}
+    return {k: v for k, v in spec.defaults.items() if k not in registered or registered[k] != v}
+
+
 def resolve_method(method: str | None, sensor, masked: bool = False,
                    n_objects: int | None = None) -> MethodSpec:
     """The spec of ``method`` (a label, matched case-insensitively; None = the default for
     ``sensor`` — a sensor, or a fused set of them — and the kind of history, as
-    :func:`mappers.defaults.choose_method` chooses it) if it maps such
-    histories, else a ValueError that lists the labels which do."""
+    :func:`mappers.defaults.choose_method` chooses it, its parameters in the spec's
+    ``defaults``) if it maps such histories, else a ValueError that lists the labels which do.
+
+    An old label resolves to its new one (:data:`ALIASES`, with a FutureWarning; parameters it
+    stands for, such as ``CAL-SMA-SPARSE``'s ``sparse=True``, are in the spec's ``defaults``)
+    or is refused, saying where it went and what to use instead (:data:`RETIRED`)."""
     key = check_sensor_set(sensor)
     sensor = sensor_name(key)
     kind = "masked" if masked else "complete"
     fits = methods_for(key, masked)
     if method is None:
-        method = choose_method(key, masked=bool(masked), n_objects=n_objects)
-        if method is None or method not in _METHODS:
+        chosen = choose_method(key, masked=bool(masked), n_objects=n_objects)
+        if chosen is None or chosen[0] not in _METHODS:
             raise ValueError(f"no default method for {kind} {sensor} histories; choose from {list(fits)}")
-    if not isinstance(method, str):
+        label, implied = chosen
+    elif not isinstance(method, str):
         raise ValueError(f"method must be a label (str) or None, got {method!r}")
-    label = method if method in _METHODS else {k.lower(): k for k in _METHODS}.get(method.strip().lower())
+    else:
+        label, implied = _canonical(method)
     if label is None:
         raise ValueError(f"unknown method {method!r}; methods for {kind} {sensor} histories: {list(fits)}")
     spec = _METHODS[label]
@@ -271,11 +434,12 @@ def resolve_method(method: str | None, sensor, masked: bool = False,
         raise ValueError(
             f"method {label!r} does not map {kind} {sensor} histories; methods that do: {list(fits)}"
         )
-    return spec
+    return spec.with_defaults(implied)
 
 
 # The built-in methods, in table order: the paper's ten (its Table 1), ours for complete
-# histories, those for masked histories, the fused ones and the viewpoint adjustments.
+# histories, those for masked histories, the fused ones and the viewpoint adjustments. The
+# paper's keep its spellings; ours are upper case with hyphens. Older labels: ALIASES, RETIRED.
 # The paper's grids (K 4..10, sigma^2 in {0.25, 0.5, 1, 2}, d in {2, 4, 8}), widened where our
 # first full protocol run put the best value on the grid's edge (HLLE at K = 10, KPCA(GAUS) at
 # sigma^2 = 2): a best parameter on an edge says the grid was too narrow, not where the optimum is.
@@ -304,47 +468,31 @@ _BUILTINS: tuple[MethodSpec, ...] = (
                {"n_neighbors": [k for k in _K_GRID if k > 5]}, "Hessian LLE"),
     MethodSpec("SDE", "mappers.paper.methods:_sde", {"n_neighbors": 7},
                {"n_neighbors": _K_GRID}, "semidefinite embedding / maximum variance unfolding"),
-    MethodSpec("CAL-SMA", "mappers.calibrated.cal_sma:_cal_sma", {},
-               {"n_neighbors": [8, 10, 12, 14, 16]}, "calibrated anchored SMACOF with fold guard",
-               uses_anchors=True),
+    MethodSpec("CAL-SMA", "mappers.calibrated.factory:_cal_sma", {},
+               {"n_neighbors": [8, 10, 12, 14, 16]},
+               "calibrated anchored SMACOF with fold guard; sparse=True: on sparse pairs, for "
+               "thousands of objects", uses_anchors=True, scalable={"sparse": True}),
     MethodSpec("UNFOLD", "mappers.calibrated.unfolding:_unfold", {}, {},
                "classical metric unfolding of the squared range histories (range sensor only)",
                sensors=("range",), normalize=False),
-    MethodSpec("CAL-SMA-SPARSE", "mappers.calibrated.cal_sma_sparse:_cal_sma_sparse", {},
-               {"n_neighbors": [8, 10, 12, 14, 16]},
-               "CAL-SMA on sparse pairs: scales to thousands of objects", uses_anchors=True,
-               sensors=("visibility", "bearing"), sparse=True, max_objects=None),
-    MethodSpec("range-quantile", "mappers.masked.pair_maps:_range_quantile",
+    MethodSpec("RANGE-QUANTILE", "mappers.masked.pair_maps:_range_quantile",
                description="quantile of same-step range differences, anchored weighted SMACOF",
                sensors=("range",), **_MASKED),
-    MethodSpec("range-bounds", "mappers.masked.pair_maps:_range_bounds",
-               description="range-quantile with field-of-view upper bounds", sensors=("range",),
-               **_MASKED),
-    MethodSpec("covis-nonmetric", "mappers.masked.pair_maps:_covis_nonmetric",
-               description="ordinal SMACOF of -log co-observation rates, anchored", **_MASKED),
-    MethodSpec("covis-power", "mappers.masked.pair_maps:_covis_power",
-               description="power-link SMACOF of -log co-observation rates, anchored", **_MASKED),
-    MethodSpec("covis-angle", "mappers.masked.pair_maps:_covis_angle",
-               description="ordinal SMACOF of -log angle-weighted co-observation rates, anchored",
-               sensors=("bearing",), **_MASKED),
-    MethodSpec("masked-euclidean", "mappers.masked.pair_maps:_masked_euclidean",
-               description="RMS history difference over co-observed steps, weighted SMACOF",
-               **_MASKED),
-    MethodSpec("covis-ensemble", "mappers.masked.ensemble:CovisEnsemble",
+    MethodSpec("COVIS-ENSEMBLE", "mappers.masked.ensemble:CovisEnsemble",
                description="mean of anchored co-observation maps over windows of consecutive "
                            "steps", uses_timeline=True, **_MASKED),
-    MethodSpec("covis-cal", "mappers.masked.covis_auto:CovisCalibrated",
-               description="CAL-SMA of 1 - (angle-weighted) co-observation rates, anchored",
-               sensors=_COVIS_SENSORS, **_MASKED),
-    MethodSpec("covis-auto", "mappers.masked.covis_auto:CovisAuto",
-               description="covis-cal when most pairs are seen together, else covis-angle",
+    MethodSpec("COVIS-AUTO", "mappers.masked.covis_auto:CovisAuto",
+               description="CAL-SMA of the angle-weighted co-observation coefficient when most "
+                           "pairs are seen together, else its ordinal fit",
                sensors=("bearing",), **_MASKED),
-    MethodSpec("covis-sparse", "mappers.masked.covis_sparse:SparseCovis", {},
+    MethodSpec("COVIS-SPARSE", "mappers.masked.covis_sparse:SparseCovis", {},
                {"n_neighbors": [8, 12, 16]},
-               "covis-cal's model on sparse co-observed pairs: masked histories of thousands of "
-               "objects", sensors=_COVIS_SENSORS, sparse=True, max_objects=None, **_MASKED),
-    MethodSpec("dropout-blend", "mappers.masked.dropout_blend:DropoutBlend",
-               description="mean of CAL-SMA on 3-step averaged rows and covis-nonmetric, anchored",
+               "CAL-SMA (sparse=True) of the co-observation coefficient on sparse co-observed "
+               "pairs: masked histories of thousands of objects", sensors=_COVIS_SENSORS,
+               sparse=True, max_objects=None, **_MASKED),
+    MethodSpec("DROPOUT-BLEND", "mappers.masked.dropout_blend:DropoutBlend",
+               description="mean of CAL-SMA on 3-step averaged rows and the ordinal "
+                           "co-observation map, anchored",
                sensors=("visibility",), uses_timeline=True, **_MASKED),
     MethodSpec("LOC-SMA", "mappers.fused.loc_sma:_loc_sma", {},
                {"min_count": [1, 3, 10], "trim": [None, 3.0]},
@@ -362,18 +510,15 @@ _BUILTINS: tuple[MethodSpec, ...] = (
     MethodSpec("BEARING-BA", "mappers.viewpoints.bearing:BearingAdjustment", {}, {},
                "the bearing default's map refined by estimating the viewpoints (bearing-only "
                "bundle adjustment), anchors fixed", sensors=("bearing",), **_MASKED),
-    MethodSpec("VIS-BA", "mappers.viewpoints.visibility:VisibilityAdjustment", {},
-               {"max_rounds": [3, 5, 8], "grid_cells": [6, 8]},
-               "the visibility default's map refined by estimating the viewpoints (visibility "
-               "bundle adjustment: a range threshold with misses), anchors fixed",
-               sensors=("visibility",), uses_timeline=True, **_MASKED),
     MethodSpec("VIS-BA-WALK", "mappers.viewpoints.visibility:VisibilityAdjustment",
                {"continuity": True, "align": True, "overrelax": 1.0, "grid_cells": 4,
                 "prior_iters": 1, "model_rounds": 2},
                {"max_rounds": [3, 5, 8], "grid_cells": [4, 6]},
-               "VIS-BA with the walk's continuity prior (the steps' viewpoints an HMM: "
-               "consecutive steps close together): the default for flickering visibility "
-               "histories", sensors=("visibility",), uses_timeline=True, **_MASKED),
+               "the localisation-free visibility map refined by estimating the viewpoints "
+               "(visibility bundle adjustment: a range threshold with misses) under the walk's "
+               "continuity prior (the steps' viewpoints an HMM: consecutive steps close "
+               "together), anchors fixed: the default for flickering visibility histories",
+               sensors=("visibility",), uses_timeline=True, **_MASKED),
     MethodSpec("VIEW-BA", "mappers.viewpoints.view_cone:ViewAdjustment", {}, {},
                "a limited view's masked visibility map refined by estimating each step's "
                "viewpoint and heading from the observed sets (view-cone bundle adjustment), "

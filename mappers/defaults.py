@@ -7,11 +7,17 @@ fused history's sensors) and whether the history is masked, and says
 - ``method``: the default;
 - ``localisation_free``: the map that estimates no viewpoint (and its parameters) — the start an
   adjustment refines, one ``method=`` away for a user who wants the paper's kind of map;
-- ``large``: the default above :data:`SCALABLE_ABOVE_OBJECTS` objects (None: ``method``);
+- ``large``: the default above :data:`SCALABLE_ABOVE_OBJECTS` objects (None: ``method``), with
+  its parameters (``CAL-SMA`` with ``sparse=True``: its scalable form);
 - ``dropouts``: the default for a complete history that flickers like a sensor with dropouts
-  (:func:`mappers.core.flicker.flicker_rate`), whose steps are ordered like a walk's.
+  (:func:`mappers.core.flicker.flicker_rate`), whose steps are ordered like a walk's;
+- ``logged``: the default for a real robot's logged run (the UTIAS MRCLAM dataset,
+  ``lfmdr mrclam``), where a landmark is in view in a few percent of the steps and the sensor's
+  model is not known (None: ``method``), chosen leave-one-run-out on the logs
+  (``benchmarks/bench_mrclam.py``).
 
-The figures behind each choice are on the documentation's benchmarks page.
+Each choice is a label with its parameters, ``(label, params)``. The figures behind each choice are
+on the documentation's benchmarks page.
 """
 
 from __future__ import annotations
@@ -54,22 +60,31 @@ class Choice:
     localisation_free: str
     localisation_free_params: Mapping[str, Any] = field(default_factory=dict)
     large: str | None = None
+    large_params: Mapping[str, Any] = field(default_factory=dict)
     dropouts: str | None = None
+    dropouts_params: Mapping[str, Any] = field(default_factory=dict)
+    logged: str | None = None
+    logged_params: Mapping[str, Any] = field(default_factory=dict)
 
 
 _RB = frozenset({"range", "bearing"})
 _VB = frozenset({"visibility", "bearing"})
+_SPARSE: Mapping[str, Any] = MappingProxyType({"sparse": True})
 
 DEFAULTS: Mapping[tuple[str | frozenset[str], bool], Choice] = MappingProxyType({
-    ("visibility", False): Choice("CAL-SMA", "CAL-SMA", large="CAL-SMA-SPARSE",
+    ("visibility", False): Choice("CAL-SMA", "CAL-SMA", large="CAL-SMA", large_params=_SPARSE,
                                   dropouts="VIS-BA-WALK"),
-    ("bearing", False): Choice("BEARING-BA", "CAL-SMA", large="CAL-SMA-SPARSE"),
+    ("bearing", False): Choice("BEARING-BA", "CAL-SMA", large="CAL-SMA", large_params=_SPARSE),
     ("range", False): Choice("UNFOLD", "UNFOLD"),
     # VIEW-BA's joint step solves a (2F, 2F) system of the F free objects: above the size
-    # threshold masked visibility keeps VIEW-BA's start.
-    ("visibility", True): Choice("VIEW-BA", "dropout-blend", large="dropout-blend"),
-    ("bearing", True): Choice("BEARING-BA", "covis-auto", large="covis-sparse"),
-    ("range", True): Choice("range-quantile", "range-quantile"),
+    # threshold masked visibility keeps VIEW-BA's start. On logged runs (MRCLAM) the pattern of
+    # what was seen is mapped, for bearing too: no bearing-only statistic measured better on
+    # them (docs/bearing-on-real-data.md).
+    ("visibility", True): Choice("VIEW-BA", "DROPOUT-BLEND", large="DROPOUT-BLEND",
+                                 logged="COVIS-ENSEMBLE"),
+    ("bearing", True): Choice("BEARING-BA", "COVIS-AUTO", large="COVIS-SPARSE",
+                              logged="COVIS-ENSEMBLE"),
+    ("range", True): Choice("RANGE-QUANTILE", "RANGE-QUANTILE"),
     (_RB, False): Choice("LOC-SMA", "LOC-SMA", {"refine": None}),
     (_RB, True): Choice("LOC-SMA", "LOC-SMA", {"refine": None}),
     (_VB, False): Choice("VB-SMA", "VB-SMA", {"refine": False}),
@@ -86,18 +101,21 @@ def _row(sensor, masked: bool) -> Choice | None:
 
 
 def choose_method(sensor, *, masked: bool = False, n_objects: int | None = None,
-                  dropouts: bool = False) -> str | None:
-    """The default label for histories of ``sensor`` (a sensor or a set of fused sensors),
-    complete or ``masked``, of ``n_objects`` objects (None: not known), that flicker like a
-    sensor with ``dropouts`` (complete histories only); None when the table has no row."""
+                  dropouts: bool = False, logged: bool = False) -> tuple[str, dict[str, Any]] | None:
+    """``(label, params)`` of the default for histories of ``sensor`` (a sensor or a set of fused
+    sensors), complete or ``masked``, of ``n_objects`` objects (None: not known), that flicker
+    like a sensor with ``dropouts`` (complete histories only), or ``logged`` by real robots (a
+    run of the MRCLAM dataset; it outranks the others); None when the table has no row."""
     row = _row(sensor, masked)
     if row is None:
         return None
+    if logged and row.logged:
+        return row.logged, dict(row.logged_params)
     if n_objects is not None and n_objects > SCALABLE_ABOVE_OBJECTS and row.large:
-        return row.large
+        return row.large, dict(row.large_params)
     if dropouts and not masked and row.dropouts:
-        return row.dropouts
-    return row.method
+        return row.dropouts, dict(row.dropouts_params)
+    return row.method, {}
 
 
 def localisation_free(sensor, masked: bool = False) -> tuple[str, dict[str, Any]]:
@@ -111,7 +129,7 @@ def localisation_free(sensor, masked: bool = False) -> tuple[str, dict[str, Any]
 
 
 def choose_for_history(X, mask, sensor: str, timeline=None,
-                       notes: list[str] | None = None) -> str | None:
+                       notes: list[str] | None = None) -> tuple[str, dict[str, Any]] | None:
     """:func:`choose_method` for a single sensor's histories as ``build_map`` checked them
     (``mappers.fitting.check_inputs``); when it is the dropout default (a complete, dense
     history of at most :data:`SCALABLE_ABOVE_OBJECTS` objects, whose steps are ordered like a
@@ -129,10 +147,10 @@ def choose_for_history(X, mask, sensor: str, timeline=None,
     rate = flicker_rate(X, timeline)
     if not rate > FLICKER_THRESHOLD:
         return plain
-    label = choose_method(sensor, dropouts=True, n_objects=n)
+    label, params = choose_method(sensor, dropouts=True, n_objects=n)
     if notes is not None:
         notes.append(f"the history flickers (visible at the steps before and after, not at the step: "
                      f"{rate:.0%} of such steps, above {FLICKER_THRESHOLD:.0%}): a sensor with "
                      f"dropouts, mapped with {label!r} (which assumes the steps are ordered like "
                      "a walk's, consecutive viewpoints close together)")
-    return label
+    return label, params

@@ -159,17 +159,18 @@ DENSE_BUDGET_BYTES = 2 * 2**30
 """Largest dense float64 matrix ``build_map`` builds from sparse histories for a dense method."""
 
 
-def _for_method(spec: MethodSpec, X: Any, mask: Any) -> tuple[Any, Any]:
-    """Sparse histories (and mask) densified for a method that needs a dense matrix (within the
-    budget)."""
-    if not sp.issparse(X) or spec.sparse:
+def _for_method(spec: MethodSpec, X: Any, mask: Any, params: dict[str, Any]) -> tuple[Any, Any]:
+    """Sparse histories (and mask) densified for a method that needs a dense matrix with these
+    resolved parameters (within the budget)."""
+    if not sp.issparse(X) or spec.takes_sparse(params):
         return X, mask
     need = 8 * X.shape[0] * X.shape[1]
     if need > DENSE_BUDGET_BYTES:
         raise ValueError(
             f"method {spec.label!r} needs the dense history matrix, {need / 2**30:.1f} GiB for "
             f"shape {X.shape} (budget {DENSE_BUDGET_BYTES / 2**30:.0f} GiB); use a method that "
-            "maps sparse histories, e.g. 'CAL-SMA-SPARSE' (or 'covis-sparse' when masked)"
+            "maps sparse histories, e.g. 'CAL-SMA' with sparse=True (or 'COVIS-SPARSE' when "
+            "masked)"
         )
     return X.toarray(), (mask.toarray() if sp.issparse(mask) else mask)
 
@@ -282,7 +283,7 @@ def fit_checked(spec, X, anchor_ids, anchor_positions, sensor, mask, timeline, n
     m = X.shape[0]
     merged = _method_params(spec, params, normalize, random_state)
     ids, pos = check_anchors(anchor_ids, anchor_positions, m)
-    X, mask = _for_method(spec, X, mask)
+    X, mask = _for_method(spec, X, mask, merged)
     if sp.issparse(X):
         has_data = np.diff(X.indptr) > 0
     else:
@@ -291,7 +292,7 @@ def fit_checked(spec, X, anchor_ids, anchor_positions, sensor, mask, timeline, n
     ids, pos = _usable_anchors(ids, pos, has_data[ids], "have empty histories", notes)
     mapped = np.flatnonzero(has_data)
     _check_neighbors(merged, mapped.size)
-    check_size(spec, mapped.size)
+    check_size(spec, mapped.size, merged)
     Xm = X[mapped]
     if (spec.normalize if normalize is None else normalize) and sp.issparse(Xm):
         norms = np.sqrt(np.asarray(Xm.multiply(Xm).sum(axis=1)).ravel())

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from mappers.catalog import resolve_method
+from mappers.catalog import implied_params, resolve_method
 from mappers.core.fused_histories import check_fused
 from mappers.core.sensors import check_sensor_set
 from mappers.defaults import choose_for_history
@@ -56,16 +56,19 @@ def build_map(
         anchor_positions: (A, 2) their known positions [m]; not collinear.
         method: a label of :data:`mappers.METHODS` (case-insensitive) that maps this kind of
             history; None = the default for the sensor and for complete or masked histories
-            (:func:`mappers.defaults.choose_method`, from :data:`mappers.defaults.DEFAULTS`;
-            a complete visibility history that flickers like a camera with dropouts gets the
-            table's dropout default, with a note in ``Map.warnings``). A label that does not fit is a ValueError listing the
-            labels that do.
+            (:func:`mappers.defaults.choose_method`, from :data:`mappers.defaults.DEFAULTS`,
+            with its parameters: above 500 objects ``CAL-SMA`` with ``sparse=True``; a complete
+            visibility history that flickers like a camera with dropouts gets the table's
+            dropout default, with a note in ``Map.warnings``). A label that does not fit is a
+            ValueError listing the labels that do; an old label resolves to its new one with a
+            FutureWarning, or is refused saying what to use (:data:`mappers.catalog.ALIASES`,
+            :data:`mappers.catalog.RETIRED`).
         sensor: "visibility", "bearing" or "range"; None = inferred (:func:`infer_sensor`); for
             fused histories the keys name the sensors (a given ``sensor`` must agree).
         mask: optional (M, D) bool, True where observed; an all-True mask is no mask. Fused
             histories take a mapping with one entry per sensor (None: complete).
         timeline: optional (N, 2) ints, robot and tick of each step, for methods that group
-            consecutive steps (``covis-ensemble``).
+            consecutive steps (``COVIS-ENSEMBLE``, ``DROPOUT-BLEND``, the viewpoint adjustments).
         normalize: divide each row by its norm (paper eq. 7); None = the method's choice (on for
             the paper's methods, off for those that need the raw values, such as UNFOLD).
         random_state: seed handed to methods that take one.
@@ -104,30 +107,51 @@ def _fit_map(histories, anchor_ids, anchor_positions, method, sensor, mask, time
     it was fitted on (the objects with data; an online update keeps the estimator's state)."""
     X, mask, sensor, timeline = check_inputs(histories, sensor, mask, timeline)
     notes: list[str] = []
-    if method is None:
-        method = choose_for_history(X, mask, sensor, timeline, notes)
-    spec = resolve_method(method, sensor, masked=mask is not None, n_objects=X.shape[0])
+    spec = _single_sensor_spec(method, X, mask, sensor, timeline, notes)
     return fit_checked(spec, X, anchor_ids, anchor_positions, sensor, mask, timeline, normalize,
                        random_state, params, notes)
 
 
+def _single_sensor_spec(method, X, mask, sensor, timeline, notes):
+    """The spec that maps checked single-sensor histories: ``method``'s, or (None) the default
+    :func:`mappers.defaults.choose_for_history` picks, its parameters in the spec's defaults."""
+    chosen = {}
+    if method is None:
+        picked = choose_for_history(X, mask, sensor, timeline, notes)
+        method, chosen = picked if picked is not None else (None, {})
+    spec = resolve_method(method, sensor, masked=mask is not None, n_objects=X.shape[0])
+    return spec.with_defaults(chosen)
+
+
+def _fused_spec(histories, mask, timeline, sensor):
+    """The checked fused histories (:func:`mappers.core.fused_histories.check_fused`) and the
+    spec that maps them by default."""
+    Xs, masks, key, timeline = check_fused(histories, mask, timeline)
+    _check_fused_sensor(sensor, key)
+    n = next(iter(Xs.values())).shape[0]
+    masked = any(v is not None for v in masks.values())
+    return resolve_method(None, key, masked=masked, n_objects=n)
+
+
 def default_method(histories: Any, *, sensor: str | None = None, mask: np.ndarray | None = None,
-                   timeline: np.ndarray | None = None) -> str:
+                   timeline: np.ndarray | None = None, return_params: bool = False
+                   ) -> str | tuple[str, dict[str, Any]]:
     """The label ``build_map(histories, ...)`` uses when no method is given, for every input
-    ``build_map`` takes (single-sensor or fused histories): the default of
+    ``build_map`` takes (single-sensor or fused histories, complete or masked): the default of
     :func:`mappers.defaults.choose_method` for the sensor, complete or masked, the number of
-    objects and, for a complete history, whether it flickers like a sensor with dropouts."""
+    objects and, for a complete history, whether it flickers like a sensor with dropouts.
+    ``return_params=True``: ``(label, params)``, with the parameters the default is chosen with
+    (``("CAL-SMA", {"sparse": True})`` above 500 objects)."""
     parts = getattr(histories, "parts", None)
     if isinstance(parts, Mapping) and not isinstance(histories, Mapping):
         timeline = timeline if timeline is not None else getattr(histories, "timeline", None)
         histories = dict(parts)
     if isinstance(histories, Mapping):
-        Xs, masks, key, timeline = check_fused(histories, mask, timeline)
-        _check_fused_sensor(sensor, key)
-        return resolve_method(None, key, masked=any(v is not None for v in masks.values())).label
-    X, mask, sensor, timeline = check_inputs(histories, sensor, mask, timeline)
-    label = choose_for_history(X, mask, sensor, timeline, [])
-    return resolve_method(label, sensor, masked=mask is not None, n_objects=X.shape[0]).label
+        spec = _fused_spec(histories, mask, timeline, sensor)
+    else:
+        X, mask, sensor, timeline = check_inputs(histories, sensor, mask, timeline)
+        spec = _single_sensor_spec(None, X, mask, sensor, timeline, [])
+    return (spec.label, implied_params(spec)) if return_params else spec.label
 
 
 def _check_fused_sensor(sensor, key) -> None:
@@ -142,6 +166,8 @@ def _build_fused_map(histories, anchor_ids, anchor_positions, method, sensor, ma
     :mod:`mappers.core.fused_histories`)."""
     Xs, masks, key, timeline = check_fused(histories, mask, timeline)
     _check_fused_sensor(sensor, key)
-    spec = resolve_method(method, key, masked=any(v is not None for v in masks.values()))
+    n = next(iter(Xs.values())).shape[0]
+    spec = resolve_method(method, key, masked=any(v is not None for v in masks.values()),
+                          n_objects=n)
     return fit_fused_method(spec, Xs, masks, key, timeline, anchor_ids, anchor_positions,
                             normalize=normalize, random_state=random_state, params=params)

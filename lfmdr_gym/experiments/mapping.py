@@ -44,11 +44,13 @@ def checkpoints_for(steps: int, every: int | None, sensor: str | None) -> tuple[
 
 
 def _method_and_params(method: str | None, history: History, params) -> tuple[str, dict[str, Any]]:
-    """The registered label that maps ``history`` (None: its default) and its parameters."""
+    """The registered label that maps ``history`` (None: its default) and its parameters (with
+    those an old label stands for, e.g. ``sparse=True`` for ``CAL-SMA-SPARSE``)."""
     from mappers import resolve_method
+    from mappers.catalog import implied_params
 
-    label = resolve_method(method, history.sensor, masked=history.mask is not None).label
-    return label, user_params(label, params)
+    spec = resolve_method(method, history.sensor, masked=history.mask is not None)
+    return spec.label, {**implied_params(spec), **user_params(spec.label, params)}
 
 
 def _sensor_of(env_id: str) -> str:

@@ -1,9 +1,11 @@
 """Mapping a real MRCLAM run and scoring it against motion capture (``lfmdr mrclam``).
 
 The loader (:mod:`lfmdr_gym.datasets.mrclam`) reads and bins the run; here it is mapped with any
-registered method that maps its histories (:func:`mappers.build_map`), scored over the
-non-anchor landmarks, and written as ``map.csv`` and ``map.png``. Ground truth places the
-anchors and scores; nothing else of it reaches the mapper.
+registered method that maps its histories (:func:`mappers.build_map`), by default the one
+:func:`mappers.defaults.choose_method` names for a logged run (``logged=True``: the ``logged``
+column of :data:`mappers.defaults.DEFAULTS`), scored over the non-anchor landmarks, and written
+as ``map.csv`` and ``map.png``. Ground truth places the anchors and scores; nothing else of it
+reaches the mapper.
 """
 
 from __future__ import annotations
@@ -32,25 +34,17 @@ from lfmdr_gym.datasets.mrclam import (
 from lfmdr_gym.histories.history import History
 from mappers.core.sensors import check_sensor_set, sensor_name
 
-__all__ = ["DEFAULT_METHOD", "ENSEMBLE_BIN_WIDTHS", "FUSED_BIN_WIDTH", "METHOD_ALIASES", "MRCLAMMap", "map_mrclam_run"]
+__all__ = ["ENSEMBLE_BIN_WIDTHS", "FUSED_BIN_WIDTH", "METHOD_ALIASES", "MRCLAMMap", "map_mrclam_run"]
 
-DEFAULT_METHOD: dict[str, str] = {
-    "visibility": "covis-ensemble",
-    "bearing": "covis-ensemble",
-    "range": "range-quantile",
-    "range-bearing": "LOC-SMA",
-}
-"""The method per sensor on real runs when none is given: the best measured leave-one-run-out
-(``benchmarks/bench_mrclam.py``). Bearing uses the pattern of what was seen: no bearing-only
-statistic measured better (``docs/bearing-on-real-data.md``)."""
-
+_ENSEMBLE = "COVIS-ENSEMBLE"
 FUSED_BIN_WIDTH: dict[str, float] = {"range-bearing": DEFAULT_BIN_WIDTH["range-bearing"]}
 """Bin width [s] of fused runs when none is given: the law of cosines needs both readings from
 one viewpoint, so bins stay near the camera period (chosen leave-one-run-out,
 ``benchmarks/bench_mrclam.py``)."""
 
 ENSEMBLE_BIN_WIDTHS: tuple[float, ...] = (1.0, 1.5, 2.0, 3.0, 4.0, 5.0)
-"""Bin widths [s] of the covis-ensemble's members on real runs (``bin_widths=`` overrides)."""
+"""Bin widths [s] of the COVIS-ENSEMBLE's members on real runs (``bin_widths=`` overrides); one
+``bin_width`` asked for with the default method: one member at that width (``min_co`` 3)."""
 
 METHOD_ALIASES: dict[str, str] = {"naive": "SMA(UNWGT)"}
 """Older names: ``naive`` is the paper's pipeline on the zero-filled history (``zero_fill``)."""
@@ -108,27 +102,38 @@ def _tick(widths: Sequence[float]) -> float:
     return num / math.lcm(*(f.denominator for f in fr))
 
 
-def _plan(sensor: str, method: str | None, bin_width: float | None, params: dict[str, Any]):
-    """(method label, bin width of the history, the method's parameters, zero-fill or not)."""
-    zero_fill = False
+def _plan(sensor: str, method: str | None, bin_width: float | None, params: dict[str, Any],
+          zero_fill: bool):
+    """(method label, bin width of the history, the method's parameters, whether the label was
+    ``naive``: SMA(UNWGT) on the zero-filled history)."""
+    from mappers import resolve_method
+    from mappers.catalog import implied_params
+    from mappers.defaults import choose_method
+
+    naive = False
     if bin_width is None and sensor in FUSED_BIN_WIDTH:
         bin_width = FUSED_BIN_WIDTH[sensor]
     if method in METHOD_ALIASES:
-        method, zero_fill = METHOD_ALIASES[method], True
-    if method is None:
-        method = DEFAULT_METHOD[sensor]
-        if method == "covis-ensemble" and bin_width is not None:
-            method = "covis-power"  # one bin width asked for: one member at that width
-    if method != "covis-ensemble":
-        return method, bin_width, params, zero_fill
+        method, naive = METHOD_ALIASES[method], True
+    if method is None:  # the default for a logged run, with one member at a bin width asked for
+        method, chosen = choose_method(sensor, masked=True, logged=True)
+        params = {**chosen, **params}
+        if method == _ENSEMBLE and bin_width is not None:
+            params = {"bin_widths": (bin_width,), "min_co": 3, **params}
+            bin_width = None
+    else:  # an old label: its new one (with a FutureWarning) or why it is no longer one
+        spec = resolve_method(method, sensor, masked=not (zero_fill or naive))
+        method, params = spec.label, {**implied_params(spec), **params}
+    if method != _ENSEMBLE:
+        return method, bin_width, params, naive
     if bin_width is not None:
-        raise ValueError("method 'covis-ensemble' bins the run at several widths (bin_widths=...); "
+        raise ValueError(f"method {_ENSEMBLE!r} bins the run at several widths (bin_widths=...); "
                          "bin_width must be None")
     widths = tuple(float(w) for w in np.atleast_1d(params.pop("bin_widths", ENSEMBLE_BIN_WIDTHS)))
     if not widths or min(widths) <= 0:
         raise ValueError(f"bin_widths must be positive numbers of seconds, got {widths}")
     tick = _tick(widths)
-    return method, tick, {"windows": tuple(round(w / tick) for w in widths), **params}, zero_fill
+    return method, tick, {"windows": tuple(round(w / tick) for w in widths), **params}, naive
 
 
 def _load(run_dir, key, robots, bin_width, anchors, groundtruth_fixes):
@@ -215,9 +220,9 @@ def _reported_params(method: str, params: dict[str, Any], tick: float | None) ->
     from mappers import METHODS
 
     used = METHODS[method].resolved_params(params)
-    if method == "covis-ensemble":
+    if method == _ENSEMBLE:
         used = {"bin_widths": [w * tick for w in used.pop("windows")], **used,
-                "min_co": list(used["min_co"])}
+                "min_co": [int(m) for m in np.atleast_1d(used["min_co"])]}
         used["power"] = 0.5 if used["power"] is None else used["power"]
         used.pop("max_iter", None)
     return used
@@ -249,17 +254,21 @@ def map_mrclam_run(
             measurements of every sighting, fused; ``mode=`` is the older name).
         robots: robot subject numbers whose logs to use.
         method: any registered method that maps the run's (masked) histories, e.g.
-            ``"covis-ensemble"`` (``bin_widths`` [s] and ``min_co`` sequences, ``member``,
-            ``power``), ``"covis-power"``, ``"range-quantile"``; a method for complete histories
+            ``"COVIS-ENSEMBLE"`` (``bin_widths`` [s] and ``min_co`` sequences, ``member``,
+            ``power``), ``"RANGE-QUANTILE"``, ``"LOC-SMA"``; a method for complete histories
             with ``zero_fill``; ``"naive"`` = ``"SMA(UNWGT)"`` with ``zero_fill``; None =
-            :data:`DEFAULT_METHOD` of the sensor (``"LOC-SMA"`` for range-bearing).
+            the default for a logged run of the sensor
+            (``mappers.defaults.choose_method(sensor, masked=True, logged=True)``:
+            ``COVIS-ENSEMBLE`` for visibility and bearing, ``RANGE-QUANTILE`` for range,
+            ``LOC-SMA`` for range-bearing).
         anchors: anchor landmark subject numbers; None = the 4 nearest the bounding-box corners.
         out: directory for ``map.csv`` (subject, x, y of every landmark, anchors included, in
             the ground-truth frame; written atomically) and ``map.png``; None writes nothing.
         bin_width: seconds per bin; None = the loader's default for the sensor (for fused
             sensors :data:`FUSED_BIN_WIDTH`); must be None for
-            ``covis-ensemble``; given with ``method=None`` for visibility or bearing, the
-            ensemble's member method (``covis-power``) maps the run binned at that one width.
+            ``COVIS-ENSEMBLE``; given with ``method=None`` for visibility or bearing, the
+            ensemble of one member (``bin_widths=(bin_width,)``, ``min_co=3``) maps the run
+            binned at that one width.
         groundtruth_fixes: ``"known"`` / ``"detect"`` / ``"none"`` (see ``read_run``).
         plot: write ``map.png`` (needs matplotlib) when ``out`` is given.
         zero_fill: map the history with its unobserved entries as zeros and no mask (the paper's
@@ -270,7 +279,8 @@ def map_mrclam_run(
 
     key = check_sensor_set(mode if mode is not None else sensor)
     sensor = sensor_name(key)
-    method, bin_width, params, alias_fill = _plan(sensor, method, bin_width, dict(params))
+    method, bin_width, params, alias_fill = _plan(sensor, method, bin_width, dict(params),
+                                                  zero_fill)
     histories, report = _load(run_dir, key, robots, bin_width, anchors, groundtruth_fixes)
     if zero_fill or alias_fill:
         histories = (histories.replace(mask=None) if isinstance(key, str) else

@@ -46,9 +46,16 @@ def resolve_methods(names: Iterable[str] | None, sensor: str, masked: bool = Fal
         return tuple(label for label in methods_for(sensor, masked)
                      if (masked or not _methods()[label].takes_masks)
                      and not _methods()[label].sparse)
+    from mappers.catalog import implied_params
+
     out: list[str] = []
     for name in names:
-        label = resolve_method(str(name).strip(), sensor, masked).label
+        spec = resolve_method(str(name).strip(), sensor, masked)
+        label, implied = spec.label, implied_params(spec)
+        if implied:
+            raise ValueError(f"method {name!r} is {label!r} with "
+                             f"{', '.join(f'{k}={v!r}' for k, v in implied.items())}: the protocol "
+                             "runs labels with their own defaults and grids; name the label")
         if label not in out:
             out.append(label)
     if not out:
@@ -84,7 +91,8 @@ def number_or_text(text: str) -> Any:
 
 def parse_params(items: Iterable[str] | None) -> dict[str, Any]:
     """``["K=5", "sigma2=0.5"]`` (or ``"K=5,sigma2=0.5"`` items) -> ``{"K": 5, "sigma2": 0.5}``;
-    values become int, else float, else stay text."""
+    values become int, else float, ``true``/``false`` (any case) bool (``sparse=true``), else
+    stay text."""
     out: dict[str, Any] = {}
     for item in items or ():
         for part in str(item).split(","):
@@ -93,7 +101,9 @@ def parse_params(items: Iterable[str] | None) -> dict[str, Any]:
             name, sep, text = part.partition("=")
             if not sep or not name.strip() or not text.strip():
                 raise ValueError(f"parameters are given as NAME=VALUE, got {part!r}")
-            out[name.strip()] = number_or_text(text.strip())
+            value = text.strip()
+            out[name.strip()] = {"true": True, "false": False}.get(value.lower(),
+                                                                   number_or_text(value))
     return out
 
 

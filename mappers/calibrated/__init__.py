@@ -1,4 +1,5 @@
-"""Maps that calibrate history dissimilarities against distance: CAL-SMA (dense and sparse) and UNFOLD for ranges.
+"""Maps that calibrate history dissimilarities against distance: CAL-SMA (dense, or sparse with
+``sparse=True``) and UNFOLD for ranges.
 """
 
 from __future__ import annotations

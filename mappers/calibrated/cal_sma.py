@@ -510,23 +510,3 @@ class CalibratedSMACOF(TransformerMixin, BaseEstimator):
         tags = super().__sklearn_tags__()
         tags.input_tags.pairwise = self.dissimilarity == "precomputed"
         return tags
-
-
-def _cal_sma(
-    n_neighbors: int | None = None,
-    n_rounds: int = 20,
-    position_degree: int = 2,
-    fold_threshold: float = 0.05,
-    random_state=None,
-) -> CalibratedSMACOF:
-    return CalibratedSMACOF(
-        n_neighbors=n_neighbors,
-        n_rounds=n_rounds,
-        position_degree=position_degree,
-        fold_threshold=fold_threshold,
-        random_state=random_state,
-    )
-
-
-# The defaults (K = 12 for visibility, 10 for bearing/range, via n_neighbors=None) were tuned on
-# seeds of our own, never on the protocol's; the grid lets the protocol sweep K like the others.

@@ -1,4 +1,5 @@
-"""CAL-SMA on a sparse graph of pairs (label ``"CAL-SMA-SPARSE"``): maps of thousands of objects.
+"""CAL-SMA on a sparse graph of pairs (label ``"CAL-SMA"`` with ``sparse=True``): maps of thousands
+of objects.
 
 The same model as :mod:`mappers.calibrated.cal_sma` (CAL-SMA): a log-polynomial calibration of the
 history dissimilarity into metres, fitted on neighbour pairs from the current map, alternated
@@ -205,8 +206,3 @@ class SparseCalibratedSMACOF(TransformerMixin, BaseEstimator):
         tags.input_tags.sparse = True
         return tags
 
-
-def _cal_sma_sparse(n_neighbors: int | None = None, n_rounds: int = 10, position_degree: int = 2,
-                    random_state=None) -> SparseCalibratedSMACOF:
-    return SparseCalibratedSMACOF(n_neighbors=n_neighbors, n_rounds=n_rounds,
-                                  position_degree=position_degree, random_state=random_state)

@@ -1,5 +1,6 @@
 """Co-observation maps for masked histories: calibrated when the view is global, ordinal when it
-is local (labels ``"covis-cal"`` and ``"covis-auto"``).
+is local (label ``"COVIS-AUTO"``; its calibrated branch :class:`CovisCalibrated`, ``covis-cal``,
+is a building block).
 
 A limited field of view with no range limit sees most pairs of landmarks together some time:
 the co-observation coefficient (the Ochiai coefficient of :mod:`mappers.masked.coobservation`,
@@ -11,7 +12,7 @@ its link to distance changes with the horizon, and only its order is trusted (th
 ``covis-nonmetric`` / ``covis-angle`` of :mod:`mappers.masked.pair_maps`, with lower bounds for the pairs
 never seen together).
 
-``"covis-cal"`` (visibility, bearing)
+``covis-cal``, :class:`CovisCalibrated` (visibility, bearing; a building block)
     CAL-SMA on ``1 - och_ij`` and on ``-log och_ij`` (precomputed; pairs seen together in fewer
     than ``min_co`` steps at the saturation value: never neighbours, only "far"), and the mean
     of the two anchored maps. The two differ only by a monotone transform, which the calibration
@@ -20,7 +21,7 @@ never seen together).
     assumes of a history dissimilarity: a smooth, monotone link to distance that varies slowly
     over the arena.
 
-``"covis-auto"`` (bearing)
+``"COVIS-AUTO"`` (bearing)
     ``covis-cal`` when the share of pairs (of sensed objects) seen together in fewer than
     ``min_co`` steps is at most ``local_share``, else the ordinal ``covis-angle``. The share is
     read from the data; the chosen branch is in ``branch_``. *Assumes*: what the chosen branch
@@ -74,7 +75,8 @@ def _links(links) -> tuple[str, ...]:
 
 
 class CovisCalibrated(TransformerMixin, BaseEstimator):
-    """``"covis-cal"``: CAL-SMA on ``1 -`` the co-observation coefficient (module docstring).
+    """``covis-cal``: CAL-SMA on ``1 -`` the co-observation coefficient (module docstring); the
+    global branch of ``COVIS-AUTO``, called directly (no longer a label of its own).
 
     Parameters:
         min_co: a pair seen together in fewer steps is only "far" (never a neighbour target).
@@ -134,7 +136,7 @@ class CovisCalibrated(TransformerMixin, BaseEstimator):
 
 
 class CovisAuto(TransformerMixin, BaseEstimator):
-    """``"covis-auto"``: ``covis-cal`` for a global view, the ordinal map for a local one
+    """``"COVIS-AUTO"``: ``covis-cal`` for a global view, the ordinal map for a local one
     (module docstring).
 
     Parameters:

@@ -1,6 +1,6 @@
-"""Co-observation maps of masked histories at scale (label ``"covis-sparse"``).
+"""Co-observation maps of masked histories at scale (label ``"COVIS-SPARSE"``).
 
-The masked bearing default (``covis-auto`` of :mod:`mappers.masked.covis_auto`) compares every
+The masked bearing start (``COVIS-AUTO`` of :mod:`mappers.masked.covis_auto`) compares every
 pair of objects through (M, M) matrices and dense (M, N) step tables. With a limited range the
 history is mostly unobserved and most pairs are never sensed together, so almost all of that
 work is on zeros. Here the same statistics come from sparse products over the observed entries:
@@ -14,14 +14,15 @@ work is on zeros. Here the same statistics come from sparse products over the ob
   :func:`mappers.masked.coobservation.angle_covisibility_dissimilarity` (tested), on the pairs only.
 
 Pairs sensed together in at least ``min_co`` steps (with ``och > 1e-6``) are the candidate
-pairs of CAL-SMA-SPARSE (:class:`mappers.calibrated.cal_sma_sparse.SparseCalibratedSMACOF`): a calibration of
+pairs of CAL-SMA's sparse form (``sparse=True``,
+:class:`mappers.calibrated.cal_sma_sparse.SparseCalibratedSMACOF`): a calibration of
 ``delta`` into metres on each object's nearest pairs, alternated with anchored sparse stress;
 pairs never sensed together are only "far" (the lower bound on pairs near in the map). This is
 ``covis-cal``'s model (CAL-SMA on ``-log och``, its ``"log"`` link) on a sparse graph. Memory
 and time grow with the observed entries and the co-observed pairs, not with M^2 or M N.
 
 *Assumes*: what ``covis-cal`` assumes (a smooth, monotone link from the co-observation rate to
-distance), over the pairs that were sensed together; and, as CAL-SMA-SPARSE, anchors spread
+distance), over the pairs that were sensed together; and, as CAL-SMA's sparse form, anchors spread
 over the arena (the global layout rests on them).
 """
 
@@ -114,7 +115,7 @@ def sparse_co_observation(X, mask=None, *, sensor: str):
 
 
 class SparseCovis(TransformerMixin, BaseEstimator):
-    """``"covis-sparse"``: CAL-SMA-SPARSE on ``-log`` of the co-observation coefficient of the
+    """``"COVIS-SPARSE"``: CAL-SMA (``sparse=True``) on ``-log`` of the co-observation coefficient of the
     pairs sensed together in at least ``min_co`` steps (module docstring).
 
     Parameters:

@@ -1,4 +1,4 @@
-"""A map for visibility histories with dropouts (label ``"dropout-blend"``).
+"""A map for visibility histories with dropouts (label ``"DROPOUT-BLEND"``).
 
 With a miss rate ``p`` a visible object reads 0 in a share ``p`` of the steps, at random. Two
 anchored maps that each lose to this noise in their own way are averaged:
@@ -54,7 +54,7 @@ __all__ = ["WALK_PERSISTENCE", "DropoutBlend", "smooth_steps"]
 
 WALK_PERSISTENCE = 1.5  # between walks and random viewpoints: docs/imperfect-sensing.md#dropout-blend
 """The smallest :func:`mappers.core.flicker.persistence` of the zero-filled rows at which
-``dropout-blend`` takes its steps for a walk's and, when its members disagree as a whole, keeps
+``DROPOUT-BLEND`` takes its steps for a walk's and, when its members disagree as a whole, keeps
 CAL-SMA's map."""
 
 
@@ -71,7 +71,7 @@ def smooth_steps(X, window: int, timeline=None) -> np.ndarray:
 
 
 class DropoutBlend(TransformerMixin, BaseEstimator):
-    """``"dropout-blend"``: the mean of two anchored maps (module docstring).
+    """``"DROPOUT-BLEND"``: the mean of two anchored maps (module docstring).
 
     Parameters:
         window: steps of the moving average of CAL-SMA's rows.
@@ -119,13 +119,13 @@ class DropoutBlend(TransformerMixin, BaseEstimator):
         X, mask, sensor = check_history(self, X, y, mask=mask, sensor=sensor,
                                         sensors=("visibility",))
         if anchor_ids is None or anchor_positions is None:
-            raise ValueError("dropout-blend needs anchors: its two maps meet in the anchors' frame")
+            raise ValueError("DROPOUT-BLEND needs anchors: its two maps meet in the anchors' frame")
         if mask is not None:
             X = np.where(mask, X, 0.0)
         S = smooth_steps(X, self.window, timeline)
         norms = np.linalg.norm(S, axis=1, keepdims=True)
         if np.any(norms == 0):
-            raise ValueError("dropout-blend: an object is never visible (empty history row)")
+            raise ValueError("DROPOUT-BLEND: an object is never visible (empty history row)")
         cal = CalibratedSMACOF(n_neighbors=self.n_neighbors, random_state=self.random_state)
         order = MaskedMapper(method="covis-nonmetric", min_co=self.min_co, max_iter=self.max_iter)
         # covis-nonmetric first: it is the one that fails on sparse data (its pairs fall apart),
@@ -153,7 +153,7 @@ class DropoutBlend(TransformerMixin, BaseEstimator):
             # covis-nonmetric has failed as a whole (folded, or flung far on sparse data): its
             # half of a mean would be an error, not noise to average out. CAL-SMA is the member
             # kept: it guards itself against folds (mappers.calibrated.cal_sma.fold_score)
-            warnings.warn(f"dropout-blend: the CAL-SMA and covis-nonmetric maps disagree by "
+            warnings.warn(f"DROPOUT-BLEND: the CAL-SMA and covis-nonmetric maps disagree by "
                           f"{self.disagreement_:.2f} of the anchors' spread (median; above "
                           f"max_disagreement = {self.max_disagreement:g}): the map is CAL-SMA's",
                           MaskedMapWarning, stacklevel=2)
@@ -167,7 +167,7 @@ class DropoutBlend(TransformerMixin, BaseEstimator):
         apart[both] = gap[both] > spread
         if apart.any():
             Y[apart] = a[apart]
-            warnings.warn(f"dropout-blend: objects {np.flatnonzero(apart).tolist()} lie farther "
+            warnings.warn(f"DROPOUT-BLEND: objects {np.flatnonzero(apart).tolist()} lie farther "
                           f"apart in the two maps than the anchors' spread ({spread:.2f} m); "
                           "they keep the CAL-SMA position", MaskedMapWarning, stacklevel=2)
         self.embedding_ = Y

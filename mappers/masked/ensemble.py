@@ -1,4 +1,4 @@
-"""The covisibility ensemble (label ``"covis-ensemble"``): the mean of anchored co-observation
+"""The covisibility ensemble (label ``"COVIS-ENSEMBLE"``): the mean of anchored co-observation
 maps over several windows of consecutive steps.
 
 Two landmarks caught in one camera frame are close; caught within a few seconds of each other,
@@ -108,7 +108,7 @@ def ensemble_embedding(
 
 
 class CovisEnsemble(TransformerMixin, BaseEstimator):
-    """``"covis-ensemble"``: the mean of anchored co-observation maps over windows of steps.
+    """``"COVIS-ENSEMBLE"``: the mean of anchored co-observation maps over windows of steps.
 
     Parameters:
         windows: the windows [ticks] the history is merged over, one member map each.

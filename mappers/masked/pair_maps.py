@@ -4,10 +4,12 @@ On real data a landmark is sensed in a few percent of the steps only (limited fi
 occlusion, detection range), so a history is mostly *missing*, not zero. Filling the gaps with
 zeros (what the paper's pipeline does to a visibility history) makes every rarely-seen landmark
 look far from everything. The methods here use only what was observed (the pair statistics of
-:mod:`mappers.masked.coobservation`) and say which assumptions they add. Each is a registered method
-(:data:`mappers.catalog.METHODS`) that maps complete and masked histories:
+:mod:`mappers.masked.coobservation`) and say which assumptions they add. They are the methods of
+:func:`masked_embedding` (its ``method=``), each mapping complete and masked histories; one is a
+label of the catalog (:data:`mappers.catalog.METHODS`), the others are building blocks of labels
+or dead ends kept as comparisons (their figures: ``docs/dead-ends.md``):
 
-``"range-quantile"`` (range)
+``"range-quantile"`` (range; the label ``RANGE-QUANTILE``)
     Two landmarks ranged in the same step from an unknown viewpoint satisfy ``|r_i - r_j| <=
     d_ij`` (triangle inequality), with equality when the viewpoint is on the line through them;
     a high ``quantile`` of ``|r_i - r_j|`` over the steps that observed both estimates ``d_ij``.
@@ -16,13 +18,14 @@ look far from everything. The methods here use only what was observed (the pair 
     *Assumes*: one step's ranges come from one viewpoint; over the run some viewpoints are nearly
     collinear with each observed pair; ranges are unbiased.
 
-``"range-bounds"`` (range)
+``"range-bounds"`` (range; a dead end)
     ``range-quantile`` plus an upper bound from the field of view ``fov`` [rad]: two landmarks
     in one image are at most ``fov`` apart in bearing, so ``d_ij <= sqrt(r_i^2 + r_j^2 - 2 r_i
     r_j cos(fov))``; SMACOF on distance intervals ``[L_ij, min(U_ij, (1 + slack) L_ij)]``.
     *Assumes* additionally: the camera's full field of view.
 
-``"covis-nonmetric"`` (any sensor; only the pattern of what was observed)
+``"covis-nonmetric"`` (any sensor; only the pattern of what was observed; a member of
+``COVIS-ENSEMBLE`` and ``DROPOUT-BLEND``)
     ``delta_ij = -log(C_ij / sqrt(n_i n_j))`` from the co-observation counts (the Ochiai
     coefficient: the missing-data analogue of the paper's L2-normalised visibility, eq. 7); only
     its order is trusted: non-metric weighted SMACOF with weights ``sqrt(C_ij)``, anchors fixed.
@@ -32,14 +35,15 @@ look far from everything. The methods here use only what was observed (the pair 
     *Assumes*: the chance of seeing two landmarks in one step falls monotonically with their
     distance, the same way everywhere.
 
-``"covis-power"`` (any sensor; only the pattern of what was observed)
+``"covis-power"`` (any sensor; only the pattern of what was observed; the member of
+``COVIS-ENSEMBLE``, a dead end on its own)
     ``covis-nonmetric``'s dissimilarity and weights with a metric link ``d = a * delta**power``
     (the scale refitted as it goes), started from the ``covis-nonmetric`` map: one global link
     constrains a small layout far more than the order alone. When the usable pairs fall apart
     into groups, one link cannot be calibrated across them and the ``covis-nonmetric`` map is
     kept (with a warning). *Assumes* additionally: one power law over the whole layout.
 
-``"covis-angle"`` (bearing)
+``"covis-angle"`` (bearing; ``COVIS-AUTO``'s branch for a local view)
     ``covis-nonmetric`` with an angle-weighted co-observation: a step that sensed both counts
     ``cos`` of their bearing difference (:func:`mappers.masked.coobservation.angle_covisibility_dissimilarity`),
     so two landmarks seen together in one direction are closer than two seen at the edges of a
@@ -47,7 +51,7 @@ look far from everything. The methods here use only what was observed (the pair 
     together often is measured better). *Assumes*: the angle-weighted rate of seeing two
     landmarks together falls monotonically with their distance, the same way everywhere.
 
-``"masked-euclidean"`` (any sensor; the textbook recipe, kept as a comparison)
+``"masked-euclidean"`` (any sensor; the textbook recipe, a dead end kept as a comparison)
     Root-mean-square difference of the two histories over the steps that observed both,
     weighted SMACOF over the pairs that have it. *Assumes*: a history difference is comparable
     across pairs (false for a narrow field of view, where co-observed bearings always differ by
@@ -100,8 +104,9 @@ _PATTERN_ONLY = ("covis-nonmetric", "covis-power")
 every object in every step (a complete bearing or range history), where they would draw a map
 from no information."""
 _OWN_DEFAULT = {"visibility": "covis-nonmetric", "bearing": "covis-nonmetric", "range": "range-quantile"}
-"""What :func:`masked_embedding` uses when no method is given (``build_map``'s masked defaults,
-:data:`mappers.defaults.DEFAULT_METHODS`, may be methods of other modules)."""
+"""The default of :func:`masked_embedding`'s own parameter ``method`` (a building block's
+default, not a choice of ``build_map``: which label maps which data is
+:data:`mappers.defaults.DEFAULTS`' one table)."""
 
 
 class MaskedMapWarning(UserWarning):
@@ -307,7 +312,8 @@ def masked_embedding(
             f"history sensed every object in every step (a complete {sensor} history): that "
             f"pattern says nothing about distance. Use the complete default (CAL-SMA"
             f"{', UNFOLD for range' if sensor == 'range' else ''})"
-            f"{' or covis-angle' if sensor == 'bearing' else ''}, or pass the history's mask"
+            f"{' or the method covis-angle' if sensor == 'bearing' else ''}, or pass the "
+            "history's mask"
         )
     pairs = _pair_statistics(method, seen[keep], values[keep], sensor, p)
     comps = pair_components(pairs.counts)
@@ -343,7 +349,8 @@ def masked_embedding(
 
 
 class MaskedMapper(TransformerMixin, BaseEstimator):
-    """The estimator behind each masked label of this module (module docstring).
+    """The estimator behind ``RANGE-QUANTILE`` and the building blocks of
+    :func:`masked_embedding` (module docstring).
 
     Parameters:
         method: a key of :data:`MASKED_METHODS`; None: ``range-quantile`` for range histories,
@@ -455,7 +462,7 @@ _FACTORIES = {
     "masked-euclidean": _masked_euclidean,
 }
 MASKED_METHODS: dict[str, dict[str, Any]] = {
-    label: {k: v.default for k, v in inspect.signature(f).parameters.items() if k != "max_iter"}
-    for label, f in _FACTORIES.items()
+    name: {k: v.default for k, v in inspect.signature(f).parameters.items() if k != "max_iter"}
+    for name, f in _FACTORIES.items()
 }
-"""Label -> default parameters of each masked method (each also takes ``max_iter``)."""
+"""Method of :func:`masked_embedding` -> its default parameters (each also takes ``max_iter``)."""

@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 
 from mappers.calibrated import fold_score, log_floor
+from mappers.calibrated.factory import dense_keywords
 from mappers.catalog import resolve_method
 from mappers.core.align import apply_affine, check_anchor_ids, check_anchors
 from mappers.core.errors import MappingError
@@ -250,7 +251,8 @@ class OnlineMapper:
     def _gram_path(self) -> bool:
         """CAL-SMA's statistics kept as a Gram matrix (complete histories)."""
         return self._spec is not None and not self._masked and (
-            self._spec.label == _INCREMENTAL or self._bundle is not None)
+            (self._spec.label == _INCREMENTAL and not self._spec.is_scalable(self._merged))
+            or self._bundle is not None)
 
     def _add(self, C, mask) -> None:
         if self._view is not None:  # new viewpoints placed against the current objects
@@ -321,7 +323,7 @@ class OnlineMapper:
         still looks folded is refitted later, with more steps; at most ``_FULL_FIT_MAX_ITER``
         Guttman updates per round), or ``warm_rounds`` rounds whose Guttman updates stop at
         ``warm_tol``."""
-        kw = dict(self._cal)
+        kw = dense_keywords(self._cal)
         kw.pop("n_neighbors", None)
         if warm:
             kw.update(n_rounds=self.warm_rounds, tol=self.warm_tol)

@@ -16,7 +16,7 @@ radius, between updates instead:
   since the last refit or refinement, VIEW-BA over the whole history from the current objects
   instead of a start map (:meth:`OnlineView.refine`): the view's width, the radius and every
   viewpoint found afresh, then its rounds; about a third of a refit, whose start map
-  (``dropout-blend``) is most of its cost and does not shrink with the steps;
+  (``DROPOUT-BLEND``) is most of its cost and does not shrink with the steps;
 - *new steps*: each new step's viewpoint is searched on VIEW-BA's grid of candidates over the
   current objects and refined by its Newton steps, the objects fixed: O(k M G) for k new steps
   and G candidates;

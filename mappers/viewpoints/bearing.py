@@ -2,7 +2,7 @@
 
 The paper's methods, and every other mapper here, never estimate where the robot was. This one
 does: it starts from the map the bearing default drew before it (``start``: CAL-SMA for a
-complete history, ``covis-auto`` for a masked one) and refines it by treating each step's
+complete history, ``COVIS-AUTO`` for a masked one) and refines it by treating each step's
 viewpoint as a latent pose ``(x, y, heading)``:
 
 1. *resection* of the start map: each step's pose from the bearings of the objects it observed,
@@ -80,7 +80,7 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
 
     Parameters:
         start: label of the method that draws the start map (None: the bearing default before
-            this method, CAL-SMA for a complete history and ``covis-auto`` for a masked one).
+            this method, CAL-SMA for a complete history and ``COVIS-AUTO`` for a masked one).
         loss: ``"huber"``, ``"cauchy"`` or None (least squares) on the angle residuals.
         robust_scale: the loss's scale in robust standard deviations of the residuals (1.4826
             times their median absolute value).

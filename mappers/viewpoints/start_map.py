@@ -1,6 +1,6 @@
 """What the viewpoint adjustments share: the start map they refine, and the no-gain guard.
 
-BEARING-BA (:mod:`mappers.viewpoints.bearing`), VIS-BA (:mod:`mappers.viewpoints.visibility`)
+BEARING-BA (:mod:`mappers.viewpoints.bearing`), VIS-BA-WALK (:mod:`mappers.viewpoints.visibility`)
 and the range-bearing adjustment (:mod:`mappers.viewpoints.range_bearing`) each refine a start
 map with the anchors held at their known positions (they fix the gauge), and each returns that
 start, with a warning, when the refinement explains the readings no better.
@@ -21,14 +21,16 @@ __all__ = ["anchored_start", "fit_start", "keep_if_better"]
 
 
 def fit_start(label: str, X, ids, pos, *, sensor: str, mask=None, timeline=None,
-              random_state=0, category: type[Warning] = UserWarning):
+              random_state=0, category: type[Warning] = UserWarning, params=None):
     """The start map's (M, 2) positions (NaN rows: not placed) drawn by the method ``label``
-    on the histories an adjustment was given, anchors fitted; each of the start map's notes is
-    issued as a warning of ``category``, naming the start method. Returns ``(positions,
-    label)`` with the label as the catalog spells it."""
+    (with ``params``, e.g. ``sparse=True`` for CAL-SMA) on the histories an adjustment was
+    given, anchors fitted; each of the start map's notes is issued as a warning of
+    ``category``, naming the start method. Returns ``(positions, label)`` with the label as the
+    catalog spells it."""
     X, mask, sensor, timeline = check_inputs(X, sensor, mask, timeline)
     spec = resolve_method(label, sensor, masked=mask is not None, n_objects=X.shape[0])
-    m = fit_checked(spec, X, ids, pos, sensor, mask, timeline, None, random_state, {}, [])[0]
+    m = fit_checked(spec, X, ids, pos, sensor, mask, timeline, None, random_state,
+                    dict(params or {}), [])[0]
     for note in m.warnings:
         warnings.warn(f"start map ({m.method}): {note}", category, stacklevel=4)
     return m.positions, m.method

@@ -20,7 +20,7 @@ distance; :mod:`mappers.viewpoints.view_cone_kernels`):
 
 The steps:
 
-1. **The start map**, drawn by ``start`` (default ``dropout-blend``, the masked visibility
+1. **The start map**, drawn by ``start`` (default ``DROPOUT-BLEND``, the masked visibility
    default before this method).
 2. **The view's width**, a camera's calibration: ``fov_deg`` if given, else the width whose cone
    explains the observed sets best on the start map (:func:`estimate_fov`).
@@ -250,7 +250,7 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
     """View-cone bundle adjustment of a masked visibility map (module docstring).
 
     Parameters:
-        start: label of the method that draws the start map (None: ``dropout-blend``). A
+        start: label of the method that draws the start map (None: ``DROPOUT-BLEND``). A
             method that maps masked histories gets the mask; another gets the history with the
             unobserved entries as 0.
         fov_deg: the camera's field of view [deg] in (0, 360), or None: estimated.
@@ -329,7 +329,7 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         if mask is None or np.all(mask):
             raise ValueError("VIEW-BA needs the mask of a limited view (which objects each step "
                              "observed); this history observed every object at every step: map "
-                             "it with CAL-SMA or VIS-BA")
+                             "it with CAL-SMA or VIS-BA-WALK")
         mask = np.asarray(mask, dtype=bool)
         if mask.shape != X.shape:
             raise ValueError(f"mask must have the history's shape {X.shape}, got {mask.shape}")
@@ -358,7 +358,7 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         if free.sum() > MAX_FREE_OBJECTS:
             raise ValueError(f"VIEW-BA solves a (2F, 2F) system of its F free objects each round "
                              f"and F = {int(free.sum())} is above {MAX_FREE_OBJECTS}: map this "
-                             "history with dropout-blend (build_map's default above 500 objects)")
+                             "history with DROPOUT-BLEND (build_map's default above 500 objects)")
         if self.fov_deg_ > MAX_FOV_DEG:
             warnings.warn(f"a {self.fov_deg_:.0f}-degree view says little about a heading "
                           f"(above {MAX_FOV_DEG:.0f}): the start map is kept",

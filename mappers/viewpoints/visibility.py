@@ -1,9 +1,9 @@
-"""Visibility bundle adjustment of a visibility map (labels ``"VIS-BA"``, ``"VIS-BA-WALK"``).
+"""Visibility bundle adjustment of a visibility map (label ``"VIS-BA-WALK"``: with the walk prior).
 
 The paper's methods, and the other visibility mappers here, never estimate where the robot was.
 This one does: it starts from the map the visibility default draws (``start``: CAL-SMA for a
-complete history, ``dropout-blend`` for a masked one; where the default is itself a VIS-BA, the
-map before it) and refines it by treating each step's viewpoint as a latent position. A
+complete history, ``DROPOUT-BLEND`` for a masked one; where the default is itself an adjustment,
+the map before it) and refines it by treating each step's viewpoint as a latent position. A
 visibility bit is read as a noisy range threshold with dropouts and occlusion whose parameters
 are fitted by maximum likelihood (:mod:`mappers.viewpoints.visibility_model`); only the entries
 the mask calls observed enter the likelihood.
@@ -179,8 +179,8 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
 
     Parameters:
         start: label of the method that draws the start map (None: the visibility default
-            ``build_map`` picks for the history; when that is a VIS-BA, CAL-SMA for a complete
-            history and ``dropout-blend`` for a masked one).
+            ``build_map`` picks for the history; when that adjusts viewpoints, CAL-SMA for a
+            complete history and ``DROPOUT-BLEND`` for a masked one).
         max_rounds: EM rounds (E-step, objects, model).
         inner_iters: Fisher-scoring iterations of the objects per round.
         tol: stop when no object moves more than this [m] in a round.
@@ -256,16 +256,17 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
 
     def _start_map(self, X, mask, ids, pos, timeline) -> np.ndarray:
         if self.start is not None and self.start.strip().upper() in ("VIS-BA", "VIS-BA-WALK"):
-            raise ValueError(f"start must name another method than VIS-BA, got {self.start!r}")
-        label = self.start
+            raise ValueError("start must name another method than the visibility adjustment "
+                             f"(VIS-BA-WALK), got {self.start!r}")
+        label, params = self.start, {}
         if label is None:  # the default's choice; were it an adjustment, the map before it
             Xc, maskc, _, steps = check_inputs(X, "visibility", mask, timeline)
-            label = choose_for_history(Xc, maskc, "visibility", steps)
-            if label in ("VIS-BA", "VIS-BA-WALK", "VIEW-BA"):
-                label = localisation_free("visibility", mask is not None)[0]
+            label, params = choose_for_history(Xc, maskc, "visibility", steps)
+            if label in ("VIS-BA-WALK", "VIEW-BA"):
+                label, params = localisation_free("visibility", mask is not None)
         P, self.start_method_ = fit_start(label, X, ids, pos, sensor="visibility", mask=mask,
                                           timeline=timeline, random_state=self.random_state,
-                                          category=VisibilityAdjustmentWarning)
+                                          category=VisibilityAdjustmentWarning, params=params)
         return P
 
     def fit(self, X, y=None, *, mask=None, sensor: str = "visibility", anchor_ids=None,
@@ -278,7 +279,8 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
             raise ValueError(f"step_sigma={self.step_sigma!r} is the width of the walk's steps, "
                              "which only continuity=True models")
         if sensor != "visibility":
-            raise ValueError(f"VIS-BA maps visibility histories, got sensor {sensor!r}")
+            raise ValueError("the visibility adjustment (VIS-BA-WALK) maps visibility histories, "
+                             f"got sensor {sensor!r}")
         # (with a mask the unobserved entries may hold anything)
         X = validate_data(self, X, dtype=np.float64, ensure_min_samples=3,
                           ensure_all_finite=mask is None)
@@ -286,7 +288,7 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
         m = seen.shape[1]
         self.start_method_ = None if start_positions is None else "given"
         ids, pos, P0 = anchored_start(
-            "VIS-BA", anchor_ids, anchor_positions, m, start_positions,
+            "the visibility adjustment", anchor_ids, anchor_positions, m, start_positions,
             lambda ids, pos: self._start_map(np.asarray(X, dtype=float), mask, ids, pos, timeline),
         )
         self.start_ = P0.copy()

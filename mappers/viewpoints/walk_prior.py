@@ -1,4 +1,4 @@
-"""Forward-backward over a grid of candidate viewpoints: VIS-BA's continuity prior.
+"""Forward-backward over a grid of candidate viewpoints: VIS-BA-WALK's continuity prior.
 
 The steps of a walk's history are ordered: consecutive viewpoints lie close together. Read as a
 hidden Markov model, the viewpoint is a cell of a square grid (spacing ``h``), the bits of a step

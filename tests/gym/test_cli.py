@@ -294,7 +294,7 @@ def test_mrclam_passes_its_options_to_the_loader(monkeypatch, tmp_path, capsys):
     def fake(run_dir, sensor, **kwargs):
         seen.update(kwargs, run_dir=run_dir, sensor=sensor)
         return SimpleNamespace(
-            run="MRCLAM_X", sensor=sensor, method="range-quantile", params={"quantile": 0.9},
+            run="MRCLAM_X", sensor=sensor, method="RANGE-QUANTILE", params={"quantile": 0.9},
             anchor_subjects=(6, 7, 8, 9), warnings=("clustered layout",), mpe=0.25, moe=3.5,
             centroid_mpe=3.0, csv_path=tmp_path / "o" / "map.csv", png_path=None,
             subjects=np.arange(6, 12), positions=np.array([[0.0, 0]] * 5 + [[np.nan, np.nan]]),
@@ -302,11 +302,11 @@ def test_mrclam_passes_its_options_to_the_loader(monkeypatch, tmp_path, capsys):
 
     monkeypatch.setattr(mrclam, "map_mrclam_run", fake)
     assert main(["mrclam", str(tmp_path), "--mode", "range", "--robots", "1,3",
-                 "--anchors", "6,7,8,9", "--method", "range-quantile", "--param", "quantile=0.9",
+                 "--anchors", "6,7,8,9", "--method", "RANGE-QUANTILE", "--param", "quantile=0.9",
                  "--bin-width", "0.5", "--groundtruth-fixes", "none",
                  "--out", str(tmp_path / "o")]) == 0
     assert seen == {"run_dir": str(tmp_path), "sensor": "range", "robots": [1, 3],
-                    "anchors": [6, 7, 8, 9], "method": "range-quantile", "quantile": 0.9,
+                    "anchors": [6, 7, 8, 9], "method": "RANGE-QUANTILE", "quantile": 0.9,
                     "bin_width": 0.5, "out": str(tmp_path / "o"), "groundtruth_fixes": "none",
                     "zero_fill": False}
     out = capsys.readouterr().out

@@ -354,7 +354,7 @@ def test_map_synthetic_run_writes_csv_and_png(tmp_path):
     run = _write_run(tmp_path / "Synth", truth, _simulate_rows(truth, n_images=2000, seed=7))
     res = map_mrclam_run(run, "range", robots=(1, 2, 3), out=tmp_path / "out")
     P = np.array([truth[s] for s in sorted(truth)])
-    assert res.method == "range-quantile" and res.mpe < 0.2 and res.mpe < res.centroid_mpe / 5
+    assert res.method == "RANGE-QUANTILE" and res.mpe < 0.2 and res.mpe < res.centroid_mpe / 5
     assert res.anchor_subjects == tuple(int(s) for s in np.array(sorted(truth))[corner_anchors(P)])
     with open(res.csv_path, newline="") as fh:
         rows = list(csv.DictReader(fh))
@@ -367,7 +367,7 @@ def test_map_synthetic_run_writes_csv_and_png(tmp_path):
     assert res.png_path.is_file() and res.png_path.read_bytes()[:4] == b"\x89PNG"
     vis = map_mrclam_run(run, "visibility", robots=(1, 2, 3), anchors=(6, 7, 8, 9))
     assert vis.anchor_subjects == (6, 7, 8, 9) and vis.mpe < vis.centroid_mpe
-    assert vis.method == "covis-ensemble" and vis.params["min_co"] == [3, 5]
+    assert vis.method == "COVIS-ENSEMBLE" and vis.params["min_co"] == [3, 5]
     with pytest.raises(ValueError, match="method"):
         map_mrclam_run(run, "range", robots=(1, 2, 3), method="LLE?")
 
@@ -407,27 +407,36 @@ def test_covis_ensemble_is_the_visibility_default_and_checks_its_arguments(tmp_p
     run = _write_run(tmp_path / "Ens", truth, _simulate_rows(truth, n_images=1200, seed=9))
     small = {"bin_widths": (1.0, 2.0), "min_co": (3,)}
     ens = map_mrclam_run(run, "bearing", robots=(1, 2, 3), plot=False, **small)
-    assert ens.method == "covis-ensemble"
+    assert ens.method == "COVIS-ENSEMBLE"
     assert ens.params == {"bin_widths": [1.0, 2.0], "min_co": [3], "member": "covis-power",
                           "power": 0.5}
-    singles = [map_mrclam_run(run, "bearing", robots=(1, 2, 3), method="covis-power",
-                              bin_width=w, min_co=3) for w in (1.0, 2.0)]
+    # each member alone: the ensemble of one bin width (covis-power at that width)
+    singles = [map_mrclam_run(run, "bearing", robots=(1, 2, 3), method="COVIS-ENSEMBLE",
+                              bin_widths=(w,), min_co=3) for w in (1.0, 2.0)]
+    assert all(s.history_meta["bin_width"] == w for s, w in zip(singles, (1.0, 2.0), strict=True))
     assert np.allclose(ens.positions, np.mean([s.positions for s in singles], axis=0))
     assert ens.mpe < ens.centroid_mpe / 2
     with pytest.raises(ValueError, match="bin_width"):
-        map_mrclam_run(run, "visibility", robots=(1, 2, 3), method="covis-ensemble", bin_width=2.0)
+        map_mrclam_run(run, "visibility", robots=(1, 2, 3), method="COVIS-ENSEMBLE", bin_width=2.0)
     one = map_mrclam_run(run, "visibility", robots=(1, 2, 3), bin_width=2.0)  # one width asked
-    assert one.method == "covis-power" and one.history_meta["bin_width"] == 2.0
+    assert one.method == "COVIS-ENSEMBLE" and one.history_meta["bin_width"] == 2.0
+    assert one.params["bin_widths"] == [2.0] and one.params["min_co"] == [3]
+    same = map_mrclam_run(run, "visibility", robots=(1, 2, 3), method="COVIS-ENSEMBLE",
+                          bin_widths=(2.0,), min_co=3)
+    np.testing.assert_array_equal(one.positions, same.positions)
     with pytest.raises(ValueError, match="unknown parameter"):
-        map_mrclam_run(run, "visibility", robots=(1, 2, 3), method="covis-ensemble", quantile=0.9)
+        map_mrclam_run(run, "visibility", robots=(1, 2, 3), method="COVIS-ENSEMBLE", quantile=0.9)
     with pytest.raises(ValueError, match="member"):
         map_mrclam_run(run, "visibility", robots=(1, 2, 3), member="covis-range")
     with pytest.raises(ValueError, match="power"):
         map_mrclam_run(run, "visibility", robots=(1, 2, 3), member="covis-nonmetric", power=0.5)
-    # any registered method that maps the run's masked histories, in any spelling of the label
-    one_power = map_mrclam_run(run, "visibility", robots=(1, 2, 3), method="COVIS-POWER")
-    assert one_power.method == "covis-power"
-    with pytest.raises(ValueError, match=r"'CAL-SMA' does not map masked visibility.*covis-power"):
+    # any registered method that maps the run's masked histories; an old label: its new one
+    with pytest.warns(FutureWarning, match="'covis-ensemble' is now spelled 'COVIS-ENSEMBLE'"):
+        old = map_mrclam_run(run, "bearing", robots=(1, 2, 3), method="covis-ensemble", **small)
+    np.testing.assert_array_equal(old.positions, ens.positions)
+    with pytest.raises(ValueError, match=r"'covis-power' is no longer a label.*COVIS-ENSEMBLE"):
+        map_mrclam_run(run, "visibility", robots=(1, 2, 3), method="covis-power")
+    with pytest.raises(ValueError, match=r"'CAL-SMA' does not map masked visibility.*COVIS-ENSEMBLE"):
         map_mrclam_run(run, "visibility", robots=(1, 2, 3), method="cal-sma")
     # zero-filled, methods for complete histories apply ("naive" is SMA(UNWGT) zero-filled)
     zf = map_mrclam_run(run, "visibility", robots=(1, 2, 3), method="SMA(UNWGT)", zero_fill=True)
@@ -448,6 +457,6 @@ def test_the_mrclam_example_maps_a_real_run(capsys):
     finally:
         sys.argv = argv
     out = capsys.readouterr().out
-    assert "range / range-quantile" in out
+    assert "range / RANGE-QUANTILE" in out
     mpe = float(out.split("MPE ")[1].split()[0])
     assert 0 < mpe < 0.5  # README: 0.23 m leave-one-run-out on DS2

@@ -62,7 +62,7 @@ def test_protocol_config_with_limits_maps_masked_histories():
 
 def test_protocol_records_the_settings_and_refuses_others(tmp_path):
     config = ProtocolConfig(sensor="bearing", layouts=1, poses=1, steps=200, every=100,
-                            methods=("masked-euclidean",), env_kwargs=LIMITED)
+                            methods=("COVIS-AUTO",), env_kwargs=LIMITED)
     summary = run_protocol(config, tmp_path, progress=False, report=False)
     assert summary.failed == 0 and summary.computed == 2
     manifest = json.loads((tmp_path / "manifest.json").read_text())
@@ -73,7 +73,7 @@ def test_protocol_records_the_settings_and_refuses_others(tmp_path):
     again = run_protocol(config, tmp_path, progress=False, report=False)
     assert again.computed == 0 and again.resumed == 2
     other = ProtocolConfig(sensor="bearing", layouts=1, poses=1, steps=200, every=100,
-                           methods=("masked-euclidean",), env_kwargs={**LIMITED, "fov_deg": 60})
+                           methods=("COVIS-AUTO",), env_kwargs={**LIMITED, "fov_deg": 60})
     with pytest.raises(SettingsMismatchError, match="env_kwargs"):
         run_protocol(other, tmp_path, progress=False, report=False)
 

@@ -59,12 +59,15 @@ def test_config_defaults_follow_the_paper():
 
     # by default every method made for complete histories of the sensor, in table order (UNFOLD:
     # range only; the masked-history methods, the sparse ones for large M and the fused ones are
-    # not in the paper's tables)
+    # not in the paper's tables), each with its own defaults (CAL-SMA dense: sparse=False)
     complete = tuple(m for m in ALL if m != "UNFOLD" and not ALL[m].takes_masks
                      and not ALL[m].sparse and not ALL[m].fused)
-    assert "CAL-SMA-SPARSE" in ALL and "CAL-SMA-SPARSE" not in complete
     assert ProtocolConfig().methods == complete == ProtocolConfig(sensor="bearing").methods
     assert complete[-1] == "CAL-SMA" and len(complete) == 11
+    assert ALL["CAL-SMA"].resolved_params()["sparse"] is False
+    # an old label that stands for a label with parameters is refused: the protocol runs labels
+    with pytest.warns(FutureWarning), pytest.raises(ValueError, match="'CAL-SMA' with sparse=True"):
+        ProtocolConfig(methods=["CAL-SMA-SPARSE"])
 
 
 @pytest.mark.parametrize(
@@ -105,6 +108,7 @@ def test_param_labels_round_trip():
     assert param_label({"sigma2": 0.5, "K": 5}) == "K=5,sigma2=0.5"
     assert parse_params(["K=5,sigma2=0.5"]) == {"K": 5, "sigma2": 0.5}
     assert parse_params(["-"]) == {}
+    assert parse_params(["sparse=true", "refine=False"]) == {"sparse": True, "refine": False}
     with pytest.raises(ValueError, match="NAME=VALUE"):
         parse_params(["K5"])
 

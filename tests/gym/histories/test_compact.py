@@ -94,9 +94,10 @@ def test_build_map_maps_a_history_beyond_the_budget_without_the_dense_matrix(mon
     monkeypatch.setattr(fitting, "DENSE_BUDGET_BYTES", 1024)
     with pytest.raises(DenseTooLargeError, match="History.sparse"):
         h.matrix  # noqa: B018
-    built = mappers.build_map(h, h.anchor_ids, h.anchor_positions, method="CAL-SMA-SPARSE")
-    assert built.method == "CAL-SMA-SPARSE" and np.isfinite(built.positions).all()
-    with pytest.raises(ValueError, match="CAL-SMA-SPARSE"):
+    built = mappers.build_map(h, h.anchor_ids, h.anchor_positions, method="CAL-SMA", sparse=True)
+    assert built.method == "CAL-SMA" and built.params["sparse"] is True
+    assert np.isfinite(built.positions).all()
+    with pytest.raises(ValueError, match="'CAL-SMA' with sparse=True"):
         mappers.build_map(h, h.anchor_ids, h.anchor_positions, method="CAL-SMA")
 
 

@@ -1,5 +1,5 @@
-"""Masked bearing and visibility maps from co-observation: covis-angle (mappers/masked/pair_maps.py),
-covis-cal and covis-auto (mappers/masked/covis_auto.py)."""
+"""Masked bearing and visibility maps from co-observation: the building blocks covis-angle
+(mappers/masked/pair_maps.py) and covis-cal, and COVIS-AUTO (mappers/masked/covis_auto.py)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from mappers.catalog import resolve_method
 from mappers.defaults import DEFAULT_METHODS
 from mappers.masked.coobservation import angle_covisibility_dissimilarity
 from mappers.masked.covis_auto import CovisAuto, CovisCalibrated, co_observation_coefficient
-from mappers.masked.pair_maps import masked_embedding
+from mappers.masked.pair_maps import MaskedMapper, masked_embedding
 
 pytestmark = pytest.mark.usefixtures("one_blas_thread")
 
@@ -77,13 +77,14 @@ def test_covis_auto_chooses_by_the_share_of_pairs_never_seen_together(max_range,
 
 def test_covis_auto_maps_masked_bearing_through_build_map():
     P, X, mask, a = _camera(90, seed=3)
-    # the masked bearing default refines covis-auto's map (BEARING-BA); named here, its own map
+    # the masked bearing default refines COVIS-AUTO's map (BEARING-BA); named here, its own map
     assert DEFAULT_METHODS[("bearing", True)] == "BEARING-BA"
-    m = build_map(X, a, P[a], "covis-auto", mask=mask, sensor="bearing")
-    assert m.method == "covis-auto" and non_anchor_error(m.positions, P, a) < 0.2
+    m = build_map(X, a, P[a], "COVIS-AUTO", mask=mask, sensor="bearing")
+    assert m.method == "COVIS-AUTO" and non_anchor_error(m.positions, P, a) < 0.2
     vis = (mask[:, 0::2]).astype(float)  # visibility: the co-observation pattern alone
-    m = build_map(vis, a, P[a], "covis-cal", mask=mask[:, 0::2], sensor="visibility")
-    assert non_anchor_error(m.positions, P, a) < 0.3
+    Y = CovisCalibrated().fit_transform(vis, mask=mask[:, 0::2], sensor="visibility", anchor_ids=a,
+                                        anchor_positions=P[a])  # covis-cal, a building block
+    assert non_anchor_error(Y, P, a) < 0.3
 
 
 def test_bad_input_is_refused_with_its_name():
@@ -103,10 +104,13 @@ def test_bad_input_is_refused_with_its_name():
         CovisAuto().fit_transform(mask[:, ::2].astype(float), sensor="visibility")
     with pytest.raises(ValueError, match="mask=..."):  # the mask is a keyword argument
         CovisAuto().fit(X, mask, sensor="bearing")
-    for label in ("covis-cal", "covis-auto", "covis-angle"):
-        with pytest.raises(ValueError, match="range"):
-            resolve_method(label, "range", masked=True)
-        assert resolve_method(label, "bearing", masked=True).label == label
+    with pytest.raises(ValueError, match="range"):
+        resolve_method("COVIS-AUTO", "range", masked=True)
+    assert resolve_method("COVIS-AUTO", "bearing", masked=True).label == "COVIS-AUTO"
+    for old in ("covis-cal", "covis-angle"):  # building blocks, no longer labels
+        with pytest.raises(ValueError, match=f"{old!r} is no longer a label: a building block.*"
+                                             "use COVIS-AUTO"):
+            resolve_method(old, "bearing", masked=True)
 
 
 @pytest.mark.parametrize("method", ["covis-nonmetric", "covis-power"])
@@ -117,9 +121,11 @@ def test_pattern_only_methods_refuse_a_complete_bearing_history(method):
     P, X, mask, a = _camera(360, n_obj=20, n_steps=400)
     assert mask.all()
     with pytest.raises(ValueError, match="sensed every object in every step.*covis-angle"):
-        build_map(X, a, P[a], method, sensor="bearing")
+        MaskedMapper(method).fit_transform(X, None, sensor="bearing", anchor_ids=a,
+                                           anchor_positions=P[a])
     with pytest.raises(ValueError, match="sensed every object in every step"):
         masked_embedding(X, None, "bearing", method, anchor_ids=a, anchor_positions=P[a])
     P, X, mask, a = _camera(90, n_obj=20, n_steps=1500)
-    m = build_map(X, a, P[a], method, sensor="bearing", mask=mask)
-    assert np.isfinite(m.positions).all()
+    Y = MaskedMapper(method).fit_transform(X, mask, sensor="bearing", anchor_ids=a,
+                                           anchor_positions=P[a])
+    assert np.isfinite(Y).all()

@@ -1,4 +1,4 @@
-"""covis-sparse: the masked co-observation map from sparse products, against the dense path."""
+"""COVIS-SPARSE: the masked co-observation map from sparse products, against the dense path."""
 
 import numpy as np
 import pytest
@@ -53,10 +53,10 @@ def test_sparse_coefficient_equals_the_dense_one(limited, sensor):
 def test_covis_sparse_maps_as_well_as_the_dense_default(limited):
     dense, small = limited
     ids, pos, truth = dense.anchor_ids, dense.anchor_positions, dense.object_positions
-    ref = mappers.build_map(dense, ids, pos, "covis-auto")  # the dense co-observation map
-    assert ref.method == "covis-auto"
-    got = mappers.build_map(small, ids, pos, method="covis-sparse")  # sparse in, sparse path
-    again = mappers.build_map(dense, ids, pos, method="covis-sparse")  # dense in: the same map
+    ref = mappers.build_map(dense, ids, pos, "COVIS-AUTO")  # the dense co-observation map
+    assert ref.method == "COVIS-AUTO"
+    got = mappers.build_map(small, ids, pos, method="COVIS-SPARSE")  # sparse in, sparse path
+    again = mappers.build_map(dense, ids, pos, method="COVIS-SPARSE")  # dense in: the same map
     np.testing.assert_allclose(again.positions, got.positions, atol=1e-9)
     ex = sorted({*ids.tolist(), *ref.unmapped, *got.unmapped})
     err = {name: mean_position_error(m.positions, truth, exclude=ex)
@@ -71,14 +71,14 @@ def test_covis_sparse_maps_as_well_as_the_dense_default(limited):
 
 def test_large_masked_bearing_default_is_covis_sparse():
     spec = mappers.catalog.resolve_method(None, "bearing", masked=True, n_objects=1000)
-    assert spec.label == "covis-sparse" and spec.sparse
+    assert spec.label == "COVIS-SPARSE" and spec.sparse
     assert mappers.catalog.resolve_method(None, "bearing", masked=True, n_objects=50).label == "BEARING-BA"
 
 
 def test_a_dense_masked_method_gets_the_sparse_history_densified(limited):
     dense, small = limited
-    a = mappers.build_map(small, dense.anchor_ids, dense.anchor_positions, method="covis-auto")
-    b = mappers.build_map(dense, dense.anchor_ids, dense.anchor_positions, method="covis-auto")
+    a = mappers.build_map(small, dense.anchor_ids, dense.anchor_positions, method="COVIS-AUTO")
+    b = mappers.build_map(dense, dense.anchor_ids, dense.anchor_positions, method="COVIS-AUTO")
     np.testing.assert_array_equal(a.positions, b.positions)
 
 

@@ -1,4 +1,4 @@
-"""Dropouts read from the data: the flicker rate (mappers/core/flicker.py), dropout-blend
+"""Dropouts read from the data: the flicker rate (mappers/core/flicker.py), DROPOUT-BLEND
 (mappers/masked/dropout_blend.py) and build_map's routing of flickering visibility histories (to
 VIS-BA-WALK, mappers/viewpoints/visibility.py)."""
 
@@ -108,7 +108,7 @@ def test_default_method_names_what_build_map_picks():
 
 def test_a_flickering_history_is_mapped_by_vis_ba_walk_and_better():
     """miss_rate 0.5 on two layouts: the default reads the flicker, says so (and what it
-    assumes), and its maps beat CAL-SMA's and dropout-blend's on the same histories."""
+    assumes), and its maps beat CAL-SMA's and DROPOUT-BLEND's on the same histories."""
     walk, blend, cal = [], [], []
     for seed in (11, 12):
         h = _episode(seed, 2000, miss_rate=0.5)
@@ -116,7 +116,7 @@ def test_a_flickering_history_is_mapped_by_vis_ba_walk_and_better():
         assert m.method == "VIS-BA-WALK"
         assert any("flickers" in w and "VIS-BA-WALK" in w and "walk" in w for w in m.warnings)
         walk.append(map_error(m, h))
-        blend.append(map_error(build_map(h, h.anchor_ids, h.anchor_positions, "dropout-blend"), h))
+        blend.append(map_error(build_map(h, h.anchor_ids, h.anchor_positions, "DROPOUT-BLEND"), h))
         cal.append(map_error(build_map(h, h.anchor_ids, h.anchor_positions, "CAL-SMA"), h))
     assert np.mean(blend) < 0.95 * np.mean(cal)
     assert np.mean(walk) < 0.9 * np.mean(blend)
@@ -195,7 +195,7 @@ def _covis_member(monkeypatch, positions):
 def test_a_member_that_fails_as_a_whole_leaves_the_map_to_cal_sma(monkeypatch):
     """When the two maps disagree as a whole (a fold, or a map flung far on sparse data: through
     a 90-degree view covis-nonmetric's did so on a third of our tuning histories), their mean is
-    no map: dropout-blend returns CAL-SMA's and says so; max_disagreement=None blends anyway."""
+    no map: DROPOUT-BLEND returns CAL-SMA's and says so; max_disagreement=None blends anyway."""
     h = _episode(5, 600, miss_rate=0.3)
     ids = list(h.anchor_ids)
     folded = h.object_positions.copy()

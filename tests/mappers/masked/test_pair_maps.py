@@ -174,11 +174,11 @@ def test_build_map_maps_masked_histories_with_the_masked_methods():
     anchors = _corners(P)
     m = build_map(X, anchors, P[anchors], sensor="range", mask=seen)
     assert _score(m.positions, P, anchors) < 0.3
-    assert m.method == "range-quantile"
+    assert m.method == "RANGE-QUANTILE"
     direct = masked_embedding(X, seen, "range", anchor_ids=anchors, anchor_positions=P[anchors])
     np.testing.assert_allclose(m.positions, direct.positions, atol=1e-12)  # anchors held: affine = I
     # a method for complete histories is refused, naming those that fit
-    with pytest.raises(ValueError, match="'UNFOLD' does not map masked range.*range-quantile"):
+    with pytest.raises(ValueError, match="'UNFOLD' does not map masked range.*RANGE-QUANTILE"):
         build_map(X, anchors, P[anchors], "UNFOLD", sensor="range", mask=seen)
 
 

@@ -47,7 +47,7 @@ def test_new_steps_move_the_map_between_refits(walk):
         fits.append(om.n_full_fits)
         state = om._view.state
         viewpoints.append(0 if state is None else len(state["C"]))
-    first = fits.index(1)  # the first map (dropout-blend, VIEW-BA's start, fails before)
+    first = fits.index(1)  # the first map (DROPOUT-BLEND, VIEW-BA's start, fails before)
     assert 200 <= 10 * (first + 1) <= 400 and fits[-1] == 1  # the next one at 2x its steps
     warm = [i for i in range(first + 1, len(fits)) if fits[i] == fits[i - 1]]
     assert len(warm) >= 25

@@ -40,8 +40,9 @@ def test_it_is_the_bearing_default_below_the_scalable_size():
     P, X, mask, ids = _camera(fov_deg=90, n_steps=200)
     assert DEFAULT_METHODS[("bearing", False)] == DEFAULT_METHODS[("bearing", True)] == "BEARING-BA"
     assert default_method(X, sensor="bearing", mask=mask) == "BEARING-BA"
-    assert resolve_method(None, "bearing", masked=True, n_objects=1000).label == "covis-sparse"
-    assert resolve_method(None, "bearing", n_objects=1000).label == "CAL-SMA-SPARSE"
+    assert resolve_method(None, "bearing", masked=True, n_objects=1000).label == "COVIS-SPARSE"
+    large = resolve_method(None, "bearing", n_objects=1000)
+    assert large.label == "CAL-SMA" and large.defaults["sparse"] is True
 
 
 def test_exact_bearings_recover_the_layout_from_a_perturbed_start():
@@ -66,7 +67,7 @@ def test_build_map_refines_the_default_start_on_a_complete_history():
 
 def test_noisy_masked_bearings_improve_on_the_start():
     P, X, mask, ids = _camera(fov_deg=90, max_range=1.8, n_steps=1500, noise_deg=2.0, seed=3)
-    ref = build_map(X, ids, P[ids], "covis-auto", sensor="bearing", mask=mask)
+    ref = build_map(X, ids, P[ids], "COVIS-AUTO", sensor="bearing", mask=mask)
     m = build_map(X, ids, P[ids], "BEARING-BA", sensor="bearing", mask=mask)
     assert non_anchor_error(m.positions, P, ids) < 0.5 * non_anchor_error(ref.positions, P, ids)
 

@@ -178,10 +178,10 @@ def test_view_ba_maps_an_env_history_through_build_map():
     m = build_map(h, h.anchor_ids, h.anchor_positions, "VIEW-BA")
     assert m.method == "VIEW-BA"
     keep = np.setdiff1d(np.arange(h.n_objects), h.anchor_ids)
-    blend = build_map(h, h.anchor_ids, h.anchor_positions, "dropout-blend")
+    blend = build_map(h, h.anchor_ids, h.anchor_positions, "DROPOUT-BLEND")
     err = mean_position_error(m.positions[keep], h.object_positions[keep])
     before = mean_position_error(blend.positions[keep], h.object_positions[keep])
-    assert err < 0.8 * before and err < 0.07  # 0.059 against dropout-blend's 0.090
+    assert err < 0.8 * before and err < 0.07  # 0.059 against DROPOUT-BLEND's 0.090
     va = ViewAdjustment(start="CAL-SMA")  # a method for complete histories: 0 = not seen
     Q = va.fit_transform(h.matrix, mask=h.mask, anchor_ids=h.anchor_ids,
                          anchor_positions=h.anchor_positions, timeline=h.timeline)
@@ -215,9 +215,9 @@ def test_many_objects_go_to_dropout_blend_and_view_ba_refuses_too_many(monkeypat
 
     assert resolve_method(None, "visibility", masked=True).label == "VIEW-BA"
     assert resolve_method(None, "visibility", masked=True,
-                          n_objects=SCALABLE_ABOVE_OBJECTS + 1).label == "dropout-blend"
+                          n_objects=SCALABLE_ABOVE_OBJECTS + 1).label == "DROPOUT-BLEND"
     P, _, X, mask = _camera(90, n_steps=100)
     monkeypatch.setattr(view_adjustment, "MAX_FREE_OBJECTS", 10)
-    with pytest.raises(ValueError, match="26 is above 10: map this history with dropout-blend"):
+    with pytest.raises(ValueError, match="26 is above 10: map this history with DROPOUT-BLEND"):
         ViewAdjustment(fov_deg=90).fit(X, mask=mask, anchor_ids=ANCHORS,
                                        anchor_positions=P[ANCHORS], start_positions=P)

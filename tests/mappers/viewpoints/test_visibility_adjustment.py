@@ -1,4 +1,5 @@
-"""VIS-BA (mappers/viewpoints/visibility.py): a visibility map refined by estimating viewpoints."""
+"""The visibility adjustment (mappers/viewpoints/visibility.py; label VIS-BA-WALK): a visibility
+map refined by estimating viewpoints."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import pytest
 from map_errors import non_anchor_error
 
 from mappers import build_map
-from mappers.catalog import methods_for
+from mappers.catalog import METHODS, methods_for, resolve_method
 from mappers.viewpoints.visibility import (
     VisibilityAdjustment,
     VisibilityAdjustmentWarning,
@@ -29,10 +30,20 @@ def _threshold(n_obj=30, n_steps=800, radius=0.55, seed=0):
     return P, X, np.arange(4), C
 
 
+# VIS-BA, the adjustment with independent steps (a dead end, docs/dead-ends.md): VIS-BA-WALK
+# with the walk's options off and VisibilityAdjustment's own defaults
+INDEPENDENT = {"continuity": False, "align": False, "overrelax": 0.0, "grid_cells": 6,
+               "prior_iters": 2, "model_rounds": None}
+
+
 def test_registered_for_visibility_only():
-    assert "VIS-BA" in methods_for("visibility", masked=False)
-    assert "VIS-BA" in methods_for("visibility", masked=True)
-    assert "VIS-BA" not in methods_for("bearing")
+    assert "VIS-BA-WALK" in methods_for("visibility", masked=False)
+    assert "VIS-BA-WALK" in methods_for("visibility", masked=True)
+    assert "VIS-BA-WALK" not in methods_for("bearing")
+    assert "VIS-BA" not in METHODS
+    with pytest.raises(ValueError, match=r"'VIS-BA' is no longer a label.*docs/dead-ends.md.*"
+                                         r"VIS-BA-WALK"):
+        resolve_method("VIS-BA", "visibility")
 
 
 def test_threshold_visibility_improves_a_perturbed_start():
@@ -89,27 +100,29 @@ def test_masked_entries_do_not_count():
     np.testing.assert_allclose(Y1, Y2)
 
 
-def test_build_map_with_vis_ba():
+def test_build_map_with_independent_steps():
     P, X, ids, _ = _threshold(n_steps=600)
-    m = build_map(X, ids, P[ids], "VIS-BA", sensor="visibility")
-    assert m.method == "VIS-BA" and np.all(np.isfinite(m.positions))
+    m = build_map(X, ids, P[ids], "VIS-BA-WALK", sensor="visibility", **INDEPENDENT)
+    assert m.method == "VIS-BA-WALK" and np.all(np.isfinite(m.positions))
+    assert {k: m.params[k] for k in INDEPENDENT} == INDEPENDENT
     start = build_map(X, ids, P[ids], sensor="visibility")
     assert non_anchor_error(m.positions, P, ids) < non_anchor_error(start.positions, P, ids)
 
 
 def test_as_the_default_it_refines_the_former_default(monkeypatch):
-    """Were VIS-BA the complete visibility default, its start map would not recurse into it."""
+    """Were VIS-BA-WALK the complete visibility default, its start map would not recurse into
+    it."""
     import dataclasses
     from types import MappingProxyType
 
     from mappers import defaults
 
     P, X, ids, _ = _threshold(n_steps=400)
-    row = dataclasses.replace(defaults.DEFAULTS[("visibility", False)], method="VIS-BA")
+    row = dataclasses.replace(defaults.DEFAULTS[("visibility", False)], method="VIS-BA-WALK")
     monkeypatch.setattr(defaults, "DEFAULTS",
                         MappingProxyType({**defaults.DEFAULTS, ("visibility", False): row}))
     m = build_map(X, ids, P[ids], sensor="visibility")
-    assert m.method == "VIS-BA" and np.all(np.isfinite(m.positions))
+    assert m.method == "VIS-BA-WALK" and np.all(np.isfinite(m.positions))
 
 
 def test_bad_input_is_a_clear_value_error():
@@ -120,7 +133,7 @@ def test_bad_input_is_a_clear_value_error():
     with pytest.raises(ValueError, match="0/1"):
         VisibilityAdjustment().fit(bearing, **kw)
     with pytest.raises(ValueError, match="does not map bearing"):
-        build_map(bearing, ids, P[ids], "VIS-BA", sensor="bearing")
+        build_map(bearing, ids, P[ids], "VIS-BA-WALK", sensor="bearing")
     with pytest.raises(ValueError, match="mask must have the shape"):
         VisibilityAdjustment().fit(X, mask=np.ones((3, 3), bool), **kw)
     with pytest.raises(ValueError, match="boolean"):
@@ -141,4 +154,4 @@ def test_bad_input_is_a_clear_value_error():
     with pytest.raises(ValueError, match="visibility"):
         VisibilityAdjustment().fit(X, sensor="range", **kw)
     with pytest.raises(ValueError, match="unknown parameter"):
-        build_map(X, ids, P[ids], "VIS-BA", sensor="visibility", radius=0.5)
+        build_map(X, ids, P[ids], "VIS-BA-WALK", sensor="visibility", radius=0.5)

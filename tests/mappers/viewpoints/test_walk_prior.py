@@ -1,4 +1,4 @@
-"""The continuity prior of VIS-BA: forward-backward over grid cells (mappers/viewpoints/walk_prior.py)
+"""The continuity prior of VIS-BA-WALK: forward-backward over grid cells (mappers/viewpoints/walk_prior.py)
 and VisibilityAdjustment(continuity=True) on walks with dropouts."""
 
 from __future__ import annotations
