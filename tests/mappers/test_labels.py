@@ -7,10 +7,10 @@ from __future__ import annotations
 import csv
 import re
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
+from paths import ROOT
 
 import mappers
 from mappers import METHODS, build_map, default_method
@@ -25,7 +25,6 @@ from mappers.catalog import (
 )
 from mappers.defaults import DEFAULTS, SCALABLE_ABOVE_OBJECTS, choose_method
 
-ROOT = Path(__file__).resolve().parents[1]
 PAPER = ["LPCA", "SMA(UNWGT)", "SMA(WGT)", "KPCA(GAUS)", "KPCA(POLY)", "ISOMAP", "LLE", "LEM",
          "HLLE", "SDE"]
 OURS = ["CAL-SMA", "UNFOLD", "RANGE-QUANTILE", "COVIS-ENSEMBLE", "COVIS-AUTO", "COVIS-SPARSE",

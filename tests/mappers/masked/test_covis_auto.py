@@ -121,11 +121,11 @@ def test_pattern_only_methods_refuse_a_complete_bearing_history(method):
     P, X, mask, a = _camera(360, n_obj=20, n_steps=400)
     assert mask.all()
     with pytest.raises(ValueError, match="sensed every object in every step.*covis-angle"):
-        MaskedMapper(method).fit_transform(X, None, sensor="bearing", anchor_ids=a,
-                                           anchor_positions=P[a])
+        MaskedMapper(method=method).fit_transform(X, sensor="bearing", anchor_ids=a,
+                                                  anchor_positions=P[a])
     with pytest.raises(ValueError, match="sensed every object in every step"):
         masked_embedding(X, None, "bearing", method, anchor_ids=a, anchor_positions=P[a])
     P, X, mask, a = _camera(90, n_obj=20, n_steps=1500)
-    Y = MaskedMapper(method).fit_transform(X, mask, sensor="bearing", anchor_ids=a,
-                                           anchor_positions=P[a])
+    Y = MaskedMapper(method=method).fit_transform(X, mask=mask, sensor="bearing", anchor_ids=a,
+                                                  anchor_positions=P[a])
     assert np.isfinite(Y).all()
