@@ -29,9 +29,8 @@ from mappers.registry import (
 )
 from mappers.sensors import (
     COLUMNS_PER_STEP,
-    check_sensor,
     check_sensor_set,
-    infer_sensor,
+    check_values,
     sensor_name,
 )
 
@@ -128,9 +127,7 @@ def _sparse_inputs(X: Any, sensor: str | None, mask: Any) -> tuple[Any, Any, str
     X.eliminate_zeros()
     if not np.all(np.isfinite(X.data)):
         raise ValueError("histories contain NaN or inf (in observed entries)")
-    if sensor is None:
-        sensor = infer_sensor(X)  # from the stored values: never densified
-    return X, mask, check_sensor(sensor)
+    return X, mask, check_values(X, None, sensor)  # the stored values: never densified
 
 
 def _inputs(histories, sensor, mask, timeline):
@@ -158,7 +155,7 @@ def _inputs(histories, sensor, mask, timeline):
         raise ValueError("histories contain NaN or inf (in observed entries)")
     if mask is not None:
         X = np.where(mask, X, 0.0)
-    sensor = infer_sensor(X, mask) if sensor is None else check_sensor(sensor)
+    sensor = check_values(X, mask, sensor)
     if X.shape[1] % COLUMNS_PER_STEP[sensor]:
         raise ValueError(f"{sensor} histories need an even number of columns (x, y per step), "
                          f"got {X.shape[1]}" if COLUMNS_PER_STEP[sensor] == 2 else
