@@ -20,7 +20,7 @@ from threadpoolctl import ThreadpoolController
 from mappers.catalog import MethodSpec, check_size
 from mappers.core.align import apply_affine, check_anchors, check_not_collinear, fit_affine
 from mappers.core.errors import MappingError
-from mappers.core.sensors import COLUMNS_PER_STEP, check_sensor, infer_sensor, sensor_name
+from mappers.core.sensors import COLUMNS_PER_STEP, check_values, sensor_name
 
 __all__ = ["Map", "check_inputs", "fit_checked", "fit_fused_method", "fit_method"]
 
@@ -115,9 +115,7 @@ def _sparse_inputs(X: Any, sensor: str | None, mask: Any) -> tuple[Any, Any, str
     X.eliminate_zeros()
     if not np.all(np.isfinite(X.data)):
         raise ValueError("histories contain NaN or inf (in observed entries)")
-    if sensor is None:
-        sensor = infer_sensor(X)  # from the stored values: never densified
-    return X, mask, check_sensor(sensor)
+    return X, mask, check_values(X, None, sensor)  # the stored values: never densified
 
 
 def check_inputs(histories, sensor=None, mask=None, timeline=None):
@@ -146,7 +144,7 @@ def check_inputs(histories, sensor=None, mask=None, timeline=None):
         raise ValueError("histories contain NaN or inf (in observed entries)")
     if mask is not None:
         X = np.where(mask, X, 0.0)
-    sensor = infer_sensor(X, mask) if sensor is None else check_sensor(sensor)
+    sensor = check_values(X, mask, sensor)
     if X.shape[1] % COLUMNS_PER_STEP[sensor]:
         raise ValueError(f"{sensor} histories need an even number of columns (x, y per step), "
                          f"got {X.shape[1]}" if COLUMNS_PER_STEP[sensor] == 2 else

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from mappers.core.sensors import COLUMNS_PER_STEP, check_sensor_set, check_timeline
+from mappers.core.sensors import COLUMNS_PER_STEP, check_sensor_set, check_timeline, check_values
 
 __all__ = ["check_fused"]
 
@@ -97,6 +97,7 @@ def check_fused(
         observed = X if masks[s] is None else X[masks[s]]
         if not np.all(np.isfinite(observed)):
             raise ValueError(f"histories[{s!r}] contain NaN or inf (in observed entries)")
+        check_values(X, masks[s], s)  # e.g. no negative range
         if masks[s] is not None:
             matrices[s] = np.where(masks[s], X, 0.0)
     n_steps = next(iter(steps.values()))[1]

@@ -25,6 +25,7 @@ __all__ = [
     "SENSORS",
     "check_sensor",
     "check_sensor_set",
+    "check_values",
     "sensor_name",
     "check_timeline",
     "infer_sensor",
@@ -115,18 +116,59 @@ def check_timeline(timeline: Any, n_steps: int) -> np.ndarray | None:
     return tl.astype(np.int64)
 
 
+def check_values(X: Any, mask: Any = None, sensor: str | None = None) -> str:
+    """The sensor of a history matrix: ``sensor`` checked (a name of :data:`SENSORS`), or
+    inferred from ``X`` (:func:`infer_sensor`) when None; a ValueError when the observed values
+    cannot be of it (a negative range, say bearings in radians). ``X`` dense or scipy sparse
+    (its stored values are the observed ones; ``mask``, if any, already applied)."""
+    if sensor is None:
+        return infer_sensor(X, None if sp.issparse(X) else mask)
+    check_sensor(sensor)
+    if sensor == "range":
+        _check_ranges(X, mask)
+    return sensor
+
+
+def _check_ranges(X: Any, mask: Any = None) -> None:
+    """A ValueError unless every observed value of ``X`` is >= 0 (a range can be no less)."""
+    if sp.issparse(X):
+        observed = sp.csr_array(X).data
+    else:
+        X = np.asarray(X, dtype=float)
+        observed = X if mask is None else X[np.asarray(mask, dtype=bool)]
+    negative = observed[observed < 0]
+    if negative.size:
+        raise ValueError(
+            f"range histories must be >= 0, got {negative.size} negative observed value(s) "
+            f"(the smallest {negative.min():g}). Bearings (angles) are passed as interleaved "
+            "(cos, sin) column pairs, not as angles: for an (M, N) matrix of angles `a`, "
+            "X = np.stack([np.cos(a), np.sin(a)], axis=-1).reshape(M, 2 * N) with the mask "
+            "repeated per column pair (np.repeat(mask, 2, axis=1)); or give sensor='bearing' "
+            "with those pairs.")
+
+
 def infer_sensor(X: np.ndarray, mask: np.ndarray | None = None) -> str:
     """Guess the sensor of a history matrix from its observed entries.
 
     All entries 0/1 -> "visibility"; an even number of columns whose (cos, sin) pairs are unit
-    vectors (all-zero pairs ignored) -> "bearing"; anything else -> "range". A scipy sparse
-    ``X`` (no mask) is judged from its stored values alone, never densified.
+    vectors (all-zero pairs ignored) -> "bearing"; else, all entries >= 0 -> "range"; anything
+    else (e.g. bearings given as angles in radians) is a ValueError. A scipy sparse ``X`` (no
+    mask) is judged from its stored values alone, never densified.
     """
     if sp.issparse(X):
         if mask is not None:
             raise ValueError("a mask cannot be given with a sparse history matrix")
-        return _infer_sparse_sensor(sp.csr_array(X, dtype=np.float64))
-    X = np.asarray(X, dtype=float)
+        X = sp.csr_array(X, dtype=np.float64)
+        sensor = _infer_sparse_sensor(X)
+    else:
+        X = np.asarray(X, dtype=float)
+        sensor = _infer_dense_sensor(X, mask)
+    if sensor == "range":
+        _check_ranges(X, mask)
+    return sensor
+
+
+def _infer_dense_sensor(X: np.ndarray, mask: np.ndarray | None) -> str:
     observed = X if mask is None else X[mask]
     if np.all((observed == 0) | (observed == 1)):
         return "visibility"

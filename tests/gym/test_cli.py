@@ -79,6 +79,7 @@ def clean(tmp_path_factory):
     return out
 
 
+@pytest.mark.xdist_group("cli-clean")
 def test_reproduce_end_to_end(clean, capsys):
     rows = read_results(clean / "results.csv")
     # per run: LPCA at N=100, 200; SMA(WGT), ISOMAP: their K grid at N=200 + the default at N=100
@@ -130,6 +131,7 @@ def _interrupt_then_resume(tmp_path: Path, sig: int, extra: list[str],
     return proc.returncode, rows_at_stop
 
 
+@pytest.mark.xdist_group("cli-clean-longer")
 def test_sigkill_then_rerun_gives_the_rows_of_a_clean_run(clean_longer, tmp_path):
     code, stopped = _interrupt_then_resume(tmp_path, signal.SIGKILL, [])
     assert code == -signal.SIGKILL
@@ -137,6 +139,7 @@ def test_sigkill_then_rerun_gives_the_rows_of_a_clean_run(clean_longer, tmp_path
     assert _comparable(read_results(tmp_path / "results.csv")) == clean_longer
 
 
+@pytest.mark.xdist_group("cli-clean-longer")
 @pytest.mark.parametrize(("sig", "jobs", "group"),
                          [(signal.SIGINT, "2", False), (signal.SIGINT, "2", True),
                           (signal.SIGTERM, "1", False)],
@@ -175,6 +178,7 @@ def test_unwritable_out_is_refused(tmp_path, capsys):
     assert "cannot write to output directory" in err
 
 
+@pytest.mark.xdist_group("cli-clean")
 def test_changed_settings_on_same_out_are_refused(clean, capsys):
     args = [a if a != "200" else "300" for a in SMALL]
     err = _error(["reproduce", *args, "--out", str(clean)], capsys)

@@ -1,5 +1,6 @@
 """build_map: the whole pipeline, unmapped objects, sensor inference, and every bad input."""
 
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -135,6 +136,69 @@ def test_infer_sensor_of_a_sparse_history_reads_the_stored_values_only(monkeypat
     from mappers.fitting import check_inputs
 
     assert check_inputs(sp.csr_array(B), None, None, None)[2] == "bearing"
+
+
+def _angles_and_mask(seed=0):
+    """Bearings as an (M, N) matrix of angles [rad] (the wrong form) and an (M, N) mask."""
+    H, P, a = world(sensor="bearing", n_steps=300, seed=seed)
+    angles = np.arctan2(H[:, 1::2], H[:, 0::2])
+    mask = np.random.default_rng(seed).random(angles.shape) < 0.7
+    return np.where(mask, angles, 0.0), mask, P, a
+
+
+ANGLES_HINT = r"np\.stack\(\[np\.cos\(a\), np\.sin\(a\)\], axis=-1\)\.reshape\(M, 2 \* N\)"
+
+
+def test_bearings_in_radians_are_refused_with_the_way_to_pass_them():
+    import scipy.sparse as sp
+
+    A, mask, P, a = _angles_and_mask()
+    assert (A[mask] < 0).any()
+    for call in (lambda: build_map(A, a, P[a], mask=mask), lambda: build_map(A, a, P[a]),
+                 lambda: build_map(sp.csr_array(A), a, P[a]),
+                 lambda: build_map(sp.csr_array(A), a, P[a], mask=sp.csr_array(mask)),
+                 lambda: infer_sensor(A, mask), lambda: infer_sensor(sp.csr_array(A))):
+        with pytest.raises(ValueError, match=r"range histories must be >= 0") as err:
+            call()
+        assert re.search(ANGLES_HINT, str(err.value)) and "sensor='bearing'" in str(err.value)
+        assert "np.repeat(mask, 2, axis=1)" in str(err.value)
+    # what the message says to do maps them
+    M, N = A.shape
+    X = np.stack([np.cos(A), np.sin(A)], axis=-1).reshape(M, 2 * N)
+    m = build_map(X, a, P[a], mask=np.repeat(mask, 2, axis=1))
+    assert m.sensor == "bearing" and mean_position_error(m.positions, P, exclude=a) < 0.25
+
+
+def test_a_negative_range_is_refused_even_when_the_sensor_is_given():
+    import scipy.sparse as sp
+
+    R, P, a = world(sensor="range", n_steps=300)
+    R[5, 17] = -0.25
+    for X in (R, sp.csr_array(R)):
+        for sensor in (None, "range"):
+            with pytest.raises(ValueError, match=r"range histories must be >= 0, got 1 negative"):
+                build_map(X, a, P[a], "SMA(WGT)", sensor=sensor)
+    mask = np.ones(R.shape, dtype=bool)
+    mask[5, 17] = False  # an unobserved entry may hold anything
+    assert build_map(R, a, P[a], sensor="range", mask=mask).sensor == "range"
+    with pytest.raises(ValueError, match=r"range histories must be >= 0"):  # fused: the same
+        B, _, _ = world(sensor="bearing", n_steps=300)
+        build_map({"range": R, "bearing": B}, a, P[a])
+
+
+@pytest.mark.parametrize("sensor", ["visibility", "bearing", "range"])
+def test_valid_histories_keep_their_sensor(sensor):
+    import scipy.sparse as sp
+    from mappers.sensors import check_values
+
+    H, _, _ = world(sensor=sensor, n_steps=300)
+    mask = np.random.default_rng(1).random(H.shape) < 0.8
+    if sensor == "bearing":
+        mask = np.repeat(mask[:, ::2], 2, axis=1)
+    for X, m in ((H, None), (np.where(mask, H, 0.0), mask), (sp.csr_array(H), None)):
+        assert infer_sensor(X, m) == sensor
+        assert check_values(X, m, None) == sensor
+        assert check_values(X, m, sensor) == sensor
 
 
 def test_mask_all_true_is_no_mask():

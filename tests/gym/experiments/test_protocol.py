@@ -128,6 +128,7 @@ def test_poses_share_their_layout_and_layouts_differ():
 
 
 # ------------------------------------------------------------------ running
+@pytest.mark.xdist_group("protocol-clean-run")
 def test_small_protocol_writes_every_row_table_and_figures(clean_run):
     out, summary, rows = clean_run
     config = ProtocolConfig(**SMALL)
@@ -151,6 +152,7 @@ def test_small_protocol_writes_every_row_table_and_figures(clean_run):
     assert len(list(out.glob("map_*.png"))) == 2  # LPCA and the best method
 
 
+@pytest.mark.xdist_group("protocol-clean-run")
 def test_rerun_resumes_without_recomputing(clean_run, tmp_path):
     out, _, rows = clean_run
     summary = run_protocol(ProtocolConfig(**SMALL), out, progress=False, report=False)
@@ -158,12 +160,14 @@ def test_rerun_resumes_without_recomputing(clean_run, tmp_path):
     _same_rows(read_results(out / "results.csv"), rows)
 
 
+@pytest.mark.xdist_group("protocol-clean-run")
 def test_other_settings_on_the_same_directory_are_refused(clean_run):
     out, _, _ = clean_run
     with pytest.raises(SettingsMismatchError, match="steps: 200 in the directory, 400 now"):
         run_protocol(ProtocolConfig(**{**SMALL, "steps": 400}), out, progress=False)
 
 
+@pytest.mark.xdist_group("protocol-clean-run")
 def test_partial_journal_is_completed_to_the_same_rows(clean_run, tmp_path):
     """A run stopped after some units resumes to exactly the rows of a clean run."""
     _, _, rows = clean_run
@@ -178,12 +182,14 @@ def test_partial_journal_is_completed_to_the_same_rows(clean_run, tmp_path):
     _same_rows(read_results(tmp_path / "results.csv"), rows)
 
 
+@pytest.mark.xdist_group("protocol-clean-run")
 def test_two_worker_processes_give_the_same_rows(clean_run, tmp_path):
     _, _, rows = clean_run
     run_protocol(ProtocolConfig(**SMALL), tmp_path, jobs=2, progress=False, report=False)
     _same_rows(read_results(tmp_path / "results.csv"), rows)
 
 
+@pytest.mark.xdist_group("protocol-clean-run")
 def test_dask_cluster_gives_the_same_rows(clean_run, tmp_path):
     distributed = pytest.importorskip("distributed")
     _, _, rows = clean_run

@@ -61,8 +61,12 @@ def test_files_written_before_compact_histories_still_load(name, env_id, n_objec
     assert not old.compact
     again = collect(env_id, RandomWalkPolicy(seed=0), n_steps, seed=seed,
                     make_kwargs={"n_objects": n_objects})
-    np.testing.assert_array_equal(old.matrix, again.matrix)
     np.testing.assert_array_equal(old.robot_poses, again.robot_poses)
+    if name == "visibility":  # 0/1 readings: exact
+        np.testing.assert_array_equal(old.matrix, again.matrix)
+    else:  # float32 bearings written on another machine: to a few units in their last place
+        # (2**-23 ~ 1.2e-7 at 1; cos/sin and BLAS differ across CPUs, see test_trajectory_identity)
+        np.testing.assert_allclose(old.matrix, again.matrix, rtol=0, atol=1e-6)
 
 
 def test_a_dense_matrix_beyond_the_budget_is_refused_naming_the_sparse_accessor():

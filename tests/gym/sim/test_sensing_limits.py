@@ -50,17 +50,20 @@ def _brute_in_view(pose, objects, fov_deg, max_range):
 
 
 def _brute_clear(pose, objects, r):
-    """Whether the segment robot -> object j keeps at least r from every other object's centre."""
-    p = np.asarray(pose[:2])
+    """Whether the segment robot -> object j keeps at least r from every other object's centre
+    (pair by pair, in plain float arithmetic)."""
+    px, py = float(pose[0]), float(pose[1])
+    points = [(float(x), float(y)) for x, y in objects]
     out = []
-    for j, oj in enumerate(objects):
-        seg = oj - p
+    for j, (jx, jy) in enumerate(points):
+        sx, sy = jx - px, jy - py
         clear = True
-        for k, ok in enumerate(objects):
+        for k, (kx, ky) in enumerate(points):
             if k == j:
                 continue
-            t = np.clip(np.dot(ok - p, seg) / np.dot(seg, seg), 0.0, 1.0)
-            if np.linalg.norm(p + t * seg - ok) < r:
+            t = min(max(((kx - px) * sx + (ky - py) * sy) / (sx * sx + sy * sy), 0.0), 1.0)
+            dx, dy = px + t * sx - kx, py + t * sy - ky
+            if math.sqrt(dx * dx + dy * dy) < r:
                 clear = False
                 break
         out.append(clear)
