@@ -44,6 +44,9 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("mappers", "lfmdr_gym")
 FORBIDDEN_IN_MAPPERS = ("gymnasium", "gym", "pygame", "lfmdr_gym")
 MAX_LINES = 600
+FAMILIES = ("smacof", "paper", "calibrated", "masked", "viewpoints", "fused", "online")
+"""The method families of ``mappers``: each imports ``mappers.core``, the layer below it, and
+another family only through the names that family's ``__init__`` declares."""
 
 
 # ------------------------------------------------------------------ the import graph
@@ -256,6 +259,37 @@ def test_no_module_over_max_lines():
             if n > MAX_LINES:
                 long.append(f"{path.relative_to(ROOT).as_posix()}: {n} lines")
     assert not long, f"modules over {MAX_LINES} lines (split them):\n  " + "\n  ".join(long)
+
+
+def family_breaches(root: Path) -> list[str]:
+    """``file:line imports module`` for each import that crosses ``mappers``' rooms the wrong
+    way: ``mappers.core`` importing anything of ``mappers`` but ``core`` (it is the bottom),
+    :mod:`mappers.catalog` or :mod:`mappers.defaults` importing a family (the catalog names
+    methods by entry points and imports none), and a family importing another family's
+    sub-module instead of the names its package declares."""
+    found = []
+    for module, path in modules_of(root, "mappers").items():
+        parts = module.split(".")
+        own = parts[1] if len(parts) > 1 else None
+        for base, names, line in imports_in(path, module):
+            for name in sorted(_named(base, names, modules_of(root, "mappers"))):
+                target = name.split(".")
+                if target[0] != "mappers" or len(target) < 2:
+                    continue
+                where = f"{path.relative_to(root).as_posix()}:{line} imports {name}"
+                if own == "core" and target[1] != "core":
+                    found.append(where + " (core is the bottom layer)")
+                elif own in ("catalog", "defaults") and target[1] in FAMILIES:
+                    found.append(where + " (the catalog and the defaults import no method)")
+                elif own in FAMILIES and target[1] in FAMILIES and target[1] != own \
+                        and len(target) > 2:
+                    found.append(where + f" (import it from mappers.{target[1]})")
+    return found
+
+
+def test_method_families_keep_to_their_rooms():
+    found = family_breaches(ROOT)
+    assert not found, "imports across the families of mappers:\n  " + "\n  ".join(found)
 
 
 # ------------------------------------------------------------------ the checker itself

@@ -16,6 +16,9 @@ from mappers.calibrated.cal_sma import (
 from mappers.calibrated.cal_sma_sparse import (
     SparseCalibratedSMACOF,
 )
+from mappers.calibrated.factory import (
+    dense_keywords,
+)
 from mappers.calibrated.unfolding import (
     ClassicalUnfolding,
 )
@@ -26,6 +29,7 @@ __all__ = [
     "ClassicalUnfolding",
     "FoldWarning",
     "SparseCalibratedSMACOF",
+    "dense_keywords",
     "fit_calibration",
     "fold_score",
     "history_dissimilarity",

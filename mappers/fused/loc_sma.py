@@ -45,6 +45,7 @@ from mappers.fused.law_of_cosines import (
 )
 from mappers.fused.rigidity import anchored_components, flexible_objects
 from mappers.smacof import classical_mds, weighted_smacof
+from mappers.viewpoints import BearingAdjustment, RangeBearingAdjustment
 
 __all__ = ["LawOfCosinesSMACOF", "RigidityWarning", "pair_weights"]
 
@@ -178,15 +179,11 @@ class LawOfCosinesSMACOF(TransformerMixin, BaseEstimator):
             warnings.warn(msg, RigidityWarning, stacklevel=2)
         self.adjustment_ = None
         if self.refine == "bearing":
-            from mappers.viewpoints.bearing import BearingAdjustment  # it imports the registry
-
             self.adjustment_ = BearingAdjustment()
             Y = self.adjustment_.fit_transform(X["bearing"], mask=masks.get("bearing"),
                                                anchor_ids=ids, anchor_positions=pos,
                                                start_positions=Y)
         elif self.refine == "range-bearing":
-            from mappers.viewpoints.range_bearing import RangeBearingAdjustment
-
             self.adjustment_ = RangeBearingAdjustment()
             Y = self.adjustment_.fit_transform(X, masks=masks, anchor_ids=ids,
                                                anchor_positions=pos, start_positions=Y)

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from mappers.calibrated import CalibratedSMACOF, fit_calibration
-from mappers.smacof.weighted import squared_distance_matrix
+from mappers.smacof import squared_distance_matrix
 
 __all__ = ["gram_dissimilarity"]
 

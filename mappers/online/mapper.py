@@ -47,8 +47,7 @@ from typing import Any
 
 import numpy as np
 
-from mappers.calibrated import fold_score, log_floor
-from mappers.calibrated.factory import dense_keywords
+from mappers.calibrated import dense_keywords, fold_score, log_floor
 from mappers.catalog import resolve_method
 from mappers.core.align import apply_affine, check_anchor_ids, check_anchors
 from mappers.core.errors import MappingError
