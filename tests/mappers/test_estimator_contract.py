@@ -122,6 +122,16 @@ def _expected_failed_checks(estimator) -> dict[str, str]:
              "check_readonly_memmap_input", "check_fit2d_1feature", "check_fit_idempotent",
              "check_fit_check_is_fitted", "check_n_features_in"),
             "2 steps give a rank-1 matrix: no 2-D unfolding")
+    if kind is MaskedMapper:
+        # these checks fit on data with negative entries (standard normal draws): a history of
+        # no sensor holds those, and a range history must be >= 0 (refused by name since
+        # mappers.core.sensors.check_values); the checks on non-negative data pass
+        return dict.fromkeys(
+            ("check_estimators_overwrite_params", "check_estimators_fit_returns_self",
+             "check_readonly_memmap_input", "check_positive_only_tag_during_fit",
+             "check_n_features_in_after_fitting", "check_pipeline_consistency",
+             "check_estimators_pickle"),
+            "the checks' data hold negative values, which no history can: refused as a range")
     if kind in _FUSED:
         return dict.fromkeys(_FITTED + _ARRAY_INPUT, _FUSED[kind])
     if kind in _CANNOT_FIT:
