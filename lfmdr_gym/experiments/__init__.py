@@ -14,19 +14,7 @@ from lfmdr_gym.experiments.scoring import evaluate, map_history, score_map
 from lfmdr_gym.experiments.store import ResultStore, SettingsMismatchError, read_results
 
 __all__ = [
-    "Episode",
-    "ProtocolConfig",
-    "ProtocolSummary",
-    "ResultStore",
-    "SettingsMismatchError",
-    "collect_episode",
-    "collect_history",
-    "compare_tables",
-    "evaluate",
-    "map_history",
-    "map_history_file",
-    "read_results",
-    "run_episode",
-    "run_protocol",
-    "score_map",
+    "Episode", "ProtocolConfig", "ProtocolSummary", "ResultStore", "SettingsMismatchError",
+    "collect_episode", "collect_history", "compare_tables", "evaluate", "map_history",
+    "map_history_file", "read_results", "run_episode", "run_protocol", "score_map"
 ]
