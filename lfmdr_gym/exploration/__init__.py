@@ -13,6 +13,7 @@ from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
 from lfmdr_gym.exploration.registry import POLICIES, PolicySpec
 
 __all__ = [
-    "POLICIES", "Policy", "PolicySpec", "PredictPolicy", "RandomWalkPolicy", "as_policy",
-    "base_env", "check_policy"
+    "Policy", "PredictPolicy", "as_policy", "base_env", "check_policy",
+    "RandomWalkPolicy",
+    "POLICIES", "PolicySpec",
 ]

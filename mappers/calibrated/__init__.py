@@ -18,7 +18,9 @@ from mappers.calibrated.factory import dense_keywords
 from mappers.calibrated.unfolding import ClassicalUnfolding
 
 __all__ = [
-    "CalibratedSMACOF", "CalibrationFit", "ClassicalUnfolding", "FoldWarning",
-    "SparseCalibratedSMACOF", "dense_keywords", "fit_calibration", "fold_score",
-    "history_dissimilarity", "log_floor"
+    "CalibratedSMACOF", "CalibrationFit", "FoldWarning", "fit_calibration", "fold_score",
+    "history_dissimilarity", "log_floor",
+    "SparseCalibratedSMACOF",
+    "dense_keywords",
+    "ClassicalUnfolding",
 ]

@@ -15,7 +15,9 @@ from mappers.fused.rigidity import anchored_components, flexible_objects
 from mappers.fused.vb_sma import VisibilityBearingSMACOF, joined_rows
 
 __all__ = [
-    "LawOfCosinesSMACOF", "RigidityWarning", "VisibilityBearingSMACOF", "anchored_components",
-    "flexible_objects", "frame_triangles", "frame_values", "handedness_votes", "joined_rows",
-    "pair_weights", "pooled_frame_distances", "sample_variance_model"
+    "frame_triangles", "frame_values", "handedness_votes", "pooled_frame_distances",
+    "sample_variance_model",
+    "LawOfCosinesSMACOF", "RigidityWarning", "pair_weights",
+    "anchored_components", "flexible_objects",
+    "VisibilityBearingSMACOF", "joined_rows",
 ]

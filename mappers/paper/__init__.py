@@ -9,5 +9,6 @@ from mappers.paper.methods import LaplacianEigenmap, LocallyLinear
 from mappers.paper.mvu import MaximumVarianceUnfolding, mvu_constraint_matrix
 
 __all__ = [
-    "LaplacianEigenmap", "LocallyLinear", "MaximumVarianceUnfolding", "mvu_constraint_matrix"
+    "LaplacianEigenmap", "LocallyLinear",
+    "MaximumVarianceUnfolding", "mvu_constraint_matrix",
 ]

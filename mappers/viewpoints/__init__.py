@@ -38,11 +38,14 @@ from mappers.viewpoints.visibility import (
 from mappers.viewpoints.walk_prior import forward_backward, gaussian_taps
 
 __all__ = [
-    "BearingAdjustment", "BearingAdjustmentWarning", "ConeProblem", "MAX_FOV_DEG",
-    "MAX_FREE_OBJECTS", "RangeBearingAdjustment", "ViewAdjustment", "ViewAdjustmentWarning",
-    "VisibilityAdjustment", "VisibilityAdjustmentWarning", "anchored_start", "bearing_angles",
-    "bearing_residuals", "estimate_fov", "fit_start", "forward_backward", "gaussian_taps",
-    "initial_poses", "intersect", "joint_step", "keep_if_better", "normal_blocks", "pose_jacobian",
-    "ray_spread", "resect", "robust_cost", "robust_weights", "scatter_sum", "view_cone_score",
-    "visibility_bits", "wrap_angles"
+    "BearingAdjustment", "BearingAdjustmentWarning",
+    "bearing_angles", "bearing_residuals", "initial_poses", "intersect", "joint_step",
+    "normal_blocks", "pose_jacobian", "ray_spread", "resect", "robust_cost", "robust_weights",
+    "scatter_sum", "wrap_angles",
+    "RangeBearingAdjustment",
+    "anchored_start", "fit_start", "keep_if_better",
+    "MAX_FOV_DEG", "MAX_FREE_OBJECTS", "ConeProblem", "ViewAdjustment", "ViewAdjustmentWarning",
+    "estimate_fov", "view_cone_score",
+    "VisibilityAdjustment", "VisibilityAdjustmentWarning", "visibility_bits",
+    "forward_backward", "gaussian_taps",
 ]
