@@ -22,8 +22,12 @@ from lfmdr_gym.histories import History, collect, collect_vector
 from lfmdr_gym.sim import CAMERA_PRESET
 from mappers.core.sensors import FUSED_SENSORS, SENSORS, check_sensor
 
-__all__ = ["ENV_IDS", "POLICIES", "PRESETS", "History", "LFMDREnv", "RandomWalkPolicy", "as_policy", "collect",
-           "collect_vector", "env_id_for"]
+__all__ = [
+    "LFMDREnv",
+    "POLICIES", "RandomWalkPolicy", "as_policy",
+    "History", "collect", "collect_vector",
+    "ENV_IDS", "PRESETS", "env_id_for",
+]
 
 MAX_EPISODE_STEPS = 2000
 """The paper's episode length N (paper §4.1)."""

@@ -18,6 +18,8 @@ from typing import Any
 _POLICY_HELP = ("exploration policy, a name of lfmdr_gym.POLICIES (random-walk, coverage, "
                 "coverage-scan, rl, spread, even)")
 
+_WALK_SEED_HELP = "seed of layout, start pose and walk"
+
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 
@@ -39,6 +41,13 @@ class _Formatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescription
 def _text(*paragraphs: str) -> str:
     """Help paragraphs wrapped for the terminal (the raw formatter keeps the blank lines)."""
     return "\n\n".join(textwrap.fill(" ".join(p.split()), width=88) for p in paragraphs)
+
+
+def _add_command(sub: Any, name: str, summary: str, *description: str) -> argparse.ArgumentParser:
+    """A sub-command's parser: ``summary`` in ``lfmdr --help``, the ``description`` paragraphs
+    in its own help."""
+    return sub.add_parser(name, formatter_class=_Formatter, help=summary,
+                          description=_text(*description))
 
 
 def _positive_int(text: str) -> int:
@@ -123,6 +132,27 @@ def _add_env_keywords(p: argparse.ArgumentParser) -> None:
                         "sensing (see LFMDREnv); values are read as numbers, true/false or none")
 
 
+def _add_episode_options(p: argparse.ArgumentParser, env_help: str | None) -> None:
+    """``--env`` (when ``env_help`` is given: an env id) and ``--steps``, the episode to run."""
+    if env_help is not None:
+        p.add_argument("--env", default="LFMDR-Visibility-v0", metavar="ID", help=env_help)
+    p.add_argument("--steps", type=_positive_int, default=2000, help="episode length N")
+
+
+def _add_seed_option(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument("--seed", type=int, default=0, help=what)
+
+
+def _add_policy_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--policy", default="random-walk", metavar="NAME", help=_POLICY_HELP)
+
+
+def _add_every_option(p: argparse.ArgumentParser, otherwise: str) -> None:
+    p.add_argument("--every", type=_positive_int, default=None,
+                   help="checkpoint interval; must divide --steps (default: 500 for visibility, "
+                        + otherwise + ")")
+
+
 class _OldEnvKeyword(argparse.Action):
     """``reproduce --env NAME=VALUE``, the older spelling of ``--env-kw``: still accepted, with a
     deprecation message naming the new flag, in argparse's style on stderr (everywhere else
@@ -139,39 +169,34 @@ class _OldEnvKeyword(argparse.Action):
 
 
 def _add_reproduce(sub: Any) -> None:
-    p = sub.add_parser(
-        "reproduce", formatter_class=_Formatter,
-        help="run the paper's protocol and write results.csv, table.md/csv and figures",
-        description=_text(
-            "Run the paper's protocol (§4.1): every (layout, pose) episode with the random-walk "
-            "agent; at the last checkpoint every method over its whole parameter grid, at every "
-            "checkpoint each method's default (the paper's optimum). Writes into --out: "
-            "results.csv (one row per sensor, layout, pose, method, param, n_steps), table.md and "
-            "table.csv (best parameter per method, mean ± std of MPE and MOE, beside the paper), "
-            "mpe_vs_n.png (figures 4/5/8), map_*.png example maps (figures 6/7/9) and "
-            "environment.json (package versions and machine).",
-            "Safe to interrupt: each result is saved as soon as it exists; rerunning the same "
-            "command resumes where it stopped, after Ctrl-C or a kill alike, and computes again "
-            "any unit whose mapper failed. Other settings on the same --out are refused. "
-            "Episodes are cached in --out/histories.",
-            "With --env-kw keywords that limit sensing (fov_deg, max_range, noise, dropouts) the "
-            "histories are masked and the methods default to those that map masked histories.",
-        ),
+    p = _add_command(
+        sub, "reproduce", "run the paper's protocol and write results.csv, table.md/csv and figures",
+        "Run the paper's protocol (§4.1): every (layout, pose) episode with the random-walk "
+        "agent; at the last checkpoint every method over its whole parameter grid, at every "
+        "checkpoint each method's default (the paper's optimum). Writes into --out: "
+        "results.csv (one row per sensor, layout, pose, method, param, n_steps), table.md and "
+        "table.csv (best parameter per method, mean ± std of MPE and MOE, beside the paper), "
+        "mpe_vs_n.png (figures 4/5/8), map_*.png example maps (figures 6/7/9) and "
+        "environment.json (package versions and machine).",
+        "Safe to interrupt: each result is saved as soon as it exists; rerunning the same "
+        "command resumes where it stopped, after Ctrl-C or a kill alike, and computes again "
+        "any unit whose mapper failed. Other settings on the same --out are refused. "
+        "Episodes are cached in --out/histories.",
+        "With --env-kw keywords that limit sensing (fov_deg, max_range, noise, dropouts) the "
+        "histories are masked and the methods default to those that map masked histories.",
     )
     _add_sensor_option(p, "visibility (Table 1), bearing (Table 2) or range (beyond the paper: "
                           "the same protocol with a range sensor)")
     p.add_argument("--layouts", type=_positive_int, default=5, help="random object layouts")
     p.add_argument("--poses", type=_positive_int, default=5,
                    help="random start poses per layout (runs = layouts x poses)")
-    p.add_argument("--steps", type=_positive_int, default=2000, help="episode length N")
-    p.add_argument("--every", type=_positive_int, default=None,
-                   help="checkpoint interval; must divide --steps (default: 500 for visibility, "
-                        "200 otherwise)")
+    _add_episode_options(p, None)
+    _add_every_option(p, "200 otherwise")
     p.add_argument("--methods", nargs="+", default=None, metavar="METHOD",
                    help="registered methods that map the sensor's histories, space- or "
                         "comma-separated, case-insensitive (default: every method made for "
                         "complete histories)")
-    p.add_argument("--seed", type=int, default=0, help="base seed of layouts and poses")
+    _add_seed_option(p, "base seed of layouts and poses")
     _add_env_keywords(p)
     p.add_argument("--env", action=_OldEnvKeyword, dest="env_kwargs", metavar="NAME=VALUE",
                    help=argparse.SUPPRESS)  # the older spelling of --env-kw (with a notice)
@@ -188,21 +213,15 @@ def _add_reproduce(sub: Any) -> None:
 
 
 def _add_run(sub: Any) -> None:
-    p = sub.add_parser(
-        "run", formatter_class=_Formatter,
-        help="one episode, mapped at its checkpoints, scores printed, a map figure",
-        description=_text(
-            "Collect one random-walk episode, map it with one method at every checkpoint, print "
-            "MPE and MOE, and write history.npz, scores.csv, map.csv and map.png into --out."
-        ),
+    p = _add_command(
+        sub, "run", "one episode, mapped at its checkpoints, scores printed, a map figure",
+        "Collect one random-walk episode, map it with one method at every checkpoint, print "
+        "MPE and MOE, and write history.npz, scores.csv, map.csv and map.png into --out."
     )
-    p.add_argument("--env", default="LFMDR-Visibility-v0", metavar="ID", help=_ENV_ID_HELP)
-    p.add_argument("--steps", type=_positive_int, default=2000, help="episode length N")
+    _add_episode_options(p, _ENV_ID_HELP)
     _add_method_options(p, "the default for the env's histories, as build_map chooses")
-    p.add_argument("--seed", type=int, default=0, help="seed of layout, start pose and walk")
-    p.add_argument("--every", type=_positive_int, default=None,
-                   help="checkpoint interval; must divide --steps (default: 500 for visibility, "
-                        "200 otherwise, plus N itself)")
+    _add_seed_option(p, _WALK_SEED_HELP)
+    _add_every_option(p, "200 otherwise, plus N itself")
     _add_env_keywords(p)
     p.add_argument("--out", default="lfmdr-run", metavar="DIR", help="output directory")
     p.add_argument("--online", action="store_true",
@@ -211,19 +230,15 @@ def _add_run(sub: Any) -> None:
                         "update), map.csv and map.png (the final online map) and live.gif (the "
                         "growing map beside the robot; needs matplotlib: pip install "
                         "'lfmdr[plots]')")
-    p.add_argument("--policy", default="random-walk", metavar="NAME",
-                   help=_POLICY_HELP)
+    _add_policy_option(p)
     p.set_defaults(handler=_cmd_run)
 
 
 def _add_map(sub: Any) -> None:
-    p = sub.add_parser(
-        "map", formatter_class=_Formatter,
-        help="map a saved history (.npz); scores when it holds the ground truth",
-        description=_text(
-            "Map a saved history with one method; print MPE and MOE when the file holds every "
-            "object's true position; write map.csv and map.png into --out."
-        ),
+    p = _add_command(
+        sub, "map", "map a saved history (.npz); scores when it holds the ground truth",
+        "Map a saved history with one method; print MPE and MOE when the file holds every "
+        "object's true position; write map.csv and map.png into --out."
     )
     p.add_argument("history", metavar="HISTORY.npz", help="a history saved by lfmdr collect/run")
     _add_method_options(p, "the default for the history's sensor and kind, as build_map chooses")
@@ -235,36 +250,27 @@ def _add_map(sub: Any) -> None:
 
 
 def _add_collect(sub: Any) -> None:
-    p = sub.add_parser(
-        "collect", formatter_class=_Formatter,
-        help="record one episode as a history file and summarise it",
-        description=_text(
-            "Run one episode with an exploration policy (default: the paper's random walk) and "
-            "save what the robot sensed (and the ground truth for scoring) as a History .npz; "
-            "print a summary."
-        ),
+    p = _add_command(
+        sub, "collect", "record one episode as a history file and summarise it",
+        "Run one episode with an exploration policy (default: the paper's random walk) and "
+        "save what the robot sensed (and the ground truth for scoring) as a History .npz; "
+        "print a summary."
     )
-    p.add_argument("--env", default="LFMDR-Visibility-v0", metavar="ID",
-                   help=_ENV_ID_HELP + "; a fused one (LFMDR-RangeBearing-v0, "
-                        "LFMDR-VisibilityBearing-v0, LFMDR-Camera-v0) records a fused history")
-    p.add_argument("--steps", type=_positive_int, default=2000, help="episode length N")
-    p.add_argument("--seed", type=int, default=0, help="seed of layout, start pose and walk")
+    _add_episode_options(p, _ENV_ID_HELP + "; a fused one (LFMDR-RangeBearing-v0, "
+                         "LFMDR-VisibilityBearing-v0, LFMDR-Camera-v0) records a fused history")
+    _add_seed_option(p, _WALK_SEED_HELP)
     _add_env_keywords(p)
     p.add_argument("--out", required=True, metavar="FILE.npz", help="history file to write")
-    p.add_argument("--policy", default="random-walk", metavar="NAME",
-                   help=_POLICY_HELP)
+    _add_policy_option(p)
     p.set_defaults(handler=_cmd_collect)
 
 
 def _add_mrclam(sub: Any) -> None:
-    p = sub.add_parser(
-        "mrclam", formatter_class=_Formatter,
-        help="map the landmarks of a real UTIAS MRCLAM run",
-        description=_text(
-            "Map the landmarks of an MRCLAM run directory from the robots' logged sightings "
-            "(no localisation); writes DIR/map.csv (subject, x, y) and a figure, and prints MPE "
-            "and MOE over the non-anchor landmarks."
-        ),
+    p = _add_command(
+        sub, "mrclam", "map the landmarks of a real UTIAS MRCLAM run",
+        "Map the landmarks of an MRCLAM run directory from the robots' logged sightings "
+        "(no localisation); writes DIR/map.csv (subject, x, y) and a figure, and prints MPE "
+        "and MOE over the non-anchor landmarks."
     )
     p.add_argument("run_dir", metavar="RUN_DIR", help="an MRCLAM run directory")
     _add_sensor_option(p, "which measurement to map from (range-bearing: both measurements of "
@@ -294,16 +300,13 @@ def _add_mrclam(sub: Any) -> None:
 def _add_compare(sub: Any) -> None:
     from lfmdr_gym.experiments.reproducibility import TOLERANCE
 
-    p = sub.add_parser(
-        "compare", formatter_class=_Formatter,
-        help="check that a fresh `lfmdr reproduce` run reproduces a reference table",
-        description=_text(
-            "Compare the table.csv of a run directory with a reference one (e.g. "
-            "docs/results/visibility): every method's mean MPE within --mpe-abs metres or "
-            "--mpe-rel of the reference, and its mean MOE within --moe-abs percentage points or "
-            "--moe-rel of the reference. "
-            "Exit status 0 when it reproduces, 1 otherwise."
-        ),
+    p = _add_command(
+        sub, "compare", "check that a fresh `lfmdr reproduce` run reproduces a reference table",
+        "Compare the table.csv of a run directory with a reference one (e.g. "
+        "docs/results/visibility): every method's mean MPE within --mpe-abs metres or "
+        "--mpe-rel of the reference, and its mean MOE within --moe-abs percentage points or "
+        "--moe-rel of the reference. "
+        "Exit status 0 when it reproduces, 1 otherwise."
     )
     p.add_argument("fresh", metavar="RUN_DIR", help="a directory written by lfmdr reproduce")
     p.add_argument("reference", metavar="REFERENCE_DIR", help="e.g. docs/results/visibility")

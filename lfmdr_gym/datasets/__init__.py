@@ -14,13 +14,6 @@ from lfmdr_gym.datasets.mrclam import (
 )
 
 __all__ = [
-    "DEFAULT_BIN_WIDTH",
-    "MRCLAMDataWarning",
-    "MRCLAMReport",
-    "MRCLAMRun",
-    "bin_run",
-    "check_groundtruth",
-    "corner_anchors",
-    "load_mrclam",
-    "read_run",
+    "DEFAULT_BIN_WIDTH", "MRCLAMDataWarning", "MRCLAMReport", "MRCLAMRun", "bin_run",
+    "check_groundtruth", "corner_anchors", "load_mrclam", "read_run",
 ]

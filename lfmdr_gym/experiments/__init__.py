@@ -14,19 +14,10 @@ from lfmdr_gym.experiments.scoring import evaluate, map_history, score_map
 from lfmdr_gym.experiments.store import ResultStore, SettingsMismatchError, read_results
 
 __all__ = [
-    "Episode",
-    "ProtocolConfig",
-    "ProtocolSummary",
-    "ResultStore",
-    "SettingsMismatchError",
-    "collect_episode",
-    "collect_history",
+    "Episode", "collect_episode", "collect_history",
+    "map_history_file", "run_episode",
+    "ProtocolConfig", "ProtocolSummary", "run_protocol",
     "compare_tables",
-    "evaluate",
-    "map_history",
-    "map_history_file",
-    "read_results",
-    "run_episode",
-    "run_protocol",
-    "score_map",
+    "evaluate", "map_history", "score_map",
+    "ResultStore", "SettingsMismatchError", "read_results",
 ]

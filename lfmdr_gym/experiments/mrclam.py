@@ -286,19 +286,10 @@ def map_mrclam_run(
         histories = (histories.replace(mask=None) if isinstance(key, str) else
                      {s: h.replace(mask=None) for s, h in histories.items()})
     history = histories if isinstance(key, str) else next(iter(histories.values()))
-    msgs = list(report.warnings)
     result = build_map(histories, history.anchor_ids, history.anchor_positions, method, **params)
     run = history.meta["run"]
     subjects = np.asarray(history.meta["subjects"], dtype=np.int64)
-    fitted, every = _with_data(histories), np.arange(len(subjects))
-    for w in result.warnings:  # the objects they name as landmark subjects, not as rows
-        w = _in_subjects(w, subjects, fitted if _METHOD_NOTE.match(w) else every)
-        msgs.append(f"{run} ({sensor}, {result.method}): {w}")
-        warnings.warn(msgs[-1], MRCLAMDataWarning, stacklevel=2)
-    if result.unmapped:
-        msgs.append(f"{run} ({sensor}): subject(s) {subjects[list(result.unmapped)].tolist()} are "
-                    "unmapped (empty in map.csv) and not scored")
-        warnings.warn(msgs[-1], MRCLAMDataWarning, stacklevel=2)
+    msgs = [*report.warnings, *_warn_map(result, histories, run, sensor, subjects)]
     mpe, moe, centroid_mpe = _scores(result.positions, history)
     label = "naive" if alias_fill else result.method
     outcome = MRCLAMMap(
@@ -310,6 +301,23 @@ def map_mrclam_run(
         history_meta={**history.meta, "sensor": sensor},
     )
     return outcome if out is None else _write(outcome, Path(out), plot)
+
+
+def _warn_map(result: Any, histories: Any, run: Any, sensor: str,
+              subjects: np.ndarray) -> list[str]:
+    """The map's warnings and unmapped subjects, as messages naming the run, each also warned
+    (as a ``MRCLAMDataWarning`` at the caller of :func:`map_mrclam_run`)."""
+    msgs: list[str] = []
+    fitted, every = _with_data(histories), np.arange(len(subjects))
+    for w in result.warnings:  # the objects they name as landmark subjects, not as rows
+        w = _in_subjects(w, subjects, fitted if _METHOD_NOTE.match(w) else every)
+        msgs.append(f"{run} ({sensor}, {result.method}): {w}")
+        warnings.warn(msgs[-1], MRCLAMDataWarning, stacklevel=3)
+    if result.unmapped:
+        msgs.append(f"{run} ({sensor}): subject(s) {subjects[list(result.unmapped)].tolist()} are "
+                    "unmapped (empty in map.csv) and not scored")
+        warnings.warn(msgs[-1], MRCLAMDataWarning, stacklevel=3)
+    return msgs
 
 
 def _write(result: MRCLAMMap, out: Path, plot: bool) -> MRCLAMMap:

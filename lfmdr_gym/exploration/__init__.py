@@ -12,5 +12,8 @@ from lfmdr_gym.exploration.contract import Policy, PredictPolicy, as_policy, bas
 from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
 from lfmdr_gym.exploration.registry import POLICIES, PolicySpec
 
-__all__ = ["POLICIES", "Policy", "PolicySpec", "PredictPolicy", "RandomWalkPolicy", "as_policy",
-           "base_env", "check_policy"]
+__all__ = [
+    "Policy", "PredictPolicy", "as_policy", "base_env", "check_policy",
+    "RandomWalkPolicy",
+    "POLICIES", "PolicySpec",
+]

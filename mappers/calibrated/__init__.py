@@ -13,25 +13,14 @@ from mappers.calibrated.cal_sma import (
     history_dissimilarity,
     log_floor,
 )
-from mappers.calibrated.cal_sma_sparse import (
-    SparseCalibratedSMACOF,
-)
-from mappers.calibrated.factory import (
-    dense_keywords,
-)
-from mappers.calibrated.unfolding import (
-    ClassicalUnfolding,
-)
+from mappers.calibrated.cal_sma_sparse import SparseCalibratedSMACOF
+from mappers.calibrated.factory import dense_keywords
+from mappers.calibrated.unfolding import ClassicalUnfolding
 
 __all__ = [
-    "CalibratedSMACOF",
-    "CalibrationFit",
-    "ClassicalUnfolding",
-    "FoldWarning",
+    "CalibratedSMACOF", "CalibrationFit", "FoldWarning", "fit_calibration", "fold_score",
+    "history_dissimilarity", "log_floor",
     "SparseCalibratedSMACOF",
     "dense_keywords",
-    "fit_calibration",
-    "fold_score",
-    "history_dissimilarity",
-    "log_floor",
+    "ClassicalUnfolding",
 ]

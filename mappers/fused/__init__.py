@@ -10,31 +10,14 @@ from mappers.fused.law_of_cosines import (
     pooled_frame_distances,
     sample_variance_model,
 )
-from mappers.fused.loc_sma import (
-    LawOfCosinesSMACOF,
-    RigidityWarning,
-    pair_weights,
-)
-from mappers.fused.rigidity import (
-    anchored_components,
-    flexible_objects,
-)
-from mappers.fused.vb_sma import (
-    VisibilityBearingSMACOF,
-    joined_rows,
-)
+from mappers.fused.loc_sma import LawOfCosinesSMACOF, RigidityWarning, pair_weights
+from mappers.fused.rigidity import anchored_components, flexible_objects
+from mappers.fused.vb_sma import VisibilityBearingSMACOF, joined_rows
 
 __all__ = [
-    "LawOfCosinesSMACOF",
-    "RigidityWarning",
-    "VisibilityBearingSMACOF",
-    "anchored_components",
-    "flexible_objects",
-    "frame_triangles",
-    "frame_values",
-    "handedness_votes",
-    "joined_rows",
-    "pair_weights",
-    "pooled_frame_distances",
+    "frame_triangles", "frame_values", "handedness_votes", "pooled_frame_distances",
     "sample_variance_model",
+    "LawOfCosinesSMACOF", "RigidityWarning", "pair_weights",
+    "anchored_components", "flexible_objects",
+    "VisibilityBearingSMACOF", "joined_rows",
 ]

@@ -13,25 +13,10 @@ from mappers.masked.coobservation import (
     range_pair_bounds,
     range_pair_distances,
 )
-from mappers.masked.covis_auto import (
-    CovisAuto,
-    CovisCalibrated,
-    co_observation_coefficient,
-)
-from mappers.masked.covis_sparse import (
-    SparseCovis,
-    sparse_co_observation,
-)
-from mappers.masked.dropout_blend import (
-    WALK_PERSISTENCE,
-    DropoutBlend,
-    smooth_steps,
-)
-from mappers.masked.ensemble import (
-    CovisEnsemble,
-    ensemble_embedding,
-    window_steps,
-)
+from mappers.masked.covis_auto import CovisAuto, CovisCalibrated, co_observation_coefficient
+from mappers.masked.covis_sparse import SparseCovis, sparse_co_observation
+from mappers.masked.dropout_blend import WALK_PERSISTENCE, DropoutBlend, smooth_steps
+from mappers.masked.ensemble import CovisEnsemble, ensemble_embedding, window_steps
 from mappers.masked.pair_maps import (
     MASKED_METHODS,
     MaskedMap,
@@ -41,28 +26,12 @@ from mappers.masked.pair_maps import (
 )
 
 __all__ = [
-    "CovisAuto",
-    "CovisCalibrated",
-    "CovisEnsemble",
-    "DropoutBlend",
-    "MASKED_METHODS",
-    "MaskedMap",
-    "MaskedMapWarning",
-    "MaskedMapper",
-    "SparseCovis",
-    "WALK_PERSISTENCE",
-    "angle_covisibility_dissimilarity",
-    "co_observation_coefficient",
-    "co_observation_components",
-    "co_observation_counts",
-    "covisibility_dissimilarity",
-    "ensemble_embedding",
-    "masked_embedding",
-    "masked_euclidean_dissimilarity",
-    "pair_components",
-    "range_pair_bounds",
-    "range_pair_distances",
-    "smooth_steps",
-    "sparse_co_observation",
-    "window_steps",
+    "angle_covisibility_dissimilarity", "co_observation_components", "co_observation_counts",
+    "covisibility_dissimilarity", "masked_euclidean_dissimilarity", "pair_components",
+    "range_pair_bounds", "range_pair_distances",
+    "CovisAuto", "CovisCalibrated", "co_observation_coefficient",
+    "SparseCovis", "sparse_co_observation",
+    "WALK_PERSISTENCE", "DropoutBlend", "smooth_steps",
+    "CovisEnsemble", "ensemble_embedding", "window_steps",
+    "MASKED_METHODS", "MaskedMap", "MaskedMapper", "MaskedMapWarning", "masked_embedding",
 ]

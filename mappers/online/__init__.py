@@ -3,22 +3,9 @@
 
 from __future__ import annotations
 
-from mappers.online.bearing import (
-    OnlineBundle,
-)
-from mappers.online.cal_sma import (
-    gram_dissimilarity,
-)
-from mappers.online.mapper import (
-    OnlineMapper,
-)
-from mappers.online.view_cone import (
-    OnlineView,
-)
+from mappers.online.bearing import OnlineBundle
+from mappers.online.cal_sma import gram_dissimilarity
+from mappers.online.mapper import OnlineMapper
+from mappers.online.view_cone import OnlineView
 
-__all__ = [
-    "OnlineBundle",
-    "OnlineMapper",
-    "OnlineView",
-    "gram_dissimilarity",
-]
+__all__ = ["OnlineBundle", "OnlineMapper", "OnlineView", "gram_dissimilarity"]

@@ -5,18 +5,10 @@ scikit-learn provides most of them; LLE, LEM and MVU are wrapped or written here
 
 from __future__ import annotations
 
-from mappers.paper.methods import (
-    LaplacianEigenmap,
-    LocallyLinear,
-)
-from mappers.paper.mvu import (
-    MaximumVarianceUnfolding,
-    mvu_constraint_matrix,
-)
+from mappers.paper.methods import LaplacianEigenmap, LocallyLinear
+from mappers.paper.mvu import MaximumVarianceUnfolding, mvu_constraint_matrix
 
 __all__ = [
-    "LaplacianEigenmap",
-    "LocallyLinear",
-    "MaximumVarianceUnfolding",
-    "mvu_constraint_matrix",
+    "LaplacianEigenmap", "LocallyLinear",
+    "MaximumVarianceUnfolding", "mvu_constraint_matrix",
 ]

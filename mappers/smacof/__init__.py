@@ -5,17 +5,8 @@ scikit-learn's ``smacof`` takes no weights; these are written here (de Leeuw 197
 
 from __future__ import annotations
 
-from mappers.smacof.sparse_stress import (
-    candidate_pairs,
-    knn_pairs,
-    landmark_mds,
-    sparse_smacof,
-)
-from mappers.smacof.variants import (
-    bounded_smacof,
-    nonmetric_smacof,
-    power_link_smacof,
-)
+from mappers.smacof.sparse_stress import candidate_pairs, knn_pairs, landmark_mds, sparse_smacof
+from mappers.smacof.variants import bounded_smacof, nonmetric_smacof, power_link_smacof
 from mappers.smacof.weighted import (
     GuttmanTransform,
     WeightedSMACOF,
@@ -27,18 +18,8 @@ from mappers.smacof.weighted import (
 )
 
 __all__ = [
-    "GuttmanTransform",
-    "WeightedSMACOF",
-    "bounded_smacof",
-    "candidate_pairs",
-    "classical_mds",
-    "euclidean_distance_matrix",
-    "knn_pairs",
-    "landmark_mds",
-    "nonmetric_smacof",
-    "power_link_smacof",
-    "raw_stress",
-    "sparse_smacof",
-    "squared_distance_matrix",
-    "weighted_smacof",
+    "candidate_pairs", "knn_pairs", "landmark_mds", "sparse_smacof",
+    "bounded_smacof", "nonmetric_smacof", "power_link_smacof",
+    "GuttmanTransform", "WeightedSMACOF", "classical_mds", "euclidean_distance_matrix",
+    "raw_stress", "squared_distance_matrix", "weighted_smacof",
 ]

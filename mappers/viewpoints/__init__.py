@@ -3,10 +3,7 @@
 
 from __future__ import annotations
 
-from mappers.viewpoints.bearing import (
-    BearingAdjustment,
-    BearingAdjustmentWarning,
-)
+from mappers.viewpoints.bearing import BearingAdjustment, BearingAdjustmentWarning
 from mappers.viewpoints.engine import (
     bearing_angles,
     bearing_residuals,
@@ -22,14 +19,8 @@ from mappers.viewpoints.engine import (
     scatter_sum,
     wrap_angles,
 )
-from mappers.viewpoints.range_bearing import (
-    RangeBearingAdjustment,
-)
-from mappers.viewpoints.start_map import (
-    anchored_start,
-    fit_start,
-    keep_if_better,
-)
+from mappers.viewpoints.range_bearing import RangeBearingAdjustment
+from mappers.viewpoints.start_map import anchored_start, fit_start, keep_if_better
 from mappers.viewpoints.view_cone import (
     MAX_FOV_DEG,
     MAX_FREE_OBJECTS,
@@ -44,41 +35,17 @@ from mappers.viewpoints.visibility import (
     VisibilityAdjustmentWarning,
     visibility_bits,
 )
-from mappers.viewpoints.walk_prior import (
-    forward_backward,
-    gaussian_taps,
-)
+from mappers.viewpoints.walk_prior import forward_backward, gaussian_taps
 
 __all__ = [
-    "BearingAdjustment",
-    "BearingAdjustmentWarning",
-    "ConeProblem",
-    "MAX_FOV_DEG",
-    "MAX_FREE_OBJECTS",
+    "BearingAdjustment", "BearingAdjustmentWarning",
+    "bearing_angles", "bearing_residuals", "initial_poses", "intersect", "joint_step",
+    "normal_blocks", "pose_jacobian", "ray_spread", "resect", "robust_cost", "robust_weights",
+    "scatter_sum", "wrap_angles",
     "RangeBearingAdjustment",
-    "ViewAdjustment",
-    "ViewAdjustmentWarning",
-    "VisibilityAdjustment",
-    "VisibilityAdjustmentWarning",
-    "anchored_start",
-    "bearing_angles",
-    "bearing_residuals",
-    "estimate_fov",
-    "fit_start",
-    "forward_backward",
-    "gaussian_taps",
-    "initial_poses",
-    "intersect",
-    "joint_step",
-    "keep_if_better",
-    "normal_blocks",
-    "pose_jacobian",
-    "ray_spread",
-    "resect",
-    "robust_cost",
-    "robust_weights",
-    "scatter_sum",
-    "view_cone_score",
-    "visibility_bits",
-    "wrap_angles",
+    "anchored_start", "fit_start", "keep_if_better",
+    "MAX_FOV_DEG", "MAX_FREE_OBJECTS", "ConeProblem", "ViewAdjustment", "ViewAdjustmentWarning",
+    "estimate_fov", "view_cone_score",
+    "VisibilityAdjustment", "VisibilityAdjustmentWarning", "visibility_bits",
+    "forward_backward", "gaussian_taps",
 ]
