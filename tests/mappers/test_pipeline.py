@@ -189,6 +189,7 @@ def test_a_negative_range_is_refused_even_when_the_sensor_is_given():
 @pytest.mark.parametrize("sensor", ["visibility", "bearing", "range"])
 def test_valid_histories_keep_their_sensor(sensor):
     import scipy.sparse as sp
+
     from mappers.core.sensors import check_values
 
     H, _, _ = world(sensor=sensor, n_steps=300)
