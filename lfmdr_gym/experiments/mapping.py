@@ -44,13 +44,19 @@ def checkpoints_for(steps: int, every: int | None, sensor: str | None) -> tuple[
 
 
 def _method_and_params(method: str | None, history: History, params) -> tuple[str, dict[str, Any]]:
-    """The registered label that maps ``history`` (None: its default) and its parameters (with
-    those an old label stands for, e.g. ``sparse=True`` for ``CAL-SMA-SPARSE``)."""
-    from mappers import resolve_method
+    """The registered label that maps ``history`` (None: the default ``build_map`` chooses for
+    it, :func:`mappers.default_method`: by sensor, mask, size and dropouts) and its parameters
+    (with those the choice or an old label stands for, e.g. ``sparse=True`` for
+    ``CAL-SMA-SPARSE``)."""
+    from mappers import default_method, resolve_method
     from mappers.catalog import implied_params
 
-    spec = resolve_method(method, history.sensor, masked=history.mask is not None)
-    return spec.label, {**implied_params(spec), **user_params(spec.label, params)}
+    if method is None:
+        label, implied = default_method(history, return_params=True)
+    else:
+        spec = resolve_method(method, history.sensor, masked=history.mask is not None)
+        label, implied = spec.label, implied_params(spec)
+    return label, {**implied, **user_params(label, params)}
 
 
 def _sensor_of(env_id: str) -> str:
@@ -119,9 +125,9 @@ def map_history_file(
     position is in the file, ``mpe``, ``moe``, ``mpe_nonanchor``.
     """
     history = History.load(path)
-    method, params = _method_and_params(method, history, params)
     if n_steps is not None:
         history = history.head(n_steps)
+    method, params = _method_and_params(method, history, params)
     out = ensure_writable_dir(out if out is not None else Path(path).with_suffix(""))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

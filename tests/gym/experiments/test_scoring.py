@@ -26,3 +26,22 @@ def test_mpe_nonanchor_skips_anchors_and_unmapped_objects():
     assert score_map(est, [4], h)["mpe_nonanchor"] == mpe_nonanchor(est, [4], h)
     # nothing mapped but the anchors: no figure rather than an error
     assert np.isnan(mpe_nonanchor(est, [3, 4, 5], h))
+
+
+def test_map_history_file_without_a_method_takes_build_maps_default(tmp_path):
+    """``lfmdr map`` chooses as ``build_map`` does: a flickering visibility history (a camera's
+    dropouts) gets the table's dropout default, not the plain visibility one."""
+    import gymnasium as gym
+
+    import mappers
+    from lfmdr_gym import RandomWalkPolicy, collect
+    from lfmdr_gym.experiments.mapping import map_history_file
+
+    env = gym.make("LFMDR-Visibility-v0", max_episode_steps=600, miss_rate=0.5)
+    history = collect(env, RandomWalkPolicy.for_env(env), 600, seed=3)
+    path = tmp_path / "flicker.npz"
+    history.save(path)
+    chosen = mappers.default_method(history)
+    assert chosen == "VIS-BA-WALK"
+    info = map_history_file(path, out=tmp_path / "out")
+    assert info["method"] == chosen == info["map"].method
