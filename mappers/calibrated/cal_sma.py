@@ -224,6 +224,21 @@ def _features(P: np.ndarray, centre: np.ndarray, half: float, degree: int) -> np
     return np.stack(F, axis=-1) if F else np.zeros(P.shape[:-1] + (0,))
 
 
+CALIBRATION_CONSTRAINTS: dict = {
+    "n_neighbors": [Interval(Integral, 2, None, closed="left"), None],
+    "n_rounds": [Interval(Integral, 1, None, closed="left")],
+    "position_degree": [Interval(Integral, 0, 3, closed="both")],
+    "dissimilarity_degree": [Interval(Integral, 1, 3, closed="both")],
+    "far_weight": [Interval(Real, 0, None, closed="left")],
+    "far_factor": [Interval(Real, 0, None, closed="left")],
+    "max_iter": [Interval(Integral, 1, None, closed="left")],
+    "tol": [Interval(Real, 0, None, closed="left")],
+    "random_state": ["random_state"],
+}
+"""The ``_parameter_constraints`` CAL-SMA and its sparse variant share (calibration rounds,
+neighbour targets, far-pair bound, Guttman updates, seed)."""
+
+
 class CalibratedSMACOF(TransformerMixin, BaseEstimator):
     """Calibrated, anchored, fold-guarded SMACOF of observation histories (label ``"CAL-SMA"``).
 
@@ -260,19 +275,11 @@ class CalibratedSMACOF(TransformerMixin, BaseEstimator):
     """
 
     _parameter_constraints: dict = {
-        "n_neighbors": [Interval(Integral, 2, None, closed="left"), None],
+        **CALIBRATION_CONSTRAINTS,
         "dissimilarity": [StrOptions({"auto", "cosine", "euclidean", "precomputed"})],
-        "n_rounds": [Interval(Integral, 1, None, closed="left")],
-        "position_degree": [Interval(Integral, 0, 3, closed="both")],
-        "dissimilarity_degree": [Interval(Integral, 1, 3, closed="both")],
-        "far_weight": [Interval(Real, 0, None, closed="left")],
-        "far_factor": [Interval(Real, 0, None, closed="left")],
         "n_init": [Interval(Integral, 0, None, closed="left")],
         "fold_threshold": [Interval(Real, 0, None, closed="left")],
         "init": ["array-like", None],
-        "max_iter": [Interval(Integral, 1, None, closed="left")],
-        "tol": [Interval(Real, 0, None, closed="left")],
-        "random_state": ["random_state"],
     }
 
     def __init__(

@@ -19,7 +19,7 @@ large survey would.
 
 from __future__ import annotations
 
-from numbers import Integral, Real
+from numbers import Integral
 
 import numpy as np
 import scipy.sparse as sp
@@ -29,7 +29,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import validate_data
 
-from mappers.calibrated.cal_sma import fit_calibration
+from mappers.calibrated.cal_sma import CALIBRATION_CONSTRAINTS, fit_calibration
 from mappers.core.align import apply_affine, check_anchors, fit_affine
 from mappers.smacof import candidate_pairs, knn_pairs, landmark_mds, sparse_smacof
 
@@ -65,18 +65,10 @@ class SparseCalibratedSMACOF(TransformerMixin, BaseEstimator):
     """
 
     _parameter_constraints: dict = {
-        "n_neighbors": [Interval(Integral, 2, None, closed="left"), None],
+        **CALIBRATION_CONSTRAINTS,
         "dissimilarity": [StrOptions({"auto", "cosine", "euclidean"})],
-        "n_rounds": [Interval(Integral, 1, None, closed="left")],
-        "position_degree": [Interval(Integral, 0, 3, closed="both")],
-        "dissimilarity_degree": [Interval(Integral, 1, 3, closed="both")],
-        "far_weight": [Interval(Real, 0, None, closed="left")],
-        "far_factor": [Interval(Real, 0, None, closed="left")],
         "n_far": [Interval(Integral, 0, None, closed="left")],
         "n_landmarks": [Interval(Integral, 3, None, closed="left")],
-        "max_iter": [Interval(Integral, 1, None, closed="left")],
-        "tol": [Interval(Real, 0, None, closed="left")],
-        "random_state": ["random_state"],
     }
 
     def __init__(self, *, n_neighbors=None, dissimilarity="auto", n_rounds=10, position_degree=2,

@@ -17,7 +17,7 @@ from sklearn.utils.validation import validate_data
 
 from mappers.core.sensors import SENSORS, check_sensor, infer_sensor
 
-__all__ = ["check_fused_input", "check_history", "check_no_bools"]
+__all__ = ["check_fit", "check_fused_input", "check_history", "check_no_bools", "check_views"]
 
 
 def check_history(estimator, X, y=None, *, mask=None, sensor: str | None = None,
@@ -79,3 +79,21 @@ def check_no_bools(estimator, *names: str) -> None:
         if isinstance(value, bool | np.bool_):
             raise ValueError(f"the {name!r} parameter of {type(estimator).__name__} must be a "
                              f"number, got {value!r}")
+
+
+def check_fit(estimator, X, y=None, *, bools: Iterable[str] = (), **history):
+    """``(X, mask, sensor)``: the preamble of a masked estimator's ``fit`` in one call, in this
+    order: its parameters (``estimator._validate_params()``), none of ``bools`` given as a bool
+    (:func:`check_no_bools`), and the history (:func:`check_history` with ``history``'s keyword
+    arguments: mask, sensor, sensors, accept_sparse, min_objects)."""
+    estimator._validate_params()
+    check_no_bools(estimator, *bools)
+    return check_history(estimator, X, y, **history)
+
+
+def check_views(estimator, X, mask=None) -> np.ndarray:
+    """``X`` as a float64 (M, D) array with M >= 3 for a viewpoint adjustment's ``fit`` (as
+    :func:`sklearn.utils.validation.validate_data`); with a mask the unobserved entries may hold
+    anything (NaN), without one every entry must be finite."""
+    return validate_data(estimator, X, dtype=np.float64, ensure_min_samples=3,
+                         ensure_all_finite=mask is None)

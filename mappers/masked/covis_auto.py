@@ -40,7 +40,7 @@ from sklearn.utils._param_validation import Interval
 
 from mappers.calibrated import CalibratedSMACOF
 from mappers.core.sensors import step_observations
-from mappers.core.validation import check_history, check_no_bools
+from mappers.core.validation import check_fit
 from mappers.masked.coobservation import (
     angle_covisibility_dissimilarity,
     covisibility_dissimilarity,
@@ -110,10 +110,9 @@ class CovisCalibrated(TransformerMixin, BaseEstimator):
     def fit(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
             anchor_positions=None):
         """Map the history ``X`` (M, D) (``mask`` True where observed; None: complete)."""
-        self._validate_params()
-        check_no_bools(self, "min_co")
+        X, mask, sensor = check_fit(self, X, y, bools=("min_co",), mask=mask, sensor=sensor,
+                                    sensors=_SENSORS)
         links = _links(self.links)
-        X, mask, sensor = check_history(self, X, y, mask=mask, sensor=sensor, sensors=_SENSORS)
         och, C = co_observation_coefficient(X, mask, sensor)
         far = C < self.min_co
         np.fill_diagonal(far, False)
@@ -172,9 +171,8 @@ class CovisAuto(TransformerMixin, BaseEstimator):
     def fit(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
             anchor_positions=None):
         """Map the bearing history ``X`` (M, 2N) (``mask`` True where observed)."""
-        self._validate_params()
-        check_no_bools(self, "min_co")
-        X, mask, sensor = check_history(self, X, y, mask=mask, sensor=sensor, sensors=("bearing",))
+        X, mask, sensor = check_fit(self, X, y, bools=("min_co",), mask=mask, sensor=sensor,
+                                    sensors=("bearing",))
         _, C = co_observation_coefficient(X, mask, sensor)
         sensed = np.diag(C) > 0
         Cs = C[np.ix_(sensed, sensed)]

@@ -37,7 +37,7 @@ from sklearn.utils._param_validation import Interval
 
 from mappers.calibrated import SparseCalibratedSMACOF
 from mappers.core.sensors import COLUMNS_PER_STEP
-from mappers.core.validation import check_history, check_no_bools
+from mappers.core.validation import check_fit
 
 __all__ = ["SparseCovis", "sparse_co_observation"]
 
@@ -154,10 +154,8 @@ class SparseCovis(TransformerMixin, BaseEstimator):
     def fit(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
             anchor_positions=None):
         """Map the history ``X`` (M, D), dense or sparse (``mask`` True where observed)."""
-        self._validate_params()
-        check_no_bools(self, "min_co")
-        X, mask, sensor = check_history(self, X, y, mask=mask, sensor=sensor, sensors=_SENSORS,
-                                        accept_sparse=True)
+        X, mask, sensor = check_fit(self, X, y, bools=("min_co",), mask=mask, sensor=sensor,
+                                    sensors=_SENSORS, accept_sparse=True)
         m = X.shape[0]
         i, j, och, count, _ = sparse_co_observation(X, mask, sensor=sensor)
         use = (count >= self.min_co) & (och > _FLOOR)

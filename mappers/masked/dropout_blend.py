@@ -47,7 +47,7 @@ from sklearn.utils._param_validation import Interval
 
 from mappers.calibrated import CalibratedSMACOF
 from mappers.core.flicker import persistence, step_runs
-from mappers.core.validation import check_history, check_no_bools
+from mappers.core.validation import check_fit
 from mappers.masked.pair_maps import MaskedMapper, MaskedMapWarning
 
 __all__ = ["WALK_PERSISTENCE", "DropoutBlend", "smooth_steps"]
@@ -114,10 +114,8 @@ class DropoutBlend(TransformerMixin, BaseEstimator):
     def fit(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
             anchor_positions=None, timeline=None):
         """Map the visibility history ``X`` (M, N) (``mask`` True where observed)."""
-        self._validate_params()
-        check_no_bools(self, "window", "min_co", "max_disagreement")
-        X, mask, sensor = check_history(self, X, y, mask=mask, sensor=sensor,
-                                        sensors=("visibility",))
+        X, mask, sensor = check_fit(self, X, y, bools=("window", "min_co", "max_disagreement"),
+                                    mask=mask, sensor=sensor, sensors=("visibility",))
         if anchor_ids is None or anchor_positions is None:
             raise ValueError("DROPOUT-BLEND needs anchors: its two maps meet in the anchors' frame")
         if mask is not None:

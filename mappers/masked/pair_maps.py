@@ -79,7 +79,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 
 from mappers.core.align import apply_affine, check_anchors, fit_affine
 from mappers.core.sensors import step_observations
-from mappers.core.validation import check_history
+from mappers.core.validation import check_fit
 from mappers.masked.coobservation import (
     angle_covisibility_dissimilarity,
     covisibility_dissimilarity,
@@ -405,8 +405,7 @@ class MaskedMapper(TransformerMixin, BaseEstimator):
     def fit(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
             anchor_positions=None):
         """Map the history ``X`` (M, D) (``mask`` True where observed; None: complete)."""
-        self._validate_params()
-        X, mask, sensor = check_history(self, X, y, mask=mask, sensor=sensor)
+        X, mask, sensor = check_fit(self, X, y, mask=mask, sensor=sensor)
         method = _OWN_DEFAULT[sensor] if self.method is None else self.method
         params = {name: getattr(self, name) for name in MASKED_METHODS[method]}
         self.result_ = masked_embedding(X, mask, sensor, method, anchor_ids=anchor_ids,

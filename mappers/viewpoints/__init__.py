@@ -3,22 +3,9 @@
 
 from __future__ import annotations
 
+from mappers.viewpoints import engine
 from mappers.viewpoints.bearing import BearingAdjustment, BearingAdjustmentWarning
-from mappers.viewpoints.engine import (
-    bearing_angles,
-    bearing_residuals,
-    initial_poses,
-    intersect,
-    joint_step,
-    normal_blocks,
-    pose_jacobian,
-    ray_spread,
-    resect,
-    robust_cost,
-    robust_weights,
-    scatter_sum,
-    wrap_angles,
-)
+from mappers.viewpoints.engine import *  # noqa: F403 (its __all__, re-exported below)
 from mappers.viewpoints.range_bearing import RangeBearingAdjustment
 from mappers.viewpoints.start_map import anchored_start, fit_start, keep_if_better
 from mappers.viewpoints.view_cone import (
@@ -39,9 +26,7 @@ from mappers.viewpoints.walk_prior import forward_backward, gaussian_taps
 
 __all__ = [
     "BearingAdjustment", "BearingAdjustmentWarning",
-    "bearing_angles", "bearing_residuals", "initial_poses", "intersect", "joint_step",
-    "normal_blocks", "pose_jacobian", "ray_spread", "resect", "robust_cost", "robust_weights",
-    "scatter_sum", "wrap_angles",
+    *engine.__all__,
     "RangeBearingAdjustment",
     "anchored_start", "fit_start", "keep_if_better",
     "MAX_FOV_DEG", "MAX_FREE_OBJECTS", "ConeProblem", "ViewAdjustment", "ViewAdjustmentWarning",

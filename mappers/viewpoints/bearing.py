@@ -50,8 +50,8 @@ from numbers import Integral, Real
 import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval, StrOptions
-from sklearn.utils.validation import validate_data
 
+from mappers.core.validation import check_views
 from mappers.defaults import localisation_free
 from mappers.viewpoints.engine import (
     bearing_angles,
@@ -148,9 +148,7 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         self._validate_params()
         if sensor != "bearing":
             raise ValueError(f"BEARING-BA maps bearing histories, got a {sensor} history")
-        # (with a mask the unobserved entries may hold anything)
-        X = validate_data(self, X, dtype=np.float64, ensure_min_samples=3,
-                          ensure_all_finite=mask is None)
+        X = check_views(self, X, mask)
         theta, seen = bearing_angles(X, mask)
         m = theta.shape[1]
         ids, pos, P0 = anchored_start(

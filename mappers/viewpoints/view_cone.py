@@ -58,9 +58,9 @@ from scipy.optimize import minimize_scalar
 from scipy.special import log_expit
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval
-from sklearn.utils.validation import validate_data
 
 from mappers.catalog import METHODS
+from mappers.core.validation import check_views
 from mappers.defaults import localisation_free
 from mappers.viewpoints import view_cone_kernels as view_kernels
 from mappers.viewpoints.engine import joint_step
@@ -323,9 +323,7 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         self._validate_params()
         if sensor != "visibility":
             raise ValueError(f"VIEW-BA maps visibility histories, got sensor {sensor!r}")
-        # (with a mask the unobserved entries may hold anything)
-        X = validate_data(self, X, dtype=np.float64, ensure_min_samples=3,
-                          ensure_all_finite=mask is None)
+        X = check_views(self, X, mask)
         if mask is None or np.all(mask):
             raise ValueError("VIEW-BA needs the mask of a limited view (which objects each step "
                              "observed); this history observed every object at every step: map "

@@ -66,9 +66,9 @@ from numbers import Integral, Real
 import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval
-from sklearn.utils.validation import validate_data
 
 from mappers.core.flicker import step_runs
+from mappers.core.validation import check_views
 from mappers.defaults import choose_for_history, localisation_free
 from mappers.fitting import check_inputs
 from mappers.viewpoints.start_map import anchored_start, fit_start
@@ -281,9 +281,7 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
         if sensor != "visibility":
             raise ValueError("the visibility adjustment (VIS-BA-WALK) maps visibility histories, "
                              f"got sensor {sensor!r}")
-        # (with a mask the unobserved entries may hold anything)
-        X = validate_data(self, X, dtype=np.float64, ensure_min_samples=3,
-                          ensure_all_finite=mask is None)
+        X = check_views(self, X, mask)
         seen, observed = visibility_bits(X, mask)
         m = seen.shape[1]
         self.start_method_ = None if start_positions is None else "given"
