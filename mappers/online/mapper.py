@@ -52,7 +52,7 @@ from mappers.catalog import resolve_method
 from mappers.core.align import apply_affine, check_anchor_ids, check_anchors
 from mappers.core.errors import MappingError
 from mappers.core.graph import informative_pairs, knn_mask
-from mappers.core.sensors import COLUMNS_PER_STEP, check_sensor, infer_sensor
+from mappers.core.sensors import COLUMNS_PER_STEP, check_sensor, check_values, infer_sensor
 from mappers.fitting import Map, _thread_limit
 from mappers.online.bearing import OnlineBundle
 from mappers.online.cal_sma import _OnlineCalSMA, gram_dissimilarity
@@ -278,6 +278,8 @@ class OnlineMapper:
         in ``warnings``.
         """
         C, mask = self._check_batch(columns, mask)
+        if self.sensor is not None:
+            check_values(C, mask, self.sensor)  # e.g. no negative range
         self._kind(mask)
         self._m = C.shape[0]
         if self._spec is None:

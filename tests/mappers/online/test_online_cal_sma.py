@@ -340,3 +340,17 @@ def test_cli_run_online(tmp_path, capsys):
                  "20", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "online BEARING-BA" in out and (tmp_path / "live.gif").exists()
+
+
+def test_an_online_range_history_with_a_negative_value_is_refused_by_name():
+    """Every batch of an explicit ``sensor="range"`` is checked as build_map checks a history,
+    the later ones too: a range is >= 0."""
+    rng = np.random.default_rng(0)
+    P = rng.uniform(0, 2, (8, 2))
+    C = np.linalg.norm(P[:, None, :] - rng.uniform(0, 2, (1, 40, 2)), axis=2)
+    online = OnlineMapper(np.arange(4), P[:4], sensor="range")
+    online.update(C[:, :30])
+    bad = C[:, 30:].copy()
+    bad[2, 3] = -0.5
+    with pytest.raises(ValueError, match=">= 0"):
+        online.update(bad)
