@@ -1,7 +1,7 @@
 """How a method's embedding becomes a map: the inputs checked, the method fitted, the anchors fit.
 
-:func:`fit_method` is ``build_map`` once the method is chosen: the history validated (sensor,
-mask, timeline), rows without data left unmapped, rows normalised (paper eq. 7) when the method
+:func:`check_inputs` validates a history (sensor, mask, timeline); :func:`fit_checked` is
+``build_map`` once the method is chosen: rows without data left unmapped, rows normalised (paper eq. 7) when the method
 asks for it, the estimator fitted, the objects it could not place set aside, and the affine map
 onto the anchors applied (paper §3). The viewpoint adjustments draw their start maps with it.
 """
@@ -9,7 +9,6 @@ onto the anchors applied (paper §3). The viewpoint adjustments draw their start
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -22,7 +21,7 @@ from mappers.core.align import apply_affine, check_anchors, check_not_collinear,
 from mappers.core.errors import MappingError
 from mappers.core.sensors import COLUMNS_PER_STEP, check_values, sensor_name
 
-__all__ = ["Map", "check_inputs", "fit_checked", "fit_fused_method", "fit_method"]
+__all__ = ["Map", "check_inputs", "fit_checked", "fit_fused_method"]
 
 # Up to this many objects one BLAS thread is fastest: the matrices are small and the machine's
 # other threads (or processes) only add contention. Above it, the BLAS library decides.
@@ -261,23 +260,12 @@ def _anchor_fit(spec: MethodSpec, Y: np.ndarray, local: np.ndarray, pos: np.ndar
         raise MappingError(f"method {spec.label!r}: cannot fit the anchors: {exc}") from exc
 
 
-def fit_method(spec: MethodSpec, histories: Any, anchor_ids: Sequence[int] | np.ndarray,
-               anchor_positions: Any, *, sensor: str | None = None, mask: Any = None,
-               timeline: Any = None, normalize: bool | None = None,
-               random_state: int | None = 0, params: dict[str, Any] | None = None,
-               notes: list[str] | None = None) -> tuple[Map, Any, np.ndarray]:
-    """The map of ``spec``'s method on a single sensor's histories (checked as ``build_map``
-    checks them), the fitted estimator, and the rows it was fitted on (the objects with data; an
-    online update keeps the estimator's state). ``notes`` are warnings gathered before (they
-    lead ``Map.warnings``)."""
-    X, mask, sensor, timeline = check_inputs(histories, sensor, mask, timeline)
-    return fit_checked(spec, X, anchor_ids, anchor_positions, sensor, mask, timeline, normalize,
-                       random_state, dict(params or {}), list(notes or []))
-
-
 def fit_checked(spec, X, anchor_ids, anchor_positions, sensor, mask, timeline, normalize,
                 random_state, params, notes) -> tuple[Map, Any, np.ndarray]:
-    """:func:`fit_method` of inputs already checked (:func:`check_inputs`)."""
+    """The map of ``spec``'s method on a single sensor's histories checked by
+    :func:`check_inputs`, the fitted estimator, and the rows it was fitted on (the objects with
+    data; an online update keeps the estimator's state). ``notes`` are warnings gathered before
+    (they lead ``Map.warnings``)."""
     m = X.shape[0]
     merged = _method_params(spec, params, normalize, random_state)
     ids, pos = check_anchors(anchor_ids, anchor_positions, m)
