@@ -65,7 +65,8 @@ class Camera3DEnv(gym.Env):
 
     ``bearing_noise_deg``: each ray is turned by Gaussian noise of this standard deviation in each
     of its two angular components (the ray plus a Gaussian vector perpendicular to it, normalised).
-    ``range_noise``: Gaussian noise [m] on each range (clipped to the space). ``miss_rate``: the
+    ``range_noise``: Gaussian noise [m] on each range (a negative result reflected at 0: a
+    range is a distance). ``miss_rate``: the
     probability that a tag that could be read is not (a dropped detection: no ray, no range, a 0
     in visibility). ``occlusion``: posts hide tags. Noise and dropouts come from a generator
     seeded from the reset seed, apart from ``np_random``: the same seed and actions give the same
@@ -289,7 +290,10 @@ class Camera3DEnv(gym.Env):
             obs["bearing"] = np.where(seen[:, None], rays, 0.0).astype(np.float32)
         if "range" in self.sensors:
             if self.range_noise > 0.0:
-                dist = np.clip(dist + rng.normal(0.0, self.range_noise, m), 0.0, self.range_high)
+                # reflected at 0 (a distance; a mapper refuses an observed range <= 0), and
+                # within the space (10 sd past the range limit: never reached in practice)
+                dist = np.minimum(np.abs(dist + rng.normal(0.0, self.range_noise, m)),
+                                  self.range_high)
             obs["range"] = np.where(seen, dist, 0.0).astype(np.float32)
         rel = w.object_positions - pose[:2]
         q = np.einsum("ij,ij->i", rel, rel) - w.object_radius ** 2
