@@ -11,7 +11,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import lfmdr_gym
-from lfmdr_gym import RandomWalkPolicy, collect
+from lfmdr_gym import RandomWalkPolicy, collect, collect_vector
 from lfmdr_gym.camera3d_env import Camera3DEnv
 from lfmdr_gym.histories.history import History
 
@@ -192,3 +192,18 @@ def test_recorded_rays_and_ranges_point_back_at_the_tags():
         j = seen[:, t]
         back = centre + ranges[j, t, None] * (rays[j, t] @ rot)
         np.testing.assert_allclose(back, h.object_positions[j], atol=1e-5)
+
+
+def test_compact_and_vector_recording_give_the_same_3d_history():
+    plain = collect("LFMDR-Camera3D-v0", RandomWalkPolicy(), 60, seed=8)
+    small = collect("LFMDR-Camera3D-v0", RandomWalkPolicy(), 60, seed=8, compact=True)
+    assert small.compact and small.dimension == 3
+    for part in ("bearing", "range"):
+        np.testing.assert_allclose(small.parts[part].matrix, plain.parts[part].matrix, atol=1e-6)
+        np.testing.assert_array_equal(small.parts[part].mask, plain.parts[part].mask)
+    envs = gym.make_vec("LFMDR-Camera3D-v0", num_envs=2, max_episode_steps=60)
+    vec = collect_vector(envs, RandomWalkPolicy(), 60, seed=8)
+    envs.close()
+    assert [h.dimension for h in vec] == [3, 3]
+    np.testing.assert_array_equal(vec[0].object_positions, plain.object_positions)
+    assert vec[0].parts["bearing"].shape == (50, 180)
