@@ -2,7 +2,7 @@
 
     python benchmarks/bench_camera3d.py [--layouts 25] [--steps 2000] [--seed0 34000]
         [--bearing-noise-deg 1.0] [--range-noise 0.02] [--sensors range-bearing,bearing,visibility]
-        [--out docs/results/camera3d/camera3d.csv]
+        [--env-kw NAME=VALUE ...] [--out docs/results/camera3d/camera3d.csv]
 
 Each layout is a fresh episode of ``LFMDR-Camera3D-v0`` with its defaults (50 tags: 15 posts with
 2 tags each and 20 on the walls, heights 0-2 m; 6 anchors; a camera 0.3 m up, pitched 20 degrees,
@@ -19,6 +19,8 @@ missing), and the CPU seconds of ``build_map`` (``time.process_time``: the machi
 CPU time is the fairer figure). Goals (issue 34, M = 50, N = 2000, 1 degree + 2 cm): range +
 bearing <= 0.01 m, bearing <= 0.02 m, visibility <= 0.15 m, under 2 s of CPU per map.
 
+``--env-kw`` sets an env keyword beyond the noise (e.g. ``max_range=1.5``), for every sensor.
+
 Writes one row per layout and sensor to ``--out`` (atomically) and prints mean / median / max
 MPE, the mapped share and the median CPU time per sensor.
 """
@@ -28,6 +30,7 @@ from __future__ import annotations
 import argparse
 import csv
 import io
+import json
 import time
 import warnings
 from pathlib import Path
@@ -45,7 +48,7 @@ GOALS = {"range-bearing": 0.01, "bearing": 0.02, "visibility": 0.15}
 """Issue 34's MPE goals [m] per sensor at N = 2000 with 1 degree and 2 cm of noise."""
 CPU_GOAL = 2.0
 FIELDS = ("layout_seed", "sensor", "method", "n_objects", "n_steps", "bearing_noise_deg",
-          "range_noise", "mpe", "mapped", "cpu_seconds", "error")
+          "range_noise", "env_kwargs", "mpe", "mapped", "cpu_seconds", "error")
 
 
 def noise_kwargs(sensor: str, bearing_noise_deg: float, range_noise: float) -> dict[str, float]:
@@ -69,14 +72,32 @@ def score(estimate: np.ndarray, truth: np.ndarray, anchor_ids: np.ndarray) -> tu
     return float(err.mean()), placed.size / rest.size
 
 
+def env_kwargs(pairs: list[str]) -> dict[str, Any]:
+    """``NAME=VALUE`` pairs as env keywords (values read as Python literals: 1.5, None, True)."""
+    import ast
+
+    out = {}
+    for pair in pairs:
+        name, sep, value = pair.partition("=")
+        if not sep or not name:
+            raise ValueError(f"--env-kw takes NAME=VALUE, got {pair!r}")
+        try:
+            out[name] = ast.literal_eval(value)
+        except (ValueError, SyntaxError):
+            raise ValueError(f"--env-kw {name}: {value!r} is not a number, None, True or False") from None
+    return out
+
+
 def run_one(seed: int, sensor: str, steps: int, bearing_noise_deg: float,
-            range_noise: float) -> dict[str, Any]:
+            range_noise: float, extra: dict[str, Any] | None = None) -> dict[str, Any]:
     """One layout's map for one sensor: a row of the CSV."""
-    kwargs = {"sensor": sensor, **noise_kwargs(sensor, bearing_noise_deg, range_noise)}
+    kwargs = {"sensor": sensor, **noise_kwargs(sensor, bearing_noise_deg, range_noise),
+              **(extra or {})}
     history = collect(ENV_ID, RandomWalkPolicy(), steps, seed=seed, make_kwargs=kwargs)
     row: dict[str, Any] = {"layout_seed": seed, "sensor": sensor, "n_objects": history.n_objects,
                            "n_steps": steps, "bearing_noise_deg": kwargs.get("bearing_noise_deg", 0.0),
                            "range_noise": kwargs.get("range_noise", 0.0), "method": "",
+                           "env_kwargs": json.dumps(extra or {}, sort_keys=True),
                            "mpe": float("nan"), "mapped": 0.0, "cpu_seconds": float("nan"),
                            "error": ""}
     cpu = time.process_time()
@@ -130,17 +151,22 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--bearing-noise-deg", type=float, default=1.0)
     ap.add_argument("--range-noise", type=float, default=0.02)
     ap.add_argument("--sensors", default="range-bearing,bearing,visibility")
+    ap.add_argument("--env-kw", action="append", default=[], metavar="NAME=VALUE")
     ap.add_argument("--out", type=Path, default=Path("docs/results/camera3d/camera3d.csv"))
     args = ap.parse_args(argv)
     sensors = [s for s in args.sensors.split(",") if s]
     unknown = sorted(set(sensors) - {"range-bearing", "bearing", "range", "visibility"})
     if unknown:
         ap.error(f"unknown sensor(s) {unknown}")
+    try:
+        extra = env_kwargs(args.env_kw)
+    except ValueError as exc:
+        ap.error(str(exc))
     rows = []
     for k in range(args.layouts):
         for sensor in sensors:
             row = run_one(args.seed0 + k, sensor, args.steps, args.bearing_noise_deg,
-                          args.range_noise)
+                          args.range_noise, extra)
             rows.append(row)
             print(f"seed {row['layout_seed']} {sensor:<14} {row['method'] or '-':<16} "
                   f"MPE {row['mpe']:.4f} m  mapped {row['mapped']:.2f}  "
@@ -148,7 +174,8 @@ def main(argv: list[str] | None = None) -> None:
     write_csv(rows, args.out)
     print(f"\n{args.layouts} layouts of {ENV_ID}, N = {args.steps}, noise "
           f"{args.bearing_noise_deg} deg / {args.range_noise} m, seeds {args.seed0}.."
-          f"{args.seed0 + args.layouts - 1}; goal: CPU < {CPU_GOAL} s per map")
+          f"{args.seed0 + args.layouts - 1}; env keywords {extra or 'the defaults'}; goal: CPU "
+          f"< {CPU_GOAL} s per map")
     print("\n".join(summary(rows, sensors)))
     print(f"wrote {args.out}")
 
