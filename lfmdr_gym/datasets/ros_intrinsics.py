@@ -53,14 +53,10 @@ class IntrinsicsError(ValueError):
 class CameraIntrinsics:
     """A pinhole camera with lens distortion, in ROS's ``CameraInfo`` convention.
 
-    Attributes
-    ----------
-    K
-        (3, 3) camera matrix [pixels].
-    distortion_model
-        ``"plumb_bob"``, ``"rational_polynomial"`` or ``""`` (none).
-    D
-        The distortion coefficients (see the module docstring); all zero or empty means none.
+    Attributes:
+        K: (3, 3) camera matrix [pixels].
+        distortion_model: ``"plumb_bob"``, ``"rational_polynomial"`` or ``""`` (none).
+        D: The distortion coefficients (see the module docstring); all zero or empty means none.
     """
 
     K: np.ndarray

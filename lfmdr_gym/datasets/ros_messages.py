@@ -108,11 +108,10 @@ def require_rosbags() -> Any:
 def detection_typestore(ros_version: int) -> Typestore:
     """A ``rosbags`` typestore of a ROS distribution plus the three AprilTag detection messages.
 
-    Parameters
-    ----------
-    ros_version
-        1 for ROS 1 Noetic's standard messages (``std_msgs/Header`` has ``seq``, ``CameraInfo`` has
-        ``D``/``K``/``R``/``P``), 2 for ROS 2 Humble's (no ``seq``; ``d``/``k``/``r``/``p``).
+    Args:
+        ros_version: 1 for ROS 1 Noetic's standard messages (``std_msgs/Header`` has ``seq``,
+            ``CameraInfo`` has ``D``/``K``/``R``/``P``), 2 for ROS 2 Humble's (no ``seq``;
+            ``d``/``k``/``r``/``p``).
     """
     if ros_version not in (1, 2):
         raise ValueError(f"ros_version must be 1 or 2, got {ros_version!r}")

@@ -247,46 +247,34 @@ def read_rosbag(
 ) -> pd.DataFrame:
     """Read a topic of AprilTag detections from a ROS bag into an observation table.
 
-    Parameters
-    ----------
-    path
-        A ROS 1 ``.bag`` file, or a ROS 2 bag folder (sqlite3 or MCAP storage).
-    topic
-        The detection topic; its type must be one of
-        :data:`~lfmdr_gym.datasets.ros_messages.DETECTION_ARRAY_TYPES`.
-    camera_info_topic
-        The ``sensor_msgs/CameraInfo`` topic of the camera, needed (only) for
-        ``apriltag_msgs/AprilTagDetectionArray``, whose detections are pixels. If its intrinsics
-        change during the bag, each image takes the latest CameraInfo at or before its time.
-    robot
-        If given, a ``robot`` column with this id (several robots: read each bag, concatenate).
-    time_source
-        ``"header"`` (default): the messages' header stamps (the images' capture times);
-        ``"bag"``: the times the bag recorded them.
-    rectified
-        The detector ran on the rectified image: pixels are mapped with ``CameraInfo.P``'s left
-        3x3 and no distortion, instead of ``K`` and ``D``.
-    bundles
-        ``"error"`` (default) refuses ``apriltag_ros`` tag bundles; ``"skip"`` leaves them out
-        and counts them in ``attrs["skipped_bundles"]``.
+    Args:
+        path: A ROS 1 ``.bag`` file, or a ROS 2 bag folder (sqlite3 or MCAP storage).
+        topic: The detection topic; its type must be one of
+            :data:`~lfmdr_gym.datasets.ros_messages.DETECTION_ARRAY_TYPES`.
+        camera_info_topic: The ``sensor_msgs/CameraInfo`` topic of the camera, needed (only) for
+            ``apriltag_msgs/AprilTagDetectionArray``, whose detections are pixels. If its intrinsics
+            change during the bag, each image takes the latest CameraInfo at or before its time.
+        robot: If given, a ``robot`` column with this id (several robots: read each bag,
+            concatenate).
+        time_source: ``"header"`` (default): the messages' header stamps (the images' capture
+            times); ``"bag"``: the times the bag recorded them.
+        rectified: The detector ran on the rectified image: pixels are mapped with
+            ``CameraInfo.P``'s left 3x3 and no distortion, instead of ``K`` and ``D``.
+        bundles: ``"error"`` (default) refuses ``apriltag_ros`` tag bundles; ``"skip"`` leaves them
+            out and counts them in ``attrs["skipped_bundles"]``.
 
-    Returns
-    -------
-    pandas.DataFrame
+    Returns:
         One row per detection: ``time`` [s], ``landmark`` (int, or ``"family:id"`` strings when
         families mix), ``robot`` (if given), ``frame`` (message index), ``ray_x, ray_y, ray_z``
         (optical frame) and, for pose-carrying types, ``range`` [m]. ``attrs`` records the
         source, topic, message type, time source, camera frame and tag families.
 
-    Raises
-    ------
-    RosbagError
-        A missing or unreadable bag (the expected layout is said), a topic not in the bag (the
-        bag's topics and types are listed), a message type not handled (the handled are listed),
-        an empty topic, a missing or unusable CameraInfo, zero stamps, bundles, mixed camera
-        frames or a detection that gives no ray.
-    ImportError
-        ``rosbags`` is not installed (the message says ``pip install 'lfmdr[ros]'``).
+    Raises:
+        RosbagError: A missing or unreadable bag (the expected layout is said), a topic not in the
+            bag (the bag's topics and types are listed), a message type not handled (the handled are
+            listed), an empty topic, a missing or unusable CameraInfo, zero stamps, bundles, mixed
+            camera frames or a detection that gives no ray.
+        ImportError: ``rosbags`` is not installed (the message says ``pip install 'lfmdr[ros]'``).
     """
     if time_source not in TIME_SOURCES:
         raise ValueError(f"time_source must be one of {TIME_SOURCES}, got {time_source!r}")

@@ -58,27 +58,17 @@ def camera_detections(
 ) -> pd.DataFrame:
     """What a forward-looking camera on a planar robot detects: tag positions in its optical frame.
 
-    Parameters
-    ----------
-    times
-        (T,) time of each pose [s].
-    poses
-        (T, 3) robot poses ``x, y, heading`` [m, m, rad]; the camera looks along the heading.
-    landmarks
-        (L, 2) true landmark positions [m].
-    ids
-        The landmarks' tag ids (default 0..L-1).
-    fov
-        Horizontal field of view [rad]: a tag is seen when its bearing is within ``fov/2``.
-    max_range
-        Tags farther [m] (in the plane) are not seen.
-    camera_height, landmark_height
-        Heights [m] of the camera and of the tags (the tags' ``y``, pointing down, is
-        ``camera_height - landmark_height``).
+    Args:
+        times: (T,) time of each pose [s].
+        poses: (T, 3) robot poses ``x, y, heading`` [m, m, rad]; the camera looks along the heading.
+        landmarks: (L, 2) true landmark positions [m].
+        ids: The landmarks' tag ids (default 0..L-1).
+        fov: Horizontal field of view [rad]: a tag is seen when its bearing is within ``fov/2``.
+        max_range: Tags farther [m] (in the plane) are not seen.
+        camera_height, landmark_height: Heights [m] of the camera and of the tags (the tags' ``y``,
+            pointing down, is ``camera_height - landmark_height``).
 
-    Returns
-    -------
-    pandas.DataFrame
+    Returns:
         ``time, frame, landmark, x, y, z``: one row per detection, ``frame`` the pose index, the
         position in the optical frame (z forward, x right, y down), so the planar bearing is
         ``atan2(-x, z)``. Only tags in front of the camera are kept, so ``z > 0``.
@@ -202,33 +192,23 @@ def write_detection_bag(
 ) -> Path:
     """Write detections as a bag of AprilTag detection-array messages, one message per frame.
 
-    Parameters
-    ----------
-    path
-        The bag to create: a ``.bag`` file for ``"rosbag1"``, a folder otherwise; must not exist.
-    detections
-        ``time`` [s, > 0], ``landmark`` (int tag id), ``x, y, z`` (the tag's position in the
-        camera's optical frame [m]), optionally ``frame`` (rows of one frame form one message;
-        default: rows of one time) and ``family`` (default ``"36h11"``) — e.g. from
-        :func:`camera_detections`.
-    container
-        One of :data:`CONTAINERS`.
-    msgtype
-        One of :data:`~lfmdr_gym.datasets.ros_messages.DETECTION_ARRAY_TYPES`.
-    topic
-        The detection topic.
-    camera
-        The camera's intrinsics; required for ``apriltag_msgs`` (the tag's pixel centre is its
-        position projected, distortion applied), whose bag then also holds one
-        ``sensor_msgs/CameraInfo`` per frame on ``camera_info_topic``, stamped as the frame.
-    camera_frame
-        ``header.frame_id`` of every message.
-    tag_size
-        The tags' side [m] (``apriltag_ros``'s ``size``).
+    Args:
+        path: The bag to create: a ``.bag`` file for ``"rosbag1"``, a folder otherwise; must not
+            exist.
+        detections: ``time`` [s, > 0], ``landmark`` (int tag id), ``x, y, z`` (the tag's position in
+            the camera's optical frame [m]), optionally ``frame`` (rows of one frame form one
+            message; default: rows of one time) and ``family`` (default ``"36h11"``) — e.g. from
+            :func:`camera_detections`.
+        container: One of :data:`CONTAINERS`.
+        msgtype: One of :data:`~lfmdr_gym.datasets.ros_messages.DETECTION_ARRAY_TYPES`.
+        topic: The detection topic.
+        camera: The camera's intrinsics; required for ``apriltag_msgs`` (the tag's pixel centre is
+            its position projected, distortion applied), whose bag then also holds one
+            ``sensor_msgs/CameraInfo`` per frame on ``camera_info_topic``, stamped as the frame.
+        camera_frame: ``header.frame_id`` of every message.
+        tag_size: The tags' side [m] (``apriltag_ros``'s ``size``).
 
-    Returns
-    -------
-    pathlib.Path
+    Returns:
         ``path``.
     """
     if container not in CONTAINERS:
