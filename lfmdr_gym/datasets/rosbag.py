@@ -287,6 +287,10 @@ def read_rosbag(
         if topic not in topics:
             raise RosbagError(f"topic {topic!r} is not in {path}; {_topics_listing(topics)}")
         msgtype = topics[topic].msgtype
+        if msgtype is None:  # rosbags' summary of a topic recorded with several types
+            types = sorted({c.msgtype for c in topics[topic].connections})
+            raise RosbagError(f"topic {topic!r} carries several message types {types}; "
+                              "lfmdr reads a topic of one detection type")
         if msgtype not in DETECTION_ARRAY_TYPES:
             raise RosbagError(f"topic {topic!r} holds {msgtype}, which lfmdr does not read; "
                               f"handled types: {', '.join(DETECTION_ARRAY_TYPES)}")

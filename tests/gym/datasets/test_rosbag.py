@@ -292,8 +292,29 @@ def test_the_writer_refuses_bad_requests(tmp_path):
         write_detection_bag(tmp_path / "there", DETECTIONS, container="mcap")
 
 
-def test_a_failed_write_leaves_nothing_behind(tmp_path):
-    too_big = DETECTIONS.assign(landmark=DETECTIONS["landmark"] + 2**40)  # not an int32 tag id
-    with pytest.raises((OverflowError, ValueError)):
-        write_detection_bag(tmp_path / "x.bag", too_big, container="rosbag1")
+def test_the_writer_refuses_tag_ids_a_message_cannot_hold(tmp_path):
+    with pytest.raises(ValueError, match=r"tag id 10995116277\d\d does not fit the messages' int32"):
+        write_detection_bag(tmp_path / "a", DETECTIONS.assign(landmark=DETECTIONS["landmark"] + 2**40),
+                            container="mcap")
+    with pytest.raises(ValueError, match="landmark must be integer tag ids"):
+        write_detection_bag(tmp_path / "a", DETECTIONS.assign(landmark="x"), container="mcap")
+
+
+@pytest.mark.parametrize("container", CONTAINERS)
+def test_a_failed_write_leaves_nothing_behind(tmp_path, monkeypatch, container):
+    from lfmdr_gym.datasets import rosbag_write
+
+    calls = []
+
+    def failing(*args, **kwargs):  # the third message fails, after two were written
+        calls.append(1)
+        if len(calls) == 3:
+            raise RuntimeError("disk full")
+        return header(*args, **kwargs)
+
+    header = rosbag_write._header
+    monkeypatch.setattr(rosbag_write, "_header", failing)
+    with pytest.raises(RuntimeError, match="disk full"):
+        write_detection_bag(tmp_path / _name(container, ISAAC_ROS), DETECTIONS, container=container,
+                            msgtype=ISAAC_ROS)
     assert list(tmp_path.iterdir()) == []
