@@ -11,11 +11,14 @@ y down) has normalised coordinates ``x = X/Z, y = Y/Z``; the lens moves them to
     yd = y s + p1 (r2 + 2 y^2) + 2 p2 x y
 
 (``plumb_bob``: ``D = (k1, k2, p1, p2, k3)``, Brown–Conrady; ``rational_polynomial``: ``D = (k1, k2,
-p1, p2, k3, k4, k5, k6)``), and the pixel is ``u = fx xd + cx, v = fy yd + cy`` with ``K = [[fx, 0,
+p1, p2, k3, k4, k5, k6)``). The fisheye model ``equidistant`` (``D = (k1, k2, k3, k4)``, OpenCV's
+``cv::fisheye``, Kannala & Brandt 2006) bends the angle ``theta = atan(r)`` off the axis instead:
+``theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8)`` and ``(xd, yd) =
+(theta_d / r) (x, y)``. Either way the pixel is ``u = fx xd + cx, v = fy yd + cy`` with ``K = [[fx, 0,
 cx], [0, fy, cy], [0, 0, 1]]`` (a skew ``K[0, 1]`` is honoured too).
 
-Undistortion (pixel -> ray) has no closed form. It is solved here by Newton's method on the two
-equations above, with their analytic Jacobian, started at the distorted point — vectorised over all
+Undistortion (pixel -> ray) has no closed form. It is solved here by Newton's method (for the
+fisheye on the one equation in ``theta``; else on the two equations above), with their analytic Jacobian, started at the distorted point — vectorised over all
 pixels, to 1e-12 in normalised coordinates. It is written by hand because OpenCV
 (``cv2.undistortPoints``, a fixed-point iteration of a fixed count that does not report whether it
 converged) is not a dependency; here a pixel that does not converge, or lands where the lens model
@@ -38,7 +41,7 @@ import numpy as np
 
 __all__ = ["CameraIntrinsics", "IntrinsicsError", "pixels_to_rays", "rays_to_pixels"]
 
-MODELS = {"plumb_bob": 5, "rational_polynomial": 8}
+MODELS = {"plumb_bob": 5, "rational_polynomial": 8, "equidistant": 4}
 """Distortion models handled, with their coefficient counts."""
 
 _TOL = 1e-12  # Newton stops when the distortion residual (normalised coordinates) is below this
@@ -96,8 +99,9 @@ class CameraIntrinsics:
         return any(self.D)
 
     def coefficients(self) -> np.ndarray:
-        """``(k1, k2, p1, p2, k3, k4, k5, k6)``, zeros where the model has none."""
-        out = np.zeros(8)
+        """``(k1, k2, k3, k4)`` of the fisheye, else ``(k1, k2, p1, p2, k3, k4, k5, k6)``, zeros
+        where the model has none."""
+        out = np.zeros(4 if self.distortion_model == "equidistant" else 8)
         out[: len(self.D)] = self.D
         return out
 
@@ -152,6 +156,37 @@ def _radial_monotone(xy: np.ndarray, c: np.ndarray, samples: int = 32) -> np.nda
     return np.all((num / den + 2 * r2 * ds > 0) & (den > 0), axis=1)
 
 
+def _fisheye_theta_d(theta: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The fisheye's distorted angle and its derivative d(theta_d)/d(theta)."""
+    t2 = theta * theta
+    poly = 1 + t2 * (k[0] + t2 * (k[1] + t2 * (k[2] + t2 * k[3])))
+    dpoly = 1 + t2 * (3 * k[0] + t2 * (5 * k[1] + t2 * (7 * k[2] + t2 * 9 * k[3])))
+    return theta * poly, dpoly
+
+
+def _fisheye_undistort(target: np.ndarray, k: np.ndarray,
+                       samples: int = 32) -> tuple[np.ndarray, np.ndarray]:
+    """Undistorted normalised points of the fisheye and which of them are valid.
+
+    Valid: Newton converged, ``theta < pi/2`` (in front of the camera) and ``theta_d`` increases
+    all the way from the axis (no fold of the model before the point).
+    """
+    theta_d = np.hypot(target[:, 0], target[:, 1])
+    theta = theta_d.copy()
+    for _ in range(_MAX_ITER):
+        f, df = _fisheye_theta_d(theta, k)
+        if np.max(np.abs(f - theta_d)) < _TOL:
+            break
+        theta = theta - (f - theta_d) / df
+    f, _ = _fisheye_theta_d(theta, k)
+    _, df = _fisheye_theta_d(theta[:, None] * np.linspace(0.0, 1.0, samples + 1)[None, :], k)
+    ok = (np.abs(f - theta_d) < _TOL * 10) & (np.abs(theta) < np.pi / 2) & np.all(df > 0, axis=1)
+    scale = np.ones_like(theta)
+    nz = theta_d > 0
+    scale[nz & ok] = np.tan(theta[nz & ok]) / theta_d[nz & ok]
+    return target * scale[:, None], ok
+
+
 def _pixels_array(pixels: np.ndarray | Sequence) -> np.ndarray:
     uv = np.asarray(pixels, dtype=float)
     if uv.ndim != 2 or uv.shape[1] != 2:
@@ -175,7 +210,16 @@ def pixels_to_rays(pixels: np.ndarray | Sequence, camera: CameraIntrinsics) -> n
     x = (uv[:, 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
     target = np.stack([x, y], axis=1)
     xy = target.copy()
-    if camera.distorted and len(xy):
+    if camera.distorted and len(xy) and camera.distortion_model == "equidistant":
+        xy, ok = _fisheye_undistort(target, camera.coefficients())
+        if not ok.all():
+            i = int(np.argmin(ok))
+            raise IntrinsicsError(
+                f"pixel {i} {uv[i].tolist()} cannot be undistorted with equidistant "
+                f"D={list(camera.D)}: Newton's method did not converge, the model folds over "
+                "there, or the direction is 90 degrees or more off the axis"
+            )
+    elif camera.distorted and len(xy):
         c = camera.coefficients()
         for _ in range(_MAX_ITER):
             d, J = _distort(xy, c)
@@ -210,7 +254,12 @@ def rays_to_pixels(rays: np.ndarray | Sequence, camera: CameraIntrinsics) -> np.
         i = int(np.argmax(behind))
         raise IntrinsicsError(f"ray {i} {r[i].tolist()} is not in front of the camera (z <= 0)")
     xy = r[:, :2] / r[:, 2:3]
-    if camera.distorted:
+    if camera.distorted and camera.distortion_model == "equidistant":
+        rr = np.hypot(xy[:, 0], xy[:, 1])
+        theta_d, _ = _fisheye_theta_d(np.arctan(rr), camera.coefficients())
+        nz = rr > 0
+        xy[nz] *= (theta_d[nz] / rr[nz])[:, None]
+    elif camera.distorted:
         xy, _ = _distort(xy, camera.coefficients())
     K = camera.K
     u = K[0, 0] * xy[:, 0] + K[0, 1] * xy[:, 1] + K[0, 2]

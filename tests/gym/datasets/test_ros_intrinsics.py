@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from types import SimpleNamespace
 
 import numpy as np
@@ -16,6 +17,7 @@ from lfmdr_gym.datasets.ros_intrinsics import (
 
 K = np.array([[600.0, 0.0, 320.0], [0.0, 610.0, 240.0], [0.0, 0.0, 1.0]])
 PLUMB_BOB = CameraIntrinsics(K, "plumb_bob", (-0.3, 0.1, 0.001, -0.002, -0.02))
+FISHEYE = CameraIntrinsics(K, "equidistant", (-0.02, 0.004, -0.001, 0.0002))
 RATIONAL = CameraIntrinsics(K, "rational_polynomial", (0.5, 0.1, 0.001, -0.002, -0.02, 0.4, 0.05, 0.01))
 
 
@@ -24,8 +26,8 @@ def _rays(n: int = 500, half: float = 0.5) -> np.ndarray:
     return np.column_stack([rng.uniform(-half, half, (n, 2)), np.ones(n)])
 
 
-@pytest.mark.parametrize("camera", [CameraIntrinsics(K), PLUMB_BOB, RATIONAL],
-                         ids=["pinhole", "plumb_bob", "rational"])
+@pytest.mark.parametrize("camera", [CameraIntrinsics(K), PLUMB_BOB, RATIONAL, FISHEYE],
+                         ids=["pinhole", "plumb_bob", "rational", "equidistant"])
 def test_pixels_of_rays_map_back_to_the_rays(camera):
     rays = _rays()
     back = pixels_to_rays(rays_to_pixels(rays * 2.5, camera), camera)
@@ -43,6 +45,25 @@ def test_distortion_moves_the_pixel_as_the_model_says():
     x = 0.4  # on the image's horizontal axis: xd = x (1 + k1 x^2)
     uv = rays_to_pixels([[x, 0.0, 1.0]], cam)
     assert uv[0, 0] == pytest.approx(320 + 600 * x * (1 + k1 * x * x), abs=1e-9)
+
+
+def test_the_fisheye_bends_the_angle_off_the_axis():
+    k1 = FISHEYE.D[0]
+    theta = 0.9  # 52 degrees off the axis, in the image's vertical plane
+    uv = rays_to_pixels([[0.0, math.tan(theta), 1.0]], FISHEYE)
+    poly = 1 + sum(k * theta ** (2 * i + 2) for i, k in enumerate(FISHEYE.D))
+    assert uv[0, 1] == pytest.approx(240 + 610 * theta * poly, abs=1e-9)
+    assert uv[0, 0] == pytest.approx(320, abs=1e-12) and k1 != 0
+    wide = np.column_stack([np.tan(np.linspace(0, 1.4, 30)), np.zeros(30), np.ones(30)])
+    np.testing.assert_allclose(pixels_to_rays(rays_to_pixels(wide, FISHEYE), FISHEYE), wide,
+                               rtol=1e-10)
+
+
+def test_a_fisheye_pixel_past_90_degrees_is_refused():
+    # theta_d of 1.75 rad is only reached past theta = pi/2 with these coefficients
+    with pytest.raises(IntrinsicsError, match=r"pixel 0 .* 90 degrees or more off the axis"):
+        pixels_to_rays([[320.0 + 600 * 1.75, 240.0]], CameraIntrinsics(K, "equidistant",
+                                                                        (0.0, 0.0, 0.0, 1e-9)))
 
 
 def test_a_pixel_beyond_the_fold_of_the_lens_model_is_refused():
@@ -77,12 +98,12 @@ def test_bad_camera_matrices_are_refused(K_bad, match):
 
 
 def test_unknown_or_miscounted_distortion_is_refused():
-    with pytest.raises(IntrinsicsError, match="'equidistant' is not handled"):
-        CameraIntrinsics(K, "equidistant", (0.1, 0.0, 0.0, 0.0))
+    with pytest.raises(IntrinsicsError, match="'fov' is not handled"):
+        CameraIntrinsics(K, "fov", (0.1,))
     with pytest.raises(IntrinsicsError, match="plumb_bob needs 5"):
         CameraIntrinsics(K, "plumb_bob", (0.1, 0.0, 0.0, 0.0))
     # all-zero coefficients are no distortion, whatever the model's name
-    assert not CameraIntrinsics(K, "equidistant", (0.0, 0.0, 0.0, 0.0)).distorted
+    assert not CameraIntrinsics(K, "fov", (0.0,)).distorted
 
 
 def test_rays_behind_the_camera_and_bad_pixels_are_refused():
