@@ -4,7 +4,9 @@
 sqlite3 ``.db3`` or ``.mcap`` files) through ``rosbags.highlevel.AnyReader`` — the pure-Python
 ``rosbags`` library (``pip install 'lfmdr[ros]'``), no ROS install — and returns the table of issue 33
 (``time, landmark[, robot], frame, ray_x, ray_y, ray_z[, range]``). The detection messages it
-reads are those of :mod:`lfmdr_gym.datasets.ros_messages`:
+reads are those of :mod:`lfmdr_gym.datasets.ros_messages` (as a bag embeds them, so also
+``apriltag_msgs`` 1.x, whose centre is a ``float64[2]``, and Isaac ROS releases whose pose has no
+stamp):
 
 * ``apriltag_ros/AprilTagDetectionArray`` (ROS 1) and ``isaac_ros_apriltag_interfaces/
   AprilTagDetectionArray`` carry each tag's pose in the camera's optical frame (z forward, x right,
@@ -119,6 +121,24 @@ def _message_time(msg: Any, bag_ns: int, time_source: str, topic: str, index: in
     return t
 
 
+def _centre(det: Any) -> tuple[float, float]:
+    """A detection's pixel centre: a ``Point`` (apriltag_msgs 2.x) or ``float64[2]`` (1.x)."""
+    c = det.centre
+    if isinstance(c, np.ndarray):
+        return float(c[0]), float(c[1])
+    return float(c.x), float(c.y)
+
+
+def _position(det: Any) -> tuple[float, float, float]:
+    """A detection's position, under a ``PoseWithCovarianceStamped`` or (Isaac ROS releases that
+    dropped the stamp) a ``PoseWithCovariance``."""
+    pose = det.pose
+    while not hasattr(pose, "position"):
+        pose = pose.pose
+    p = pose.position
+    return float(p.x), float(p.y), float(p.z)
+
+
 def _gather(reader: Any, topic: str, msgtype: str, time_source: str, bundles: str) -> _Detections:
     """Walk the topic's messages once, keeping each detection's id, family and position or pixel."""
     out = _Detections()
@@ -145,10 +165,9 @@ def _gather(reader: Any, topic: str, msgtype: str, time_source: str, bundles: st
             else:
                 tag, family = int(det.id), str(det.family)
             if msgtype == APRILTAG_MSGS:
-                out.pixel.append((float(det.centre.x), float(det.centre.y)))
+                out.pixel.append(_centre(det))
             else:
-                p = det.pose.pose.pose.position
-                out.xyz.append((float(p.x), float(p.y), float(p.z)))
+                out.xyz.append(_position(det))
             out.time.append(t)
             out.frame.append(index)
             out.tag.append(tag)
