@@ -341,7 +341,7 @@ def read_rosbag(
         columns["range"] = np.linalg.norm(rays, axis=1)
     table = pd.DataFrame(columns)
     table.attrs.update(
-        source="rosbag", path=str(path), topic=topic, msgtype=msgtype, sensor="camera",
+        source="rosbag", path=str(path), topic=topic, msgtype=msgtype,
         time_source=time_source, camera_frame=next(iter(found.camera_frames)),
         families=families, messages=found.messages, skipped_bundles=found.bundles,
     )
@@ -352,7 +352,8 @@ def read_rosbag(
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add ``lfmdr convert rosbag``'s arguments (the bag and :func:`read_rosbag`'s options)."""
-    parser.add_argument("bag", help="a ROS 1 .bag file or a ROS 2 bag folder (sqlite3 or MCAP)")
+    parser.add_argument("src", metavar="BAG",
+                        help="a ROS 1 .bag file or a ROS 2 bag folder (sqlite3 or MCAP)")
     parser.add_argument("--topic", required=True,
                         help=f"the detection topic (types: {', '.join(DETECTION_ARRAY_TYPES)})")
     parser.add_argument("--camera-info", default=None, metavar="TOPIC",
@@ -372,5 +373,5 @@ def run(args: argparse.Namespace) -> pd.DataFrame:
     robot = args.robot
     if robot is not None and str(robot).isdigit():
         robot = int(robot)
-    return read_rosbag(args.bag, args.topic, camera_info_topic=args.camera_info, robot=robot,
+    return read_rosbag(args.src, args.topic, camera_info_topic=args.camera_info, robot=robot,
                        time_source=args.time, rectified=args.rectified, bundles=args.bundles)
