@@ -237,7 +237,7 @@ def _pixel_rays(reader: Any, found: _Detections, topics: dict[str, Any], topic: 
 
 
 def _landmarks(found: _Detections) -> tuple[pd.Series, list[str]]:
-    families = sorted(set(found.family))
+    families = sorted(set(found.family) - {""})  # apriltag_ros names no family
     if len(families) > 1:
         ids = [f"{f}:{i}" for f, i in zip(found.family, found.tag, strict=True)]
         return pd.Series(ids, dtype=object), families

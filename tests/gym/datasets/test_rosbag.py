@@ -93,6 +93,7 @@ def test_detections_written_to_a_bag_read_back_as_the_table(bags, container, msg
         assert "range" not in table.columns
     assert table.attrs["msgtype"] == msgtype and table.attrs["topic"] == TOPIC
     assert table.attrs["source"] == "rosbag" and table.attrs["time_source"] == "header"
+    assert table.attrs["families"] == ([] if msgtype == APRILTAG_ROS else ["36h11"])
 
 
 def test_the_rays_give_the_true_bearings_in_the_horizontal_plane(bags):
