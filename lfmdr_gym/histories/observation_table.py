@@ -3,23 +3,17 @@
 A robot's log of "at time t, robot r saw landmark k at bearing b (and range d)" is a
 ``pandas.DataFrame`` with these columns (the guide ``docs/guide/observations.md`` has examples):
 
-========================  ==========================================================================
-``time``                  [s], required.
-``landmark``              required; integer or string id (strings stay strings, also in maps).
-``robot``                 optional integer or string id; absent: one robot.
-``frame``                 optional integer; rows with the same ``robot`` and ``frame`` were taken
-                          from one pose (absent: rows with the same ``robot`` and ``time``).
-``bearing``               [rad], sensor frame, counter-clockwise, 2-D; within [-2 pi, 2 pi].
-``bearing_cos``,          the bearing as its unit vector (cos, sin), instead of or beside
-``bearing_sin``           ``bearing``: kept bit for bit (what :func:`history_to_observations
-                          <lfmdr_gym.histories.observations.history_to_observations>` writes).
-``ray_x, ray_y, ray_z``   a direction in the sensor's frame (3-D, any length but not 0); camera
-                          optical frame: z forward, x right, y down. With 2-D anchors it is
-                          projected to ``bearing = atan2(-ray_x, ray_z)``.
-``range``                 [m], >= 0.
-``visible``               optional 0/1: 0 marks an observed entry that did not see the landmark
-                          (a camera that looked and missed); absent: every row is a sighting.
-========================  ==========================================================================
+| column | meaning |
+|---|---|
+| ``time`` | [s], required. |
+| ``landmark`` | required; integer or string id (strings stay strings, also in maps). |
+| ``robot`` | optional integer or string id; absent: one robot. |
+| ``frame`` | optional integer; rows with the same ``robot`` and ``frame`` were taken from one pose (absent: rows with the same ``robot`` and ``time``). |
+| ``bearing`` | [rad], sensor frame, counter-clockwise, 2-D; within [-2 pi, 2 pi]. |
+| ``bearing_cos``, ``bearing_sin`` | the bearing as its unit vector (cos, sin), instead of or beside ``bearing``: kept bit for bit (what ``history_to_observations`` writes). |
+| ``ray_x``, ``ray_y``, ``ray_z`` | a direction in the sensor's frame (3-D, any length but not 0); camera optical frame: z forward, x right, y down. With 2-D anchors it is projected to ``bearing = atan2(-ray_x, ray_z)``. |
+| ``range`` | [m], >= 0. |
+| ``visible`` | optional 0/1: 0 marks an observed entry that did not see the landmark (a camera that looked and missed); absent: every row is a sighting. |
 
 Any subset of the measurements may be given (none: visibility only). Other columns are allowed,
 kept, and not used; a column that differs from a known name only in case or spaces is an error.
