@@ -106,6 +106,37 @@ def test_the_rays_give_the_true_bearings_in_the_horizontal_plane(bags):
     np.testing.assert_allclose(bearing, truth, atol=1e-9)
 
 
+@pytest.mark.parametrize("msgtype", [APRILTAG_ROS, APRILTAG_MSGS])
+def test_the_table_keeps_the_contract_and_becomes_a_history(bags, tmp_path, msgtype):
+    from lfmdr_gym.histories.observation_table import (
+        check_observations,
+        read_observations,
+        write_observations,
+    )
+    from lfmdr_gym.histories.observations import landmark_ids, observations_to_history
+
+    table = read_rosbag(bags["sqlite3", msgtype], TOPIC, camera_info_topic="/camera_info",
+                        robot=1)
+    check_observations(table)
+    back = read_observations(write_observations(table, tmp_path / "obs.csv"))
+    pd.testing.assert_frame_equal(back, table, check_exact=False, rtol=1e-15)
+    assert back.attrs == table.attrs
+    ids = np.arange(8) * 3 + 1
+    anchors = pd.DataFrame({"landmark": ids[:4], "x": LANDMARKS[:4, 0], "y": LANDMARKS[:4, 1]})
+    history = observations_to_history(table, anchors)
+    assert history.sensor == ("range-bearing" if msgtype == APRILTAG_ROS else "bearing")
+    assert history.n_steps == table["frame"].nunique()
+    bearing = history.matrix["bearing"] if history.fused else history.matrix
+    mask = history.mask["bearing"] if history.fused else history.mask
+    # every sighting is one observed cell holding the true bearing's cosine and sine
+    rows = np.searchsorted(landmark_ids(history), table["landmark"].to_numpy())
+    step = table["frame"].to_numpy()  # frames are 0.. in order, so steps are frames
+    truth = np.arctan2(-DETECTIONS["x"].to_numpy(), DETECTIONS["z"].to_numpy())
+    np.testing.assert_allclose(bearing[rows, 2 * step], np.cos(truth), atol=1e-9)
+    np.testing.assert_allclose(bearing[rows, 2 * step + 1], np.sin(truth), atol=1e-9)
+    assert mask.sum() == 2 * len(table)
+
+
 def test_robot_column_and_bag_times(bags):
     table = read_rosbag(bags["rosbag1", APRILTAG_ROS], TOPIC, robot="r2", time_source="bag")
     assert list(table.columns[:4]) == ["time", "landmark", "robot", "frame"]
