@@ -155,6 +155,22 @@ def test_the_cli_options_read_the_same_table(bags):
     pd.testing.assert_frame_equal(run(args), expected)
 
 
+def test_a_split_ros1_recording_reads_as_one(bags, tmp_path):
+    late = DETECTIONS["time"] >= T0 + 1.4
+    parts = [write_detection_bag(tmp_path / f"part{i}.bag", DETECTIONS[sel], container="rosbag1")
+             for i, sel in enumerate((late, ~late))]  # in any order: messages come in time order
+    whole = read_rosbag(bags["rosbag1", APRILTAG_ROS], TOPIC)
+    split = read_rosbag(parts, TOPIC)
+    pd.testing.assert_frame_equal(split, whole)
+    assert split.attrs["path"] == [str(p) for p in parts]
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    pd.testing.assert_frame_equal(run(parser.parse_args([*map(str, parts), "--topic", TOPIC])),
+                                  whole)
+    with pytest.raises(RosbagError, match="only as the .bag files of one split ROS 1 recording"):
+        read_rosbag([parts[0], bags["mcap", ISAAC_ROS]], TOPIC)
+
+
 def test_mixed_tag_families_become_string_landmarks(tmp_path):
     det = DETECTIONS.assign(family=np.where(DETECTIONS["landmark"] < 10, "36h11", "25h9"))
     path = write_detection_bag(tmp_path / "fam", det, container="mcap", msgtype=ISAAC_ROS)
