@@ -318,10 +318,16 @@ def test_bad_options_are_refused(bags):
         read_rosbag(bags["mcap", ISAAC_ROS], TOPIC, bundles="merge")
 
 
-def test_without_rosbags_the_error_says_how_to_install_it(monkeypatch):
-    monkeypatch.setitem(sys.modules, "rosbags", None)
+def test_without_rosbags_the_error_says_how_to_install_it(monkeypatch, bags, tmp_path):
+    for name in [m for m in sys.modules if m == "rosbags" or m.startswith("rosbags.")]:
+        monkeypatch.setitem(sys.modules, name, None)  # as if not installed
     with pytest.raises(ImportError, match=r"pip install 'lfmdr\[ros\]'"):
         require_rosbags()
+    with pytest.raises(ImportError, match=r"pip install 'lfmdr\[ros\]'"):
+        read_rosbag(bags["mcap", ISAAC_ROS], TOPIC)
+    with pytest.raises(ImportError, match=r"pip install 'lfmdr\[ros\]'"):
+        write_detection_bag(tmp_path / "x", DETECTIONS, container="mcap")
+    assert list(tmp_path.iterdir()) == []
 
 
 # ---- writer ------------------------------------------------------------------------------------
