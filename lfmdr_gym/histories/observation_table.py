@@ -133,10 +133,18 @@ def normalise_ids(values: pd.Series, what: str, where: _Where) -> pd.Series:
         return values.astype(np.int64)
     arr = values.to_numpy(dtype=object)
     is_str = np.fromiter((isinstance(v, str) for v in arr), bool, len(arr))
+    is_int = np.fromiter((isinstance(v, int | np.integer) and not isinstance(v, bool | np.bool_)
+                          for v in arr), bool, len(arr))
+    if is_int.all():
+        return values.astype(np.int64)
+    if not (is_str | is_int).all():
+        pos = int(np.flatnonzero(~(is_str | is_int))[0])
+        _fail(where, pos, what, f"{what} id {_show(arr[pos])} ({type(arr[pos]).__name__}) is "
+              "neither an integer nor a string", int((~(is_str | is_int)).sum()))
     if not is_str.all():
         pos = int(np.flatnonzero(~is_str)[0])
-        _fail(where, pos, what, f"{what} id {arr[pos]!r} ({type(arr[pos]).__name__}) is neither "
-              "an integer nor a string", int((~is_str).sum()))
+        _fail(where, pos, what, f"{what} ids mix integers and strings ({_show(arr[pos])} among "
+              "strings); give them all as one or the other", int((~is_str).sum()))
     strings = values.astype(str)
     if len(strings) and strings.str.fullmatch(_INT).all():
         return strings.astype(np.int64)

@@ -147,6 +147,24 @@ def _robots(table: pd.DataFrame) -> tuple[np.ndarray, list[Any]]:
     return pos[codes], order
 
 
+def _empty_frames(frames: Any, robot_ids: list[Any], has_robot: bool) -> np.ndarray | None:
+    """``attrs["empty_frames"]`` (frames without a sighting that are steps all the same: frame
+    numbers, or [robot id, frame] pairs with a ``robot`` column) as (robot position, frame)."""
+    if frames is None:
+        return None
+    try:
+        if not has_robot:
+            return np.array([[0, int(f)] for f in frames], dtype=np.int64).reshape(-1, 2)
+        at = _positions(np.array(robot_ids, dtype=object), [r for r, _ in frames])
+        if (at < 0).any():
+            raise ValueError(f"attrs['empty_frames'] names robots not in the table: "
+                             f"{sorted({r for (r, _), a in zip(frames, at, strict=True) if a < 0})}")
+        return np.column_stack([at, [int(f) for _, f in frames]]).astype(np.int64).reshape(-1, 2)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"attrs['empty_frames'] must list frame numbers (with a robot column: "
+                         f"[robot, frame] pairs): {exc}") from exc
+
+
 def _ticks(table: pd.DataFrame, robot: np.ndarray) -> np.ndarray:
     """Each row's frame number: ``frame``, else the rank of its time among its robot's times."""
     if "frame" in table.columns:
@@ -258,9 +276,7 @@ def observations_to_history(
         steps = time_steps(robot, table["time"].to_numpy(np.float64), len(robot_ids), bin_width,
                            drop_empty_bins=drop_empty_bins)
     else:
-        extra = attrs.get("empty_frames")
-        if extra is not None and "robot" not in table.columns:
-            extra = [[0, f] for f in extra]
+        extra = _empty_frames(attrs.get("empty_frames"), robot_ids, "robot" in table.columns)
         steps = tick_steps(robot, _ticks(table, robot), len(robot_ids), extra=extra)
     n_steps, m = steps.n_steps, len(ids)
     readings: dict[str, Any] = {}
@@ -369,6 +385,13 @@ def history_to_observations(history: History, *, landmarks: Any = None) -> Obser
             raise ValueError("the history's steps are not in (robot, tick) order without repeats;"
                              " a table's frames would reorder them")
         robot_of, frame_of = tl[:, 0], tl[:, 1]
+        # robot ids: the history's own (meta["robots"], as a loader or this module keeps them) if
+        # they name every robot of the timeline, else the timeline's robot numbers
+        named = history.meta.get("robots")
+        n_robots = int(robot_of.max()) + 1 if n else 0
+        robot_ids = (list(named) if isinstance(named, list) and len(named) >= n_robots
+                     and len(set(map(str, named))) == len(named) else list(range(n_robots)))
+        robot_ids = _id_array(robot_ids).tolist() if robot_ids else []
     else:
         robot_of, frame_of = np.zeros(n, np.int64), np.arange(n, dtype=np.int64)
     grid, masked = _entries(history)
@@ -377,7 +400,7 @@ def history_to_observations(history: History, *, landmarks: Any = None) -> Obser
     row, step = coo.row[order].astype(np.int64), coo.col[order].astype(np.int64)
     out: dict[str, Any] = {"time": frame_of[step].astype(np.float64)}
     if history.timeline is not None:
-        out["robot"] = robot_of[step]
+        out["robot"] = _id_array(robot_ids)[robot_of[step]]
     out["frame"] = frame_of[step]
     out["landmark"] = ids[row]
     parts = history.parts or {history.sensor: history}
@@ -405,9 +428,8 @@ def history_to_observations(history: History, *, landmarks: Any = None) -> Obser
     table.attrs = {
         "source": "lfmdr history", "sensor": history.sensor, "complete": not masked,
         "landmarks": ids.tolist(),
-        **({"robots": list(range(int(robot_of.max()) + 1))}
-           if history.timeline is not None and n else {}),
-        **({"empty_frames": ([[int(robot_of[t]), int(frame_of[t])] for t in empty]
+        **({"robots": robot_ids} if history.timeline is not None and n else {}),
+        **({"empty_frames": ([[robot_ids[robot_of[t]], int(frame_of[t])] for t in empty]
                              if history.timeline is not None else frame_of[empty].tolist())}
            if len(empty) else {}),
     }

@@ -94,15 +94,17 @@ def _logged(seed: int = 0) -> History:
 
 def test_timeline_gaps_empty_steps_and_string_ids_survive(tmp_path):
     h = _logged()
+    h = h.replace(meta={"robots": ["r0", "r1", "r2", "r3"]})  # the robots' names
     names = [f"tag-{k}" for k in "hgfedcba"]  # not in sorted order: attrs keep the row order
     log = history_to_observations(h, landmarks=names)
     assert log.observations["landmark"].map(type).eq(str).all()
-    assert log.observations.attrs["empty_frames"] == [[int(v) for v in h.timeline[7]]]
+    assert set(log.observations["robot"]) == {"r0", "r1", "r3"}  # r2 took no step
+    assert log.observations.attrs["empty_frames"] == [["r0", int(h.timeline[7, 1])]]
     path = write_observations(log.observations, tmp_path / "o.csv")
     back = observations_to_history(read_observations(path), log.anchors, truth=log.truth)
     assert_same_history(h, back)
     assert landmark_ids(back).tolist() == names and back.meta["landmarks"] == names
-    assert back.meta["robots"] == [0, 1, 2, 3]
+    assert back.meta["robots"] == ["r0", "r1", "r2", "r3"]
 
 
 def _sightings() -> pd.DataFrame:
@@ -172,6 +174,8 @@ def test_bad_anchors_and_sensors_are_refused():
         observations_to_history(_sightings(), ANCHORS.assign(z=1.0))
     with pytest.raises(ValueError, match="must all be integers or all strings"):
         observations_to_history(_sightings(), ANCHORS.assign(landmark=[1, 2, 4]))
+    with pytest.raises(ObservationTableError, match="mix integers and strings"):
+        observations_to_history(_sightings().assign(landmark=["L1", 2] + ["L3"] * 7), ANCHORS)
     with pytest.raises(ValueError, match=r"needs \['range'\] readings"):
         observations_to_history(_sightings().drop(columns="range"), ANCHORS, sensor="range")
     with pytest.raises(ValueError, match="no rows"):
