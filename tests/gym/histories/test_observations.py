@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import lfmdr_gym
 from lfmdr_gym.exploration import RandomWalkPolicy
@@ -21,6 +23,7 @@ from lfmdr_gym.histories.observations import (
     landmark_ids,
     observations_to_history,
 )
+from mappers.core.sensors import COLUMNS_PER_STEP, sensors_of
 
 
 def assert_same_history(a: History, b: History) -> None:
@@ -194,3 +197,50 @@ def test_history_to_observations_refuses_what_a_table_cannot_hold():
         history_to_observations(h.replace(mask=mask))
     with pytest.raises(ValueError, match="not in \\(robot, tick\\) order"):
         history_to_observations(h.replace(timeline=h.timeline[::-1].copy()))
+
+
+@st.composite
+def histories(draw) -> History:
+    """Small random histories: any sensor or fused set, masked or complete, with or without a
+    timeline (robots and ticks with gaps); unobserved entries read 0, as every recorder writes."""
+    sensor = draw(st.sampled_from(["visibility", "bearing", "range", "range-bearing",
+                                   "visibility-bearing"]))
+    m, n = draw(st.integers(3, 6)), draw(st.integers(1, 12))
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    masked = draw(st.booleans())
+    seen = rng.random((m, n)) < draw(st.floats(0.0, 1.0)) if masked else np.ones((m, n), bool)
+    matrix, mask = {}, {}
+    for s in sensors_of(sensor):
+        if s == "visibility":
+            value = (rng.random((m, n)) < 0.5).astype(float)
+        elif s == "range":
+            value = np.where(rng.random((m, n)) < 0.2, 0.0, rng.uniform(0, 5, (m, n)))
+        else:
+            theta = rng.uniform(-np.pi, np.pi, (m, n))
+            value = np.stack([np.cos(theta), np.sin(theta)], axis=-1).reshape(m, 2 * n)
+        cols = COLUMNS_PER_STEP[s]
+        keep = np.repeat(seen, cols, axis=1)
+        matrix[s], mask[s] = np.where(keep, value, 0.0), keep
+    timeline = None
+    if draw(st.booleans()):
+        robots = np.sort(rng.integers(0, 3, n))
+        ticks = np.concatenate([np.sort(rng.choice(100, (robots == r).sum(), replace=False))
+                                for r in range(3)])
+        timeline = np.column_stack([robots, ticks])
+    pos = rng.uniform(-3, 3, (m, 2))
+    single = len(matrix) == 1
+    return History(sensor=sensor, matrix=matrix[sensor] if single else matrix,
+                   mask=(mask[sensor] if single else mask) if masked else None,
+                   object_positions=pos, anchor_ids=[0, 1, 2], anchor_positions=pos[:3],
+                   timeline=timeline)
+
+
+@settings(max_examples=30, deadline=None)
+@given(h=histories())
+def test_property_history_table_history_is_bit_identical(h):
+    log = history_to_observations(h)
+    if not len(log.observations):  # nothing observed: a log of no sightings maps nothing
+        with pytest.raises(ValueError, match="no rows: nothing was sighted"):
+            observations_to_history(log.observations, log.anchors, truth=log.truth)
+        return
+    assert_same_history(h, observations_to_history(log.observations, log.anchors, truth=log.truth))
