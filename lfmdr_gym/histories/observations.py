@@ -44,10 +44,8 @@ from lfmdr_gym.histories.binning import assemble, cell_values, tick_steps, time_
 from lfmdr_gym.histories.history import History
 from lfmdr_gym.histories.observation_table import (
     ObservationTableError,
-    _Where,
     check_landmarks,
-    check_observations,
-    normalise_ids,
+    checked_ids,
     read_landmarks,
 )
 from mappers.core.align import check_not_collinear
@@ -130,11 +128,11 @@ def _bearings(table: pd.DataFrame) -> dict[str, np.ndarray]:
     return {"bearing": np.arctan2(-x, z)}
 
 
-def _robots(table: pd.DataFrame) -> tuple[np.ndarray, list[Any]]:
-    """Each row's robot position (0-based) and the robot ids in position order."""
-    if "robot" not in table.columns:
+def _robots(table: pd.DataFrame, robot: pd.Series | None) -> tuple[np.ndarray, list[Any]]:
+    """Each row's robot position (0-based) and the robot ids in position order (``robot``: the
+    table's normalised robot ids, None without a robot column)."""
+    if robot is None:
         return np.zeros(len(table), np.int64), [0]
-    robot = normalise_ids(table["robot"], "robot", _Where(None, None))
     codes, uniques = pd.factorize(robot, sort=True)
     order = table.attrs.get("robots")
     if order is None:
@@ -235,7 +233,7 @@ def observations_to_history(
     Row ``i`` of the history is landmark ``meta["landmarks"][i]``. Bad input raises
     :class:`~lfmdr_gym.histories.observation_table.ObservationTableError` (a ValueError).
     """
-    check_observations(table)
+    landmark, robot_col = checked_ids(table)
     if not len(table):
         raise ValueError("the observation table has no rows: nothing was sighted")
     anchors = _landmark_table(anchors, "anchors")
@@ -243,7 +241,6 @@ def observations_to_history(
     name = _sensor(table, sensor)
     parts = sensors_of(name)
     attrs = dict(table.attrs)
-    landmark = normalise_ids(table["landmark"], "landmark", _Where(None, None))
     codes, seen_ids = pd.factorize(landmark)
     seen_ids = np.asarray(seen_ids, dtype=object)
     anchor_ids = anchors["landmark"].tolist()
@@ -270,7 +267,7 @@ def observations_to_history(
     anchor_pos = anchors[["x", "y"]].to_numpy(np.float64)
     check_not_collinear(anchor_pos, "anchor positions")
     # steps
-    robot, robot_ids = _robots(table)
+    robot, robot_ids = _robots(table, robot_col)
     if bin_width is not None:
         check_real("bin_width", bin_width, low=0.0, low_open=True)
         steps = time_steps(robot, table["time"].to_numpy(np.float64), len(robot_ids), bin_width,
