@@ -32,6 +32,7 @@ Table -> History:
 
 from __future__ import annotations
 
+import json
 import os
 from typing import Any, NamedTuple
 
@@ -304,7 +305,10 @@ def observations_to_history(
             "landmarks": ids.tolist(), "anchor_landmarks": anchor_ids,
             "robots": list(robot_ids) if "robot" in table.columns else None,
             "bin_width": None if bin_width is None else float(bin_width),
-            "rows": int(len(table)), "complete": complete, **meta_truth, "table_attrs": attrs}
+            "rows": int(len(table)), "complete": complete, **meta_truth,
+            # History.meta is JSON (History.save): an attrs value JSON cannot hold (a Path, say)
+            # is kept as its text
+            "table_attrs": json.loads(json.dumps(attrs, default=str))}
     if len(parts) == 1:
         matrix, mask = built[name]
     else:

@@ -138,6 +138,16 @@ def test_frames_from_times_rows_sorted_by_id_values_aggregated():
     assert np.isnan(h.object_positions[2]).all()  # no truth: only the anchors are placed
 
 
+def test_the_history_of_a_table_saves_with_its_ids(tmp_path):
+    table = _sightings()
+    table.attrs = {"source": "a detector", "bag": tmp_path / "run.bag"}  # a Path: kept as text
+    h = observations_to_history(table, ANCHORS)
+    back = History.load(h.save(tmp_path / "h.npz"))
+    assert back.meta["landmarks"] == ["L1", "L2", "L3", "L4"] and back.meta["robots"] == ["a", "b"]
+    assert back.meta["table_attrs"]["bag"] == str(tmp_path / "run.bag")
+    assert back.meta["source"] == "a detector"
+
+
 def test_binning_by_time_and_a_chosen_sensor():
     h = observations_to_history(_sightings(), ANCHORS, sensor="visibility", bin_width=1.0)
     assert h.sensor == "visibility" and h.n_steps == 2  # one bin per robot
