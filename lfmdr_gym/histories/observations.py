@@ -45,8 +45,10 @@ from lfmdr_gym.histories.binning import assemble, cell_values, tick_steps, time_
 from lfmdr_gym.histories.history import History
 from lfmdr_gym.histories.observation_table import (
     ObservationTableError,
+    _Where,
     check_landmarks,
     checked_ids,
+    normalise_ids,
     read_landmarks,
 )
 from mappers.core.align import check_not_collinear
@@ -138,7 +140,8 @@ def _robots(table: pd.DataFrame, robot: pd.Series | None) -> tuple[np.ndarray, l
     order = table.attrs.get("robots")
     if order is None:
         return codes.astype(np.int64), list(uniques)
-    order = list(order)
+    order = normalise_ids(pd.Series([str(v) for v in order]), "robot",
+                          _Where("attrs['robots']", None)).tolist()
     pos = _positions(np.array(order, dtype=object), list(uniques))
     if (pos < 0).any():
         raise ValueError(f"robots {[u for u, p in zip(uniques, pos, strict=True) if p < 0]} are "
@@ -249,10 +252,13 @@ def observations_to_history(
                 **({} if truth is None else {"the truth": truth["landmark"].tolist()})})
     declared = attrs.get("landmarks")
     if declared is not None:
-        ids = np.asarray(list(declared), dtype=object)
-        if len(set(ids.tolist())) != len(ids):
+        # read as a CSV's ids are (the JSON "7" or 7 is landmark 7, "007" a string)
+        ids = np.asarray(normalise_ids(pd.Series([str(v) for v in declared]), "landmark",
+                                       _Where("attrs['landmarks']", None)).tolist(), dtype=object)
+        listed = set(ids.tolist())
+        if len(listed) != len(ids):
             raise ValueError("the table's attrs['landmarks'] lists a landmark twice")
-        outside = [v for v in seen_ids.tolist() if v not in set(ids.tolist())]
+        outside = [v for v in seen_ids.tolist() if v not in listed]
         if outside:
             raise ValueError(f"landmarks {outside[:10]} are in the table but not in its "
                              f"attrs['landmarks']")

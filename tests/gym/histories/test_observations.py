@@ -254,3 +254,17 @@ def test_property_history_table_history_is_bit_identical(h):
             observations_to_history(log.observations, log.anchors, truth=log.truth)
         return
     assert_same_history(h, observations_to_history(log.observations, log.anchors, truth=log.truth))
+
+
+def test_declared_landmarks_and_robots_set_the_order_and_read_like_the_ids(tmp_path):
+    path = tmp_path / "o.csv"
+    path.write_text('# landmarks: ["9", 3, 5, 7]\n# robots: [2, "1"]\n'
+                    "time,robot,landmark,bearing\n0.0,1,3,0.1\n0.0,2,5,0.2\n0.5,2,7,0.3\n")
+    anchors = pd.DataFrame({"landmark": [3, 5, 7], "x": [0.0, 1.0, 0.0], "y": [0.0, 0.0, 1.0]})
+    h = observations_to_history(read_observations(path), anchors)
+    assert h.meta["landmarks"] == [9, 3, 5, 7] and h.meta["robots"] == [2, 1]
+    np.testing.assert_array_equal(h.timeline, [[0, 0], [0, 1], [1, 0]])  # robot 2 first
+    np.testing.assert_array_equal(h.mask[:, 0::2], [[0, 0, 0], [0, 0, 1], [1, 0, 0], [0, 1, 0]])
+    path.write_text('# landmarks: [3, 5]\ntime,landmark,bearing\n0.0,3,0.1\n0.0,7,0.2\n')
+    with pytest.raises(ValueError, match=r"landmarks \[7\] are in the table but not in its"):
+        observations_to_history(read_observations(path), anchors)
