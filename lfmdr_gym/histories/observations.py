@@ -374,7 +374,9 @@ def history_to_observations(history: History, *, landmarks: Any = None) -> Obser
     (visibility, if any observed entry reads 0), ``bearing`` with ``bearing_cos, bearing_sin``
     (the exact unit vector), ``range``. ``attrs`` keeps the sensor, the landmark ids, the robots
     and the steps without a row, so :func:`observations_to_history` gives the same matrices,
-    masks and timeline back. Robot poses are not written.
+    masks and timeline back. Robot poses are not written, nor the values of unobserved entries
+    of a masked history (no mapper reads them; they come back as 0, as every recorder and loader
+    writes them).
 
     Args:
         history: any single-sensor or fused History.
