@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from lfmdr_gym.checks import check_real
+from lfmdr_gym.datasets.mrclam_layout import check_run_layout
 from lfmdr_gym.histories.history import History
 from mappers.core.align import check_anchor_ids
 from mappers.core.sensors import (
@@ -250,17 +251,13 @@ def _read_robot(path: Path, robot: int, barcode_to_subject: dict[int, int],
 
 
 def _check_args(run_dir: Path, robots: Sequence[int], groundtruth_fixes: str) -> tuple[int, ...]:
-    if not run_dir.is_dir():
-        raise FileNotFoundError(f"run_dir {run_dir} is not a directory")
     if groundtruth_fixes not in GROUNDTRUTH_FIXES:
         raise ValueError(f"groundtruth_fixes must be one of {GROUNDTRUTH_FIXES}, "
                          f"got {groundtruth_fixes!r}")
     robots = tuple(int(r) for r in robots)
     if not robots or len(set(robots)) != len(robots):
         raise ValueError(f"robots must be a non-empty list of distinct robot numbers, got {robots}")
-    for r in robots:
-        if not (run_dir / f"Robot{r}_Measurement.dat").is_file():
-            raise ValueError(f"robots: no Robot{r}_Measurement.dat in {run_dir}")
+    check_run_layout(run_dir, robots)  # what is missing, and where to get the dataset
     return robots
 
 
