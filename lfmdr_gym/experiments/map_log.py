@@ -21,7 +21,7 @@ from lfmdr_gym.histories.history import History
 
 __all__ = ["LOG_SUFFIXES", "LogMap", "check_anchor_table", "is_observation_log", "map_observation_log"]
 
-LOG_SUFFIXES = (".csv", ".parquet", ".pq")
+LOG_SUFFIXES = (".csv", ".tsv", ".txt", ".parquet", ".pq")
 """File suffixes read as observation tables (anything else is a saved ``.npz`` history)."""
 
 
