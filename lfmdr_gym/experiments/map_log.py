@@ -14,12 +14,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from lfmdr_gym.experiments.map_files import MapFiles, write_map_files
 from lfmdr_gym.histories.history import History
 
-__all__ = ["LOG_SUFFIXES", "LogMap", "check_anchor_table", "is_observation_log", "map_observation_log"]
+__all__ = ["LOG_SUFFIXES", "LogMap", "is_observation_log", "map_observation_log"]
 
 LOG_SUFFIXES = (".csv", ".tsv", ".txt", ".parquet", ".pq")
 """File suffixes read as observation tables (anything else is a saved ``.npz`` history)."""
@@ -52,35 +50,6 @@ class LogMap:
     @property
     def scores(self) -> dict[str, Any] | None:
         return None if self.files is None else self.files.scores
-
-
-def check_anchor_table(anchors: Any, log_landmarks: Iterable[Any], log: str = "the log") -> None:
-    """Anchors usable for a map of the log: at least 3, every one in the log, not collinear
-    (coplanar in 3-D); else a ValueError naming the problem."""
-    ids = anchors["landmark"].tolist()
-    if len(ids) < 3:
-        raise ValueError(f"{len(ids)} anchor(s) {ids}: a map needs at least 3 anchors "
-                         "(landmarks of known position, not on one line)")
-    known = set(log_landmarks)
-    absent = [a for a in ids if a not in known]
-    if absent:
-        shown = sorted(known, key=str)
-        raise ValueError(f"anchor(s) {absent} are not landmarks of {log} (its landmarks: "
-                         f"{shown[:30]}{' ...' if len(shown) > 30 else ''}); an anchor must be "
-                         "sighted to be fitted")
-    axes = [a for a in ("x", "y", "z") if a in anchors.columns]
-    points = anchors[axes].to_numpy(dtype=float)
-    if len(axes) == 2:
-        from mappers.core.align import check_not_collinear
-
-        check_not_collinear(points, f"anchor positions of {ids}")
-        return
-    # 3-D: an affine map in space needs 4 anchors off one plane (np.linalg: rank of the spread)
-    centred = points - points.mean(axis=0)
-    s = np.linalg.svd(centred, compute_uv=False)
-    if len(ids) < 4 or s[0] == 0 or s[-1] <= 1e-6 * s[0]:
-        raise ValueError(f"anchor positions of {ids} are coplanar (singular values "
-                         f"{np.round(s, 6).tolist()}): a 3-D map needs 4 anchors off one plane")
 
 
 def map_observation_log(
@@ -117,14 +86,15 @@ def map_observation_log(
     from lfmdr_gym.experiments.params import method_label, param_label
     from lfmdr_gym.experiments.scoring import map_history
     from lfmdr_gym.histories.observation_table import read_landmarks, read_observations
-    from lfmdr_gym.histories.observations import observations_to_history
+    from lfmdr_gym.histories.observations import landmark_ids, observations_to_history
 
     table = read_observations(path)
-    anchor_table = read_landmarks(anchors)
-    check_anchor_table(anchor_table, table["landmark"].unique().tolist(), str(path))
-    truth_table = read_landmarks(truth) if truth is not None else None
-    history = observations_to_history(table, anchor_table, sensor=sensor, bin_width=bin_width)
-    landmarks = tuple(history.meta["landmarks"])
+    anchor_table = read_landmarks(anchors, what="anchors")
+    truth_table = read_landmarks(truth, what="truth") if truth is not None else None
+    # (it refuses anchors absent from the log, fewer than 3, or collinear)
+    history = observations_to_history(table, anchor_table, truth=truth_table, sensor=sensor,
+                                      bin_width=bin_width)
+    landmarks = tuple(landmark_ids(history).tolist())
     if n_steps is not None:
         history = history.head(n_steps)
     label, chosen = method_and_params(method, history, params)
