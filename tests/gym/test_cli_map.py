@@ -10,7 +10,12 @@ import re
 import numpy as np
 import pandas as pd
 import pytest
-from lfmdr_gym.histories.observation_table import write_landmarks, write_observations
+from lfmdr_gym.histories.observation_table import (
+    read_landmarks,
+    read_observations,
+    write_landmarks,
+    write_observations,
+)
 from lfmdr_gym.histories.observations import history_to_observations
 from paths import SHARED_DATA
 
@@ -67,10 +72,14 @@ def test_cli_writes_the_set_and_prints_scores(tmp_path, capsys):
 def test_string_ids_stay_strings(tmp_path):
     history, _, log, anchors, truth = _episode(tmp_path, "LFMDR-Visibility-v0", steps=150)
     name = {k: f"tag_{k:02d}" for k in range(history.n_objects)}
-    for path in (log, anchors, truth):
-        table = pd.read_csv(path, comment="#")
+    log_table = read_observations(log)  # (its attrs kept: a complete history's table)
+    log_table["landmark"] = log_table["landmark"].map(name)
+    log_table.attrs["landmarks"] = [name[k] for k in log_table.attrs["landmarks"]]
+    write_observations(log_table, log)
+    for path in (anchors, truth):
+        table = read_landmarks(path)
         table["landmark"] = table["landmark"].map(name)
-        table.to_csv(path, index=False)
+        write_landmarks(table, path)
     run = map_observation_log(log, anchors, truth=truth, method="SMA(WGT)",
                               out=tmp_path / "m", plot=False)
     with open(tmp_path / "m" / "map.csv", newline="") as fh:
@@ -84,8 +93,8 @@ def _bad_anchor_tables(tmp_path, anchors):
     cases = {}
     absent = table.copy()
     absent.loc[0, "landmark"] = 999
-    cases["absent"] = (absent, r"anchor\(s\) \[999\] are not landmarks of")
-    cases["few"] = (table.iloc[:2], "at least 3 anchors")
+    cases["absent"] = (absent, r"anchors \[999\] are never sighted in the log")
+    cases["few"] = (table.iloc[:2], "at least 3")
     line = table.copy()
     line["y"] = 2.0 * line["x"] + 1.0
     cases["collinear"] = (line, "collinear")
