@@ -168,12 +168,9 @@ def add_convert(sub: Any) -> None:
         "AprilTag detections of one topic of a ROS 1 bag or a ROS 2 bag (sqlite3, MCAP), read "
         "with the rosbags library (pip install 'lfmdr[ros]'; no ROS install).",
     )
-    r.add_argument("src", metavar="BAG", help="a .bag file or a ROS 2 bag directory")
-    r.add_argument("--topic", required=True, help="the detections' topic")
-    r.add_argument("--camera-info", default=None, metavar="TOPIC",
-                   help="a sensor_msgs/CameraInfo topic: the intrinsics that turn a detection's "
-                        "pixel centre into a ray (needed for apriltag_msgs detections)")
-    r.add_argument("--robot", default=None, help="robot id written in the table's robot column")
+    from lfmdr_gym.datasets import rosbag  # (imports rosbags only when it reads a bag)
+
+    rosbag.add_arguments(r)
     _add_table_out(r)
     r.set_defaults(handler=_cmd_convert_rosbag)
 
@@ -207,12 +204,11 @@ def _write_landmarks(table: Any, path: str) -> None:
 
 
 def _cmd_convert_rosbag(args: argparse.Namespace) -> int:
-    from lfmdr_gym.datasets.rosbag import read_rosbag
+    from lfmdr_gym.datasets import rosbag
     from lfmdr_gym.histories.observation_table import write_observations
 
-    table = read_rosbag(args.src, args.topic, camera_info_topic=args.camera_info,
-                        robot=args.robot)
+    table = rosbag.run(args)
     write_observations(table, args.out)
-    print(f"{args.src} {args.topic}: {len(table)} sightings of {table['landmark'].nunique()} "
+    print(f"{args.bag} {args.topic}: {len(table)} sightings of {table['landmark'].nunique()} "
           f"landmarks; wrote {args.out}")
     return 0

@@ -10,6 +10,12 @@ import re
 import numpy as np
 import pandas as pd
 import pytest
+from paths import SHARED_DATA
+
+from lfmdr_gym.cli import main
+from lfmdr_gym.experiments.episodes import collect_history
+from lfmdr_gym.experiments.map_log import map_observation_log
+from lfmdr_gym.experiments.mapping import map_history_file
 from lfmdr_gym.histories.observation_table import (
     read_landmarks,
     read_observations,
@@ -17,12 +23,6 @@ from lfmdr_gym.histories.observation_table import (
     write_observations,
 )
 from lfmdr_gym.histories.observations import history_to_observations
-from paths import SHARED_DATA
-
-from lfmdr_gym.cli import main
-from lfmdr_gym.experiments.episodes import collect_history
-from lfmdr_gym.experiments.map_log import map_observation_log
-from lfmdr_gym.experiments.mapping import map_history_file
 
 MRCLAM = SHARED_DATA / "mrclam"
 
@@ -153,3 +153,32 @@ def test_convert_mrclam_writes_a_table_and_landmarks(tmp_path, capsys):
     assert set(table["landmark"].unique()) <= set(range(6, 21))
     assert len(read_landmarks(marks)) == 15
     assert "wrote" in capsys.readouterr().out
+
+
+def test_convert_rosbag_then_map(tmp_path, capsys):
+    """A ROS 1 bag of AprilTag poses (simulated) -> lfmdr convert rosbag -> lfmdr map."""
+    pytest.importorskip("rosbags")
+    from lfmdr_gym.datasets.rosbag_write import camera_detections, write_detection_bag
+
+    rng = np.random.default_rng(3)
+    steps, landmarks = 150, rng.uniform(-2.0, 2.0, (10, 2))
+    poses = np.column_stack([rng.uniform(-2.5, 2.5, (steps, 2)), rng.uniform(-np.pi, np.pi, steps)])
+    det = camera_detections(1_700_000_000.0 + 0.1 * np.arange(steps), poses, landmarks,
+                            ids=np.arange(10) + 100, fov=np.radians(120))
+    bag = write_detection_bag(tmp_path / "run.bag", det)
+    log = tmp_path / "run.parquet"
+    assert main(["convert", "rosbag", str(bag), "--topic", "/tag_detections",
+                 "--out", str(log)]) == 0
+    assert "wrote" in capsys.readouterr().out
+    ids = np.arange(10) + 100
+    pd.DataFrame({"landmark": ids[:4], "x": landmarks[:4, 0], "y": landmarks[:4, 1]}).to_csv(
+        tmp_path / "anchors.csv", index=False)
+    pd.DataFrame({"landmark": ids, "x": landmarks[:, 0], "y": landmarks[:, 1]}).to_csv(
+        tmp_path / "truth.csv", index=False)
+    assert main(["map", str(log), "--anchors", str(tmp_path / "anchors.csv"), "--truth",
+                 str(tmp_path / "truth.csv"), "--sensor", "range-bearing",
+                 "--out", str(tmp_path / "m")]) == 0
+    capsys.readouterr()
+    scores = json.loads((tmp_path / "m" / "scores.json").read_text())
+    assert scores["n_scored"] == 10
+    assert scores["mpe_nonanchor"] < 0.01  # exact poses from the camera: an exact map
