@@ -7,6 +7,7 @@ Kept apart from :mod:`lfmdr_gym.cli`, which registers them, so no module grows p
 from __future__ import annotations
 
 import argparse
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -160,7 +161,10 @@ def add_convert(sub: Any) -> None:
     m.add_argument("--groundtruth-fixes", choices=["known", "detect", "none"], default="known",
                    help="as for lfmdr mrclam: which documented ground-truth errors to fix")
     m.add_argument("--landmarks", default=None, metavar="L.csv",
-                   help="also write the landmarks' ground truth here")
+                   help="also write the landmarks' ground truth here (for --truth)")
+    m.add_argument("--anchors", default=None, metavar="A.csv",
+                   help="also write the anchors lfmdr mrclam uses here (the 4 landmarks nearest "
+                        "the corners of their bounding box; for --anchors)")
     _add_table_out(m)
     m.set_defaults(handler=_cmd_convert_mrclam)
     r = add_command(
@@ -181,26 +185,27 @@ def _add_table_out(p: argparse.ArgumentParser) -> None:
 
 
 def _cmd_convert_mrclam(args: argparse.Namespace) -> int:
-    from lfmdr_gym.datasets.mrclam import read_run
-    from lfmdr_gym.datasets.mrclam_table import mrclam_landmarks, mrclam_observations
-    from lfmdr_gym.histories.observation_table import write_observations
+    from lfmdr_gym.datasets.mrclam import MRCLAMDataWarning, read_run
+    from lfmdr_gym.datasets.mrclam_table import (
+        mrclam_anchors,
+        mrclam_landmarks,
+        mrclam_observations,
+    )
+    from lfmdr_gym.histories.observation_table import write_landmarks, write_observations
 
-    run = read_run(args.src, groundtruth_fixes=args.groundtruth_fixes)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MRCLAMDataWarning)  # they are in run.report.warnings
+        run = read_run(args.src, groundtruth_fixes=args.groundtruth_fixes)
     table = mrclam_observations(run)
-    write_observations(table, args.out)
     print_warnings(run.report.warnings)
-    print(f"{run.name}: {len(table)} sightings of {table['landmark'].nunique()} landmarks by "
-          f"{table['robot'].nunique()} robots; wrote {args.out}")
+    written = [write_observations(table, args.out)]
     if args.landmarks is not None:
-        _write_landmarks(mrclam_landmarks(run), args.landmarks)
-        print(f"wrote {args.landmarks}")
+        written.append(write_landmarks(mrclam_landmarks(run), args.landmarks, what="truth"))
+    if args.anchors is not None:
+        written.append(write_landmarks(mrclam_anchors(run), args.anchors, what="anchors"))
+    print(f"{run.name}: {len(table)} sightings of {table['landmark'].nunique()} landmarks by "
+          f"{table['robot'].nunique()} robots; wrote " + ", ".join(map(str, written)))
     return 0
-
-
-def _write_landmarks(table: Any, path: str) -> None:
-    from lfmdr_gym.atomic import atomic_write_text
-
-    atomic_write_text(path, table.to_csv(index=False, lineterminator="\n"))
 
 
 def _cmd_convert_rosbag(args: argparse.Namespace) -> int:
