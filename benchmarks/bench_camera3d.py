@@ -21,7 +21,7 @@ bearing <= 0.01 m, bearing <= 0.02 m, visibility <= 0.15 m, under 2 s of CPU per
 
 ``--env-kw`` sets an env keyword beyond the noise (e.g. ``max_range=1.5``), for every sensor.
 
-Writes one row per layout and sensor to ``--out`` (atomically) and prints mean / median / max
+Writes one row per layout and sensor to ``--out`` (atomically, again after every row) and prints mean / median / max
 MPE, the mapped share and the median CPU time per sensor.
 """
 
@@ -168,10 +168,10 @@ def main(argv: list[str] | None = None) -> None:
             row = run_one(args.seed0 + k, sensor, args.steps, args.bearing_noise_deg,
                           args.range_noise, extra)
             rows.append(row)
+            write_csv(rows, args.out)  # after every row: a long run stopped early keeps its rows
             print(f"seed {row['layout_seed']} {sensor:<14} {row['method'] or '-':<16} "
                   f"MPE {row['mpe']:.4f} m  mapped {row['mapped']:.2f}  "
                   f"CPU {row['cpu_seconds']:.2f} s {row['error'][:80]}", flush=True)
-    write_csv(rows, args.out)
     print(f"\n{args.layouts} layouts of {ENV_ID}, N = {args.steps}, noise "
           f"{args.bearing_noise_deg} deg / {args.range_noise} m, seeds {args.seed0}.."
           f"{args.seed0 + args.layouts - 1}; env keywords {extra or 'the defaults'}; goal: CPU "
