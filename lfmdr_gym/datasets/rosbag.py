@@ -4,7 +4,9 @@
 sqlite3 ``.db3`` or ``.mcap`` files) through ``rosbags.highlevel.AnyReader`` — the pure-Python
 ``rosbags`` library (``pip install 'lfmdr[ros]'``), no ROS install — and returns the table of issue 33
 (``time, landmark[, robot], frame, ray_x, ray_y, ray_z[, range]``). The detection messages it
-reads are those of :mod:`lfmdr_gym.datasets.ros_messages`:
+reads are those of :mod:`lfmdr_gym.datasets.ros_messages` (as a bag embeds them, so also
+``apriltag_msgs`` 1.x, whose centre is a ``float64[2]``, and Isaac ROS releases whose pose has no
+stamp):
 
 * ``apriltag_ros/AprilTagDetectionArray`` (ROS 1) and ``isaac_ros_apriltag_interfaces/
   AprilTagDetectionArray`` carry each tag's pose in the camera's optical frame (z forward, x right,
@@ -119,6 +121,24 @@ def _message_time(msg: Any, bag_ns: int, time_source: str, topic: str, index: in
     return t
 
 
+def _centre(det: Any) -> tuple[float, float]:
+    """A detection's pixel centre: a ``Point`` (apriltag_msgs 2.x) or ``float64[2]`` (1.x)."""
+    c = det.centre
+    if isinstance(c, np.ndarray):
+        return float(c[0]), float(c[1])
+    return float(c.x), float(c.y)
+
+
+def _position(det: Any) -> tuple[float, float, float]:
+    """A detection's position, under a ``PoseWithCovarianceStamped`` or (Isaac ROS releases that
+    dropped the stamp) a ``PoseWithCovariance``."""
+    pose = det.pose
+    while not hasattr(pose, "position"):
+        pose = pose.pose
+    p = pose.position
+    return float(p.x), float(p.y), float(p.z)
+
+
 def _gather(reader: Any, topic: str, msgtype: str, time_source: str, bundles: str) -> _Detections:
     """Walk the topic's messages once, keeping each detection's id, family and position or pixel."""
     out = _Detections()
@@ -145,10 +165,9 @@ def _gather(reader: Any, topic: str, msgtype: str, time_source: str, bundles: st
             else:
                 tag, family = int(det.id), str(det.family)
             if msgtype == APRILTAG_MSGS:
-                out.pixel.append((float(det.centre.x), float(det.centre.y)))
+                out.pixel.append(_centre(det))
             else:
-                p = det.pose.pose.pose.position
-                out.xyz.append((float(p.x), float(p.y), float(p.z)))
+                out.xyz.append(_position(det))
             out.time.append(t)
             out.frame.append(index)
             out.tag.append(tag)
@@ -218,7 +237,7 @@ def _pixel_rays(reader: Any, found: _Detections, topics: dict[str, Any], topic: 
 
 
 def _landmarks(found: _Detections) -> tuple[pd.Series, list[str]]:
-    families = sorted(set(found.family))
+    families = sorted(set(found.family) - {""})  # apriltag_ros names no family
     if len(families) > 1:
         ids = [f"{f}:{i}" for f, i in zip(found.family, found.tag, strict=True)]
         return pd.Series(ids, dtype=object), families
@@ -322,7 +341,7 @@ def read_rosbag(
         columns["range"] = np.linalg.norm(rays, axis=1)
     table = pd.DataFrame(columns)
     table.attrs.update(
-        source="rosbag", path=str(path), topic=topic, msgtype=msgtype, sensor="camera",
+        source="rosbag", path=str(path), topic=topic, msgtype=msgtype,
         time_source=time_source, camera_frame=next(iter(found.camera_frames)),
         families=families, messages=found.messages, skipped_bundles=found.bundles,
     )
@@ -333,7 +352,8 @@ def read_rosbag(
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add ``lfmdr convert rosbag``'s arguments (the bag and :func:`read_rosbag`'s options)."""
-    parser.add_argument("bag", help="a ROS 1 .bag file or a ROS 2 bag folder (sqlite3 or MCAP)")
+    parser.add_argument("src", metavar="BAG",
+                        help="a ROS 1 .bag file or a ROS 2 bag folder (sqlite3 or MCAP)")
     parser.add_argument("--topic", required=True,
                         help=f"the detection topic (types: {', '.join(DETECTION_ARRAY_TYPES)})")
     parser.add_argument("--camera-info", default=None, metavar="TOPIC",
@@ -353,5 +373,5 @@ def run(args: argparse.Namespace) -> pd.DataFrame:
     robot = args.robot
     if robot is not None and str(robot).isdigit():
         robot = int(robot)
-    return read_rosbag(args.bag, args.topic, camera_info_topic=args.camera_info, robot=robot,
+    return read_rosbag(args.src, args.topic, camera_info_topic=args.camera_info, robot=robot,
                        time_source=args.time, rectified=args.rectified, bundles=args.bundles)

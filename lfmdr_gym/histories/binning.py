@@ -152,13 +152,19 @@ class Cells:
 def _median_by_cell(cell: np.ndarray, value: np.ndarray, n_cells: int) -> np.ndarray:
     """The median of ``value`` over the rows of each cell, as :func:`numpy.median` gives it (the
     middle value, or of an even count the two middle ones summed and halved)."""
-    order = np.lexsort((value, cell))
-    v = value[order]
     count = np.bincount(cell, minlength=n_cells)
-    start = np.r_[0, np.cumsum(count)[:-1]]
-    hi = v[start + count // 2]
-    lo = v[start + (count - 1) // 2]
-    return np.where(count % 2 == 1, hi, (lo + hi) / 2)
+    out = np.zeros(n_cells)
+    single = count[cell] == 1
+    out[cell[single]] = value[single]  # most cells hold one reading: no sort needed
+    rows = np.flatnonzero(~single)
+    if len(rows):
+        order = rows[np.lexsort((value[rows], cell[rows]))]
+        v, multi = value[order], np.flatnonzero(count > 1)
+        n = count[multi]
+        start = np.r_[0, np.cumsum(n)[:-1]]
+        hi, lo = v[start + n // 2], v[start + (n - 1) // 2]
+        out[multi] = np.where(n % 2 == 1, hi, (lo + hi) / 2)
+    return out
 
 
 def cell_values(sensors: tuple[str, ...], landmark: np.ndarray, step: np.ndarray,

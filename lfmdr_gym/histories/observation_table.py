@@ -3,23 +3,17 @@
 A robot's log of "at time t, robot r saw landmark k at bearing b (and range d)" is a
 ``pandas.DataFrame`` with these columns (the guide ``docs/guide/observations.md`` has examples):
 
-========================  ==========================================================================
-``time``                  [s], required.
-``landmark``              required; integer or string id (strings stay strings, also in maps).
-``robot``                 optional integer or string id; absent: one robot.
-``frame``                 optional integer; rows with the same ``robot`` and ``frame`` were taken
-                          from one pose (absent: rows with the same ``robot`` and ``time``).
-``bearing``               [rad], sensor frame, counter-clockwise, 2-D; within [-2 pi, 2 pi].
-``bearing_cos``,          the bearing as its unit vector (cos, sin), instead of or beside
-``bearing_sin``           ``bearing``: kept bit for bit (what :func:`history_to_observations
-                          <lfmdr_gym.histories.observations.history_to_observations>` writes).
-``ray_x, ray_y, ray_z``   a direction in the sensor's frame (3-D, any length but not 0); camera
-                          optical frame: z forward, x right, y down. With 2-D anchors it is
-                          projected to ``bearing = atan2(-ray_x, ray_z)``.
-``range``                 [m], >= 0.
-``visible``               optional 0/1: 0 marks an observed entry that did not see the landmark
-                          (a camera that looked and missed); absent: every row is a sighting.
-========================  ==========================================================================
+| column | meaning |
+|---|---|
+| ``time`` | [s], required. |
+| ``landmark`` | required; integer or string id (strings stay strings, also in maps). |
+| ``robot`` | optional integer or string id; absent: one robot. |
+| ``frame`` | optional integer; rows with the same ``robot`` and ``frame`` were taken from one pose (absent: rows with the same ``robot`` and ``time``). |
+| ``bearing`` | [rad], sensor frame, counter-clockwise, 2-D; within [-2 pi, 2 pi]. |
+| ``bearing_cos``, ``bearing_sin`` | the bearing as its unit vector (cos, sin), instead of or beside ``bearing``: kept bit for bit (what ``history_to_observations`` writes). |
+| ``ray_x``, ``ray_y``, ``ray_z`` | a direction in the sensor's frame (3-D, any length but not 0); camera optical frame: z forward, x right, y down. With 2-D anchors it is projected to ``bearing = atan2(-ray_x, ray_z)``. |
+| ``range`` | [m], >= 0. |
+| ``visible`` | optional 0/1: 0 marks an observed entry that did not see the landmark (a camera that looked and missed); absent: every row is a sighting. |
 
 Any subset of the measurements may be given (none: visibility only). Other columns are allowed,
 kept, and not used; a column that differs from a known name only in case or spaces is an error.
@@ -55,6 +49,7 @@ __all__ = [
     "ObservationTableError",
     "check_landmarks",
     "check_observations",
+    "checked_ids",
     "read_landmarks",
     "read_observations",
     "write_landmarks",
@@ -137,16 +132,29 @@ def normalise_ids(values: pd.Series, what: str, where: _Where) -> pd.Series:
             _fail(where, pos, what, f"{what} id {_show(arr[pos])} is neither an integer nor a string",
                   int(bad.sum()))
         return values.astype(np.int64)
-    arr = values.to_numpy(dtype=object)
+    # the types are checked on the distinct ids, not row by row (a log has few landmarks)
+    codes, uniques = pd.factorize(values)
+    arr = np.asarray(uniques, dtype=object)
     is_str = np.fromiter((isinstance(v, str) for v in arr), bool, len(arr))
+    is_int = np.fromiter((isinstance(v, int | np.integer) and not isinstance(v, bool | np.bool_)
+                          for v in arr), bool, len(arr))
+    if is_int.all():
+        return pd.Series(arr.astype(np.int64)[codes], index=values.index)
+    bad = ~(is_str | is_int)
+    if bad.any():
+        rows = bad[codes]
+        pos = int(np.flatnonzero(rows)[0])
+        v = arr[codes[pos]]
+        _fail(where, pos, what, f"{what} id {_show(v)} ({type(v).__name__}) is neither an "
+              "integer nor a string", int(rows.sum()))
     if not is_str.all():
-        pos = int(np.flatnonzero(~is_str)[0])
-        _fail(where, pos, what, f"{what} id {arr[pos]!r} ({type(arr[pos]).__name__}) is neither "
-              "an integer nor a string", int((~is_str).sum()))
-    strings = values.astype(str)
-    if len(strings) and strings.str.fullmatch(_INT).all():
-        return strings.astype(np.int64)
-    return pd.Series(arr, index=values.index, dtype=object)
+        rows = ~is_str[codes]
+        pos = int(np.flatnonzero(rows)[0])
+        _fail(where, pos, what, f"{what} ids mix integers and strings ({_show(arr[codes[pos]])} "
+              "among strings); give them all as one or the other", int(rows.sum()))
+    if len(arr) and pd.Series(arr).str.fullmatch(_INT).all():
+        return pd.Series(arr.astype(np.int64)[codes], index=values.index)
+    return pd.Series(arr[codes], index=values.index, dtype=object)
 
 
 # ------------------------------------------------------------------------------ checks
@@ -250,12 +258,19 @@ def check_observations(table: pd.DataFrame, *, name: str | None = None,
         name: how errors name the table (a file name), if given.
         first_line: the file line of the first row (CSV); None names rows by position.
     """
+    checked_ids(table, name=name, first_line=first_line)
+    return table
+
+
+def checked_ids(table: pd.DataFrame, *, name: str | None = None,
+                first_line: int | None = None) -> tuple[pd.Series, pd.Series | None]:
+    """:func:`check_observations`, returning the table's landmark and robot ids (None without a
+    ``robot`` column) as :func:`normalise_ids` gives them (so a caller need not convert twice)."""
     where = _Where(name, first_line)
     _check_columns(table, where)
     names = set(table.columns)
-    normalise_ids(table["landmark"], "landmark", where)
-    if "robot" in names:
-        normalise_ids(table["robot"], "robot", where)
+    landmark = normalise_ids(table["landmark"], "landmark", where)
+    robot = normalise_ids(table["robot"], "robot", where) if "robot" in names else None
     _numeric(table, "time", where)
     if "frame" in names:
         frame = table["frame"]
@@ -275,7 +290,7 @@ def check_observations(table: pd.DataFrame, *, name: str | None = None,
         _first(where, ~np.isin(values, (0.0, 1.0)), "visible",
                lambda i: f"visible is 0 or 1, got {_show(v.iloc[i])}")
     _check_bearings(table, where, {})
-    return table
+    return landmark, robot
 
 
 def check_landmarks(table: pd.DataFrame, *, what: str = "landmarks", name: str | None = None,

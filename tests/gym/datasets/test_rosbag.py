@@ -14,7 +14,7 @@ import pytest
 
 pytest.importorskip("rosbags", reason="rosbags not installed (pip install 'lfmdr[ros]')")
 
-from lfmdr_gym.datasets.ros_intrinsics import CameraIntrinsics  # noqa: E402
+from lfmdr_gym.datasets.ros_intrinsics import CameraIntrinsics, rays_to_pixels  # noqa: E402
 from lfmdr_gym.datasets.ros_messages import (  # noqa: E402
     APRILTAG_MSGS,
     APRILTAG_ROS,
@@ -93,6 +93,7 @@ def test_detections_written_to_a_bag_read_back_as_the_table(bags, container, msg
         assert "range" not in table.columns
     assert table.attrs["msgtype"] == msgtype and table.attrs["topic"] == TOPIC
     assert table.attrs["source"] == "rosbag" and table.attrs["time_source"] == "header"
+    assert table.attrs["families"] == ([] if msgtype == APRILTAG_ROS else ["36h11"])
 
 
 def test_the_rays_give_the_true_bearings_in_the_horizontal_plane(bags):
@@ -318,3 +319,59 @@ def test_a_failed_write_leaves_nothing_behind(tmp_path, monkeypatch, container):
         write_detection_bag(tmp_path / _name(container, ISAAC_ROS), DETECTIONS, container=container,
                             msgtype=ISAAC_ROS)
     assert list(tmp_path.iterdir()) == []
+
+
+# ---- older message layouts, as a bag embeds them ------------------------------------------------
+
+LEGACY = {
+    APRILTAG_MSGS: ("apriltag_msgs/msg/AprilTagDetection",  # apriltag_msgs 1.x: arrays, no Point
+                    "string family\nint32 id\nint32 hamming\nfloat32 goodness\n"
+                    "float32 decision_margin\nfloat64[2] centre\nfloat64[8] corners\n"
+                    "float64[9] homography\n"),
+    ISAAC_ROS: ("isaac_ros_apriltag_interfaces/msg/AprilTagDetection",  # a pose without stamp
+                "string family\nint32 id\ngeometry_msgs/Point center\n"
+                "geometry_msgs/Point[4] corners\ngeometry_msgs/PoseWithCovariance pose\n"),
+}
+
+
+@pytest.mark.parametrize("msgtype", LEGACY)
+def test_older_layouts_embedded_in_a_bag_are_read(tmp_path, msgtype):
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    from lfmdr_gym.datasets.rosbag_write import _camera_info, _header
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    name, text = LEGACY[msgtype]
+    types = get_types_from_msg(text, name)
+    types.update(get_types_from_msg("std_msgs/Header header\nAprilTagDetection[] detections\n",
+                                    msgtype))
+    store.register(types)
+    T = store.types
+    xyz = np.array([0.2, -0.1, 1.5])
+    uv = rays_to_pixels(xyz[None], CAMERA)[0]
+    header = _header(store, T0, "cam", 0)
+    if msgtype == APRILTAG_MSGS:
+        det = T[name](family="36h11", id=9, hamming=0, goodness=0.0, decision_margin=0.0,
+                      centre=uv, corners=np.zeros(8), homography=np.zeros(9))
+    else:
+        point = T["geometry_msgs/msg/Point"]
+        pose = T["geometry_msgs/msg/Pose"](
+            position=point(x=xyz[0], y=xyz[1], z=xyz[2]),
+            orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0))
+        det = T[name](family="36h11", id=9, center=point(x=0.0, y=0.0, z=0.0),
+                      corners=[point(x=0.0, y=0.0, z=0.0)] * 4,
+                      pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose,
+                                                                      covariance=np.zeros(36)))
+    path = tmp_path / "legacy"
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection(TOPIC, msgtype, typestore=store)
+        info = writer.add_connection("/camera_info", CAMERA_INFO, typestore=store)
+        writer.write(info, int(T0 * 1e9), store.serialize_cdr(_camera_info(store, header, CAMERA, 2),
+                                                              CAMERA_INFO))
+        writer.write(conn, int(T0 * 1e9), store.serialize_cdr(T[msgtype](header=header,
+                                                                         detections=[det]), msgtype))
+    table = read_rosbag(path, TOPIC, camera_info_topic="/camera_info")
+    assert table["landmark"].tolist() == [9]
+    ray = table[["ray_x", "ray_y", "ray_z"]].to_numpy()
+    np.testing.assert_allclose(_unit(ray), _unit(xyz[None]), atol=1e-9)
