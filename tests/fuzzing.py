@@ -21,7 +21,6 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 import numpy as np
-
 from paths import ROOT
 
 TIME_LIMIT = 60.0
