@@ -147,3 +147,26 @@ def summary_of(history) -> dict:
             **{name: _digest(getattr(history, name)) for name in (
                 "matrix", "mask", "object_positions", "anchor_ids", "anchor_positions",
                 "robot_poses", "timeline")}}
+
+
+def table_summary(path) -> dict:
+    """What :func:`lfmdr_gym.histories.observation_table.read_observations` read from
+    ``path``: its size, columns and attrs (a damaged CSV can read as another valid table: CSV
+    has no checksum)."""
+    from lfmdr_gym.histories.observation_table import read_observations
+
+    table = read_observations(path)
+    return {"rows": len(table), "columns": list(table.columns), "attrs": table.attrs}
+
+
+BAG_TOPIC = "/tag_detections"
+"""The detection topic of the fuzzed bags (``rosbag_write.write_detection_bag``'s default)."""
+
+
+def rosbag_summary(path) -> dict:
+    """What :func:`lfmdr_gym.datasets.rosbag.read_rosbag` read from the bag at ``path`` (its
+    detections on :data:`BAG_TOPIC`, pixels through ``/camera_info``): size and columns."""
+    from lfmdr_gym.datasets.rosbag import read_rosbag
+
+    table = read_rosbag(path, BAG_TOPIC, camera_info_topic="/camera_info")
+    return {"rows": len(table), "columns": list(table.columns)}

@@ -34,6 +34,7 @@ import json
 import math
 import os
 import re
+import zlib
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -139,6 +140,13 @@ def normalise_ids(values: pd.Series, what: str, where: _Where) -> pd.Series:
               "an integer nor a string", int((~is_str).sum()))
     strings = values.astype(str)
     if len(strings) and strings.str.fullmatch(_INT).all():
+        # only a string of 19 or more digits can be beyond int64 (whose astype would raise an
+        # OverflowError): those few are checked in Python
+        long = np.flatnonzero((strings.str.len() > 18).to_numpy())
+        big = [pos for pos in long if not -2**63 <= int(strings.iloc[pos]) < 2**63]
+        if big:
+            _fail(where, int(big[0]), what, f"{what} id {strings.iloc[big[0]]} does not fit in "
+                  "64 bits", len(big))
         return strings.astype(np.int64)
     return pd.Series(arr, index=values.index, dtype=object)
 
@@ -347,11 +355,23 @@ def _read(path: str | os.PathLike, id_columns: tuple[str, ...]) -> tuple[pd.Data
             arrow = pq.read_table(path)
         except (pa.ArrowException, OSError) as exc:
             raise ObservationTableError(f"{path} is not a readable Parquet file: {exc}") from exc
-        table = arrow.to_pandas()
-        raw = (arrow.schema.metadata or {}).get(PARQUET_KEY)
-        table.attrs = json.loads(raw) if raw else {}
+        try:
+            # a damaged schema or metadata (pandas' own or ours): bad JSON or UTF-8 (ValueError),
+            # an unknown dtype name (TypeError), a missing key
+            table = arrow.to_pandas()
+            raw = (arrow.schema.metadata or {}).get(PARQUET_KEY)
+            attrs = json.loads(raw) if raw else {}
+        except (pa.ArrowException, ValueError, TypeError, KeyError) as exc:
+            raise ObservationTableError(f"{path} is not a readable Parquet file (damaged schema "
+                                        f"or metadata): {exc!r}") from exc
+        if not isinstance(attrs, dict):
+            raise ObservationTableError(f"{path}: its lfmdr metadata is not a JSON object")
+        table.attrs = attrs
         return table, _Where(str(path), None)
-    attrs, n_comments = _read_comments(path)
+    try:
+        attrs, n_comments = _read_comments(path)
+    except (UnicodeDecodeError, OSError, EOFError, zlib.error) as exc:  # (OSError: bad gzip)
+        raise ObservationTableError(f"{path} is not a readable CSV table: {exc}") from exc
     sep = "\t" if path.suffix.lower() == ".tsv" else ","
     try:
         # ids as text (made integers where they spell one: normalise_ids). Floats must read back
@@ -361,7 +381,8 @@ def _read(path: str | os.PathLike, id_columns: tuple[str, ...]) -> tuple[pd.Data
         table = pd.read_csv(path, skiprows=n_comments, sep=sep, **exact,
                             dtype={c: str for c in id_columns}, keep_default_na=False,
                             na_values=["", "NaN", "nan", "NA"])
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError,
+            EOFError, zlib.error) as exc:  # (OSError, EOFError, zlib.error: a damaged .csv.gz)
         raise ObservationTableError(f"{path} is not a readable CSV table: {exc}") from exc
     table.columns = [str(c) for c in table.columns]
     table.attrs = attrs
