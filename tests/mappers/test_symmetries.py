@@ -97,8 +97,12 @@ KNOWN_FAILURES = {
     ("visibility-masked", "scale"): "VIEW-BA depends on the unit: not yet traced",
 }
 """(default, symmetry) -> why the default breaks it (found by this suite; issue 35). Each is
-``xfail(strict=True)`` in the default run: a fix makes the test pass, and the entry must then
-go."""
+``xfail(strict=True)`` in the default run (a fix makes the test pass, and the entry must then
+go), except those in :data:`MISSED_BY_DEFAULT_CASES`."""
+
+MISSED_BY_DEFAULT_CASES = {("bearing-complete", "scale"), ("bearing+range-masked", "rigid-motion")}
+"""Known failures that the default run's cases happen not to meet (``-m slow``'s and other
+draws do): not strict there, so that they pass as XPASS."""
 
 
 KEYS = sorted(DEFAULTS, key=_name)
@@ -235,7 +239,8 @@ def _cases(slow: bool):
             reason = KNOWN_FAILURES.get((_name(key), symmetry))
             # strict in the default run, whose cases are the same every run; not with -m slow,
             # whose fresh cases may all miss a rare failure
-            xfail = [pytest.mark.xfail(strict=not slow, reason=reason)] if reason else []
+            strict = not slow and (_name(key), symmetry) not in MISSED_BY_DEFAULT_CASES
+            xfail = [pytest.mark.xfail(strict=strict, reason=reason)] if reason else []
             # a default's symmetries on one worker: they share the cached original maps
             yield pytest.param(key, symmetry, id=f"{_name(key)}-{symmetry}",
                                marks=[*marks, *xfail, pytest.mark.xdist_group(_name(key))])
