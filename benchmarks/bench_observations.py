@@ -5,7 +5,8 @@ A synthetic log of ``--robots`` robots driving among ``--landmarks`` landmarks: 
 ``--repeats`` runs on one BLAS/OpenMP thread:
 
 - ``observations_to_history`` from the DataFrame (checks included), unbinned (one step per
-  frame) and binned (``--bin`` seconds), for range-bearing (the fused history) and visibility;
+  frame) and binned (``--bin`` seconds), for range-bearing (the fused history) and visibility,
+  and with string ids;
 - reading the log from Parquet and from CSV (``read_observations``), for reference.
 
     python benchmarks/bench_observations.py                  # 1,000,000 rows, 200 landmarks
@@ -84,10 +85,17 @@ def main() -> None:
             f"range-bearing, {args.bin} s bins": dict(sensor="range-bearing", bin_width=args.bin),
             "visibility, one step per frame": dict(sensor="visibility"),
         }
+        # the same log with string ids ("tag-7", "bot2"), as a tag detector names them
+        named = table.assign(landmark="tag-" + table["landmark"].astype(str),
+                             robot="bot" + table["robot"].astype(str))
+        named_anchors = anchors.assign(landmark="tag-" + anchors["landmark"].astype(str))
+        cases["range-bearing, string ids, per frame"] = dict(sensor="range-bearing", named=True)
         for name, kw in cases.items():
-            hist = observations_to_history(table, anchors, **kw)
-            results[name] = median_time(lambda kw=kw: observations_to_history(table, anchors, **kw),
-                                        args.repeats)
+            log, anc = (named, named_anchors) if kw.pop("named", False) else (table, anchors)
+            hist = observations_to_history(log, anc, **kw)
+            results[name] = median_time(
+                lambda kw=kw, log=log, anc=anc: observations_to_history(log, anc, **kw),
+                args.repeats)
             part = hist.parts["range"] if hist.fused else hist
             print(f"  table -> History  {name:<38} {results[name]:6.2f} s  "
                   f"({hist.n_objects} x {hist.n_steps:,} steps, sparse: {part.is_sparse})")

@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from lfmdr_gym.checks import check_real
+from lfmdr_gym.datasets.mrclam_layout import check_run_layout
 from lfmdr_gym.histories.binning import assemble, cell_values, time_steps
 from lfmdr_gym.histories.history import History
 from mappers.core.align import check_anchor_ids
@@ -60,6 +61,7 @@ __all__ = [
     "image_pairs",
     "load_mrclam",
     "read_run",
+    "run_meta",
 ]
 
 ROBOT_SUBJECTS = (1, 2, 3, 4, 5)
@@ -251,17 +253,13 @@ def _read_robot(path: Path, robot: int, barcode_to_subject: dict[int, int],
 
 
 def _check_args(run_dir: Path, robots: Sequence[int], groundtruth_fixes: str) -> tuple[int, ...]:
-    if not run_dir.is_dir():
-        raise FileNotFoundError(f"run_dir {run_dir} is not a directory")
     if groundtruth_fixes not in GROUNDTRUTH_FIXES:
         raise ValueError(f"groundtruth_fixes must be one of {GROUNDTRUTH_FIXES}, "
                          f"got {groundtruth_fixes!r}")
     robots = tuple(int(r) for r in robots)
     if not robots or len(set(robots)) != len(robots):
         raise ValueError(f"robots must be a non-empty list of distinct robot numbers, got {robots}")
-    for r in robots:
-        if not (run_dir / f"Robot{r}_Measurement.dat").is_file():
-            raise ValueError(f"robots: no Robot{r}_Measurement.dat in {run_dir}")
+    check_run_layout(run_dir, robots)  # what is missing, and where to get the dataset
     return robots
 
 
@@ -491,6 +489,39 @@ def bin_run(
     return matrix, mask, info, steps.timeline
 
 
+def run_meta(run: MRCLAMRun, sensor: str, anchor_ids: np.ndarray, seen: np.ndarray,
+             min_co: int = 3) -> dict[str, Any]:
+    """``History.meta`` of a binned run, and the warnings of what its robots saw (each also
+    warned): landmarks never sighted, and a co-observation graph that falls apart.
+
+    ``seen``: (M, N) bool, True where a landmark was sighted in a step; ``min_co``: a pair seen
+    together in fewer steps is not linked. The meta holds the run, its subjects and anchors, the
+    groups of the graph and the fields of :class:`MRCLAMReport` (its warnings these and the
+    loader's); the bins' counts are the caller's to add.
+    """
+    msgs, robots = list(run.report.warnings), list(run.report.robots)
+    comps = co_observation_components(seen, min_co)
+    never = [int(run.subjects[i]) for i in np.flatnonzero(~seen.any(axis=1))]
+    if never:
+        _warn(f"{run.name}: landmark(s) {never} were never observed by robots {robots}; "
+              "they cannot be mapped", msgs)
+    if len(comps) > 1:
+        groups = [[int(run.subjects[i]) for i in c] for c in comps]
+        _warn(f"{run.name}: the co-observation graph falls apart into {len(comps)} groups "
+              f"{groups} (pairs seen together in >= {min_co} bins): the relative placement of the "
+              "groups is not measured (a clustered layout?); a map of it places them by anchors "
+              "and lower bounds only — treat it as unreliable.", msgs)
+    report = MRCLAMReport(**{**run.report.__dict__, "warnings": tuple(msgs)})
+    return {
+        "source": "MRCLAM",
+        "sensor": sensor,
+        "subjects": run.subjects.tolist(),
+        "anchor_subjects": run.subjects[anchor_ids].tolist(),
+        "co_observation_groups": [[int(run.subjects[i]) for i in c] for c in comps],
+        **report.as_dict(),
+    }
+
+
 def load_mrclam(
     run_dir: str | os.PathLike,
     sensor: str = "visibility",
@@ -532,32 +563,11 @@ def load_mrclam(
     bw = DEFAULT_BIN_WIDTH[name] if bin_width is None else bin_width
     binned = {s: bin_run(run, s, bw, drop_empty_bins=drop_empty_bins) for s in parts}
     anchor_ids = _resolve_anchors(run, anchors)
-    msgs = list(run.report.warnings)
     # co-observation from the sightings: the mask of a sensor that keeps every one of them
     first = next(s for s in ("range", "visibility", "bearing") if s in binned)
     _, mask, info, timeline = binned[first]
-    seen = mask[:, :: COLUMNS_PER_STEP[first]]
-    comps = co_observation_components(seen, min_co)
-    never = [int(run.subjects[i]) for i in np.flatnonzero(~seen.any(axis=1))]
-    if never:
-        _warn(f"{run.name}: landmark(s) {never} were never observed by robots {list(robots)}; "
-              "they cannot be mapped", msgs)
-    if len(comps) > 1:
-        groups = [[int(run.subjects[i]) for i in c] for c in comps]
-        _warn(f"{run.name}: the co-observation graph falls apart into {len(comps)} groups "
-              f"{groups} (pairs seen together in >= {min_co} bins): the relative placement of the "
-              "groups is not measured (a clustered layout?); a map of it places them by anchors "
-              "and lower bounds only — treat it as unreliable.", msgs)
-    report = MRCLAMReport(**{**run.report.__dict__, "warnings": tuple(msgs)})
-    meta = {
-        "source": "MRCLAM",
-        "sensor": name,
-        "subjects": run.subjects.tolist(),
-        "anchor_subjects": run.subjects[anchor_ids].tolist(),
-        "co_observation_groups": [[int(run.subjects[i]) for i in c] for c in comps],
-        **report.as_dict(),
-        **info,
-    }
+    meta = run_meta(run, name, anchor_ids, mask[:, :: COLUMNS_PER_STEP[first]], min_co)
+    meta.update(info)
     if len(parts) == 1:
         matrix, mask = binned[name][0], binned[name][1]
     else:

@@ -50,6 +50,7 @@ __all__ = [
     "ObservationTableError",
     "check_landmarks",
     "check_observations",
+    "checked_ids",
     "read_landmarks",
     "read_observations",
     "write_landmarks",
@@ -132,23 +133,36 @@ def normalise_ids(values: pd.Series, what: str, where: _Where) -> pd.Series:
             _fail(where, pos, what, f"{what} id {_show(arr[pos])} is neither an integer nor a string",
                   int(bad.sum()))
         return values.astype(np.int64)
-    arr = values.to_numpy(dtype=object)
+    # the types are checked on the distinct ids, not row by row (a log has few landmarks)
+    codes, uniques = pd.factorize(values)
+    arr = np.asarray(uniques, dtype=object)
     is_str = np.fromiter((isinstance(v, str) for v in arr), bool, len(arr))
+    is_int = np.fromiter((isinstance(v, int | np.integer) and not isinstance(v, bool | np.bool_)
+                          for v in arr), bool, len(arr))
+    if is_int.all():
+        return pd.Series(arr.astype(np.int64)[codes], index=values.index)
+    bad = ~(is_str | is_int)
+    if bad.any():
+        rows = bad[codes]
+        pos = int(np.flatnonzero(rows)[0])
+        v = arr[codes[pos]]
+        _fail(where, pos, what, f"{what} id {_show(v)} ({type(v).__name__}) is neither an "
+              "integer nor a string", int(rows.sum()))
     if not is_str.all():
-        pos = int(np.flatnonzero(~is_str)[0])
-        _fail(where, pos, what, f"{what} id {arr[pos]!r} ({type(arr[pos]).__name__}) is neither "
-              "an integer nor a string", int((~is_str).sum()))
-    strings = values.astype(str)
-    if len(strings) and strings.str.fullmatch(_INT).all():
-        # only a string of 19 or more digits can be beyond int64 (whose astype would raise an
-        # OverflowError): those few are checked in Python
-        long = np.flatnonzero((strings.str.len() > 18).to_numpy())
-        big = [pos for pos in long if not -2**63 <= int(strings.iloc[pos]) < 2**63]
+        rows = ~is_str[codes]
+        pos = int(np.flatnonzero(rows)[0])
+        _fail(where, pos, what, f"{what} ids mix integers and strings ({_show(arr[codes[pos]])} "
+              "among strings); give them all as one or the other", int(rows.sum()))
+    if len(arr) and pd.Series(arr).str.fullmatch(_INT).all():
+        # a string of 19 or more digits may be beyond int64 (astype would raise OverflowError)
+        big = [k for k, v in enumerate(arr) if len(v) > 18 and not -2**63 <= int(v) < 2**63]
         if big:
-            _fail(where, int(big[0]), what, f"{what} id {strings.iloc[big[0]]} does not fit in "
-                  "64 bits", len(big))
-        return strings.astype(np.int64)
-    return pd.Series(arr, index=values.index, dtype=object)
+            rows = np.isin(codes, big)
+            pos = int(np.flatnonzero(rows)[0])
+            _fail(where, pos, what, f"{what} id {arr[codes[pos]]} does not fit in 64 bits",
+                  int(rows.sum()))
+        return pd.Series(arr.astype(np.int64)[codes], index=values.index)
+    return pd.Series(arr[codes], index=values.index, dtype=object)
 
 
 # ------------------------------------------------------------------------------ checks
@@ -252,12 +266,19 @@ def check_observations(table: pd.DataFrame, *, name: str | None = None,
         name: how errors name the table (a file name), if given.
         first_line: the file line of the first row (CSV); None names rows by position.
     """
+    checked_ids(table, name=name, first_line=first_line)
+    return table
+
+
+def checked_ids(table: pd.DataFrame, *, name: str | None = None,
+                first_line: int | None = None) -> tuple[pd.Series, pd.Series | None]:
+    """:func:`check_observations`, returning the table's landmark and robot ids (None without a
+    ``robot`` column) as :func:`normalise_ids` gives them (so a caller need not convert twice)."""
     where = _Where(name, first_line)
     _check_columns(table, where)
     names = set(table.columns)
-    normalise_ids(table["landmark"], "landmark", where)
-    if "robot" in names:
-        normalise_ids(table["robot"], "robot", where)
+    landmark = normalise_ids(table["landmark"], "landmark", where)
+    robot = normalise_ids(table["robot"], "robot", where) if "robot" in names else None
     _numeric(table, "time", where)
     if "frame" in names:
         frame = table["frame"]
@@ -277,7 +298,7 @@ def check_observations(table: pd.DataFrame, *, name: str | None = None,
         _first(where, ~np.isin(values, (0.0, 1.0)), "visible",
                lambda i: f"visible is 0 or 1, got {_show(v.iloc[i])}")
     _check_bearings(table, where, {})
-    return table
+    return landmark, robot
 
 
 def check_landmarks(table: pd.DataFrame, *, what: str = "landmarks", name: str | None = None,

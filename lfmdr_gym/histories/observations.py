@@ -32,6 +32,7 @@ Table -> History:
 
 from __future__ import annotations
 
+import json
 import os
 from typing import Any, NamedTuple
 
@@ -46,7 +47,7 @@ from lfmdr_gym.histories.observation_table import (
     ObservationTableError,
     _Where,
     check_landmarks,
-    check_observations,
+    checked_ids,
     normalise_ids,
     read_landmarks,
 )
@@ -130,21 +131,40 @@ def _bearings(table: pd.DataFrame) -> dict[str, np.ndarray]:
     return {"bearing": np.arctan2(-x, z)}
 
 
-def _robots(table: pd.DataFrame) -> tuple[np.ndarray, list[Any]]:
-    """Each row's robot position (0-based) and the robot ids in position order."""
-    if "robot" not in table.columns:
+def _robots(table: pd.DataFrame, robot: pd.Series | None) -> tuple[np.ndarray, list[Any]]:
+    """Each row's robot position (0-based) and the robot ids in position order (``robot``: the
+    table's normalised robot ids, None without a robot column)."""
+    if robot is None:
         return np.zeros(len(table), np.int64), [0]
-    robot = normalise_ids(table["robot"], "robot", _Where(None, None))
     codes, uniques = pd.factorize(robot, sort=True)
     order = table.attrs.get("robots")
     if order is None:
         return codes.astype(np.int64), list(uniques)
-    order = list(order)
+    order = normalise_ids(pd.Series([str(v) for v in order]), "robot",
+                          _Where("attrs['robots']", None)).tolist()
     pos = _positions(np.array(order, dtype=object), list(uniques))
     if (pos < 0).any():
         raise ValueError(f"robots {[u for u, p in zip(uniques, pos, strict=True) if p < 0]} are "
                          f"in the table but not in its attrs['robots'] = {order}")
     return pos[codes], order
+
+
+def _empty_frames(frames: Any, robot_ids: list[Any], has_robot: bool) -> np.ndarray | None:
+    """``attrs["empty_frames"]`` (frames without a sighting that are steps all the same: frame
+    numbers, or [robot id, frame] pairs with a ``robot`` column) as (robot position, frame)."""
+    if frames is None:
+        return None
+    try:
+        if not has_robot:
+            return np.array([[0, int(f)] for f in frames], dtype=np.int64).reshape(-1, 2)
+        at = _positions(np.array(robot_ids, dtype=object), [r for r, _ in frames])
+        if (at < 0).any():
+            raise ValueError(f"attrs['empty_frames'] names robots not in the table: "
+                             f"{sorted({r for (r, _), a in zip(frames, at, strict=True) if a < 0})}")
+        return np.column_stack([at, [int(f) for _, f in frames]]).astype(np.int64).reshape(-1, 2)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"attrs['empty_frames'] must list frame numbers (with a robot column: "
+                         f"[robot, frame] pairs): {exc}") from exc
 
 
 def _ticks(table: pd.DataFrame, robot: np.ndarray) -> np.ndarray:
@@ -217,7 +237,7 @@ def observations_to_history(
     Row ``i`` of the history is landmark ``meta["landmarks"][i]``. Bad input raises
     :class:`~lfmdr_gym.histories.observation_table.ObservationTableError` (a ValueError).
     """
-    check_observations(table)
+    landmark, robot_col = checked_ids(table)
     if not len(table):
         raise ValueError("the observation table has no rows: nothing was sighted")
     anchors = _landmark_table(anchors, "anchors")
@@ -225,7 +245,6 @@ def observations_to_history(
     name = _sensor(table, sensor)
     parts = sensors_of(name)
     attrs = dict(table.attrs)
-    landmark = normalise_ids(table["landmark"], "landmark", _Where(None, None))
     codes, seen_ids = pd.factorize(landmark)
     seen_ids = np.asarray(seen_ids, dtype=object)
     anchor_ids = anchors["landmark"].tolist()
@@ -233,10 +252,13 @@ def observations_to_history(
                 **({} if truth is None else {"the truth": truth["landmark"].tolist()})})
     declared = attrs.get("landmarks")
     if declared is not None:
-        ids = np.asarray(list(declared), dtype=object)
-        if len(set(ids.tolist())) != len(ids):
+        # read as a CSV's ids are (the JSON "7" or 7 is landmark 7, "007" a string)
+        ids = np.asarray(normalise_ids(pd.Series([str(v) for v in declared]), "landmark",
+                                       _Where("attrs['landmarks']", None)).tolist(), dtype=object)
+        listed = set(ids.tolist())
+        if len(listed) != len(ids):
             raise ValueError("the table's attrs['landmarks'] lists a landmark twice")
-        outside = [v for v in seen_ids.tolist() if v not in set(ids.tolist())]
+        outside = [v for v in seen_ids.tolist() if v not in listed]
         if outside:
             raise ValueError(f"landmarks {outside[:10]} are in the table but not in its "
                              f"attrs['landmarks']")
@@ -252,15 +274,13 @@ def observations_to_history(
     anchor_pos = anchors[["x", "y"]].to_numpy(np.float64)
     check_not_collinear(anchor_pos, "anchor positions")
     # steps
-    robot, robot_ids = _robots(table)
+    robot, robot_ids = _robots(table, robot_col)
     if bin_width is not None:
         check_real("bin_width", bin_width, low=0.0, low_open=True)
         steps = time_steps(robot, table["time"].to_numpy(np.float64), len(robot_ids), bin_width,
                            drop_empty_bins=drop_empty_bins)
     else:
-        extra = attrs.get("empty_frames")
-        if extra is not None and "robot" not in table.columns:
-            extra = [[0, f] for f in extra]
+        extra = _empty_frames(attrs.get("empty_frames"), robot_ids, "robot" in table.columns)
         steps = tick_steps(robot, _ticks(table, robot), len(robot_ids), extra=extra)
     n_steps, m = steps.n_steps, len(ids)
     readings: dict[str, Any] = {}
@@ -291,7 +311,10 @@ def observations_to_history(
             "landmarks": ids.tolist(), "anchor_landmarks": anchor_ids,
             "robots": list(robot_ids) if "robot" in table.columns else None,
             "bin_width": None if bin_width is None else float(bin_width),
-            "rows": int(len(table)), "complete": complete, **meta_truth, "table_attrs": attrs}
+            "rows": int(len(table)), "complete": complete, **meta_truth,
+            # History.meta is JSON (History.save): an attrs value JSON cannot hold (a Path, say)
+            # is kept as its text
+            "table_attrs": json.loads(json.dumps(attrs, default=str))}
     if len(parts) == 1:
         matrix, mask = built[name]
     else:
@@ -351,7 +374,9 @@ def history_to_observations(history: History, *, landmarks: Any = None) -> Obser
     (visibility, if any observed entry reads 0), ``bearing`` with ``bearing_cos, bearing_sin``
     (the exact unit vector), ``range``. ``attrs`` keeps the sensor, the landmark ids, the robots
     and the steps without a row, so :func:`observations_to_history` gives the same matrices,
-    masks and timeline back. Robot poses are not written.
+    masks and timeline back. Robot poses are not written, nor the values of unobserved entries
+    of a masked history (no mapper reads them; they come back as 0, as every recorder and loader
+    writes them).
 
     Args:
         history: any single-sensor or fused History.
@@ -369,6 +394,13 @@ def history_to_observations(history: History, *, landmarks: Any = None) -> Obser
             raise ValueError("the history's steps are not in (robot, tick) order without repeats;"
                              " a table's frames would reorder them")
         robot_of, frame_of = tl[:, 0], tl[:, 1]
+        # robot ids: the history's own (meta["robots"], as a loader or this module keeps them) if
+        # they name every robot of the timeline, else the timeline's robot numbers
+        named = history.meta.get("robots")
+        n_robots = int(robot_of.max()) + 1 if n else 0
+        robot_ids = (list(named) if isinstance(named, list) and len(named) >= n_robots
+                     and len(set(map(str, named))) == len(named) else list(range(n_robots)))
+        robot_ids = _id_array(robot_ids).tolist() if robot_ids else []
     else:
         robot_of, frame_of = np.zeros(n, np.int64), np.arange(n, dtype=np.int64)
     grid, masked = _entries(history)
@@ -377,7 +409,7 @@ def history_to_observations(history: History, *, landmarks: Any = None) -> Obser
     row, step = coo.row[order].astype(np.int64), coo.col[order].astype(np.int64)
     out: dict[str, Any] = {"time": frame_of[step].astype(np.float64)}
     if history.timeline is not None:
-        out["robot"] = robot_of[step]
+        out["robot"] = _id_array(robot_ids)[robot_of[step]]
     out["frame"] = frame_of[step]
     out["landmark"] = ids[row]
     parts = history.parts or {history.sensor: history}
@@ -405,9 +437,8 @@ def history_to_observations(history: History, *, landmarks: Any = None) -> Obser
     table.attrs = {
         "source": "lfmdr history", "sensor": history.sensor, "complete": not masked,
         "landmarks": ids.tolist(),
-        **({"robots": list(range(int(robot_of.max()) + 1))}
-           if history.timeline is not None and n else {}),
-        **({"empty_frames": ([[int(robot_of[t]), int(frame_of[t])] for t in empty]
+        **({"robots": robot_ids} if history.timeline is not None and n else {}),
+        **({"empty_frames": ([[robot_ids[robot_of[t]], int(frame_of[t])] for t in empty]
                              if history.timeline is not None else frame_of[empty].tolist())}
            if len(empty) else {}),
     }

@@ -13,7 +13,7 @@ import lfmdr_gym.datasets.mrclam as mrclam
 from lfmdr_gym.datasets.mrclam import DEFAULT_BIN_WIDTH, MRCLAMReport, MRCLAMRun, bin_run
 from lfmdr_gym.datasets.mrclam_table import mrclam_anchors, mrclam_landmarks, mrclam_observations
 from lfmdr_gym.histories.observation_table import read_observations, write_observations
-from lfmdr_gym.histories.observations import observations_to_history
+from lfmdr_gym.histories.observations import history_to_observations, observations_to_history
 
 DATA = SHARED_DATA / "mrclam"
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"MRCLAM data not found at {DATA}")
@@ -87,6 +87,10 @@ def _check_runs(runs, monkeypatch, tmp_path):
             got = observations_to_history(table, mrclam_anchors(run), truth=mrclam_landmarks(run),
                                           sensor=sensor, bin_width=DEFAULT_BIN_WIDTH[sensor])
             _same(want, got)
+            # and the loader's history written as a table reads back the same (robots 1-5 kept)
+            log = history_to_observations(want)
+            assert log.observations.attrs["robots"] == list(run.report.robots)
+            _same(want, observations_to_history(log.observations, log.anchors, truth=log.truth))
         monkeypatch.undo()
 
 

@@ -178,7 +178,7 @@ def test_landmark_tables(tmp_path):
 _floats = st.floats(allow_nan=False, allow_infinity=False, width=64)
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_property_any_valid_table_survives_csv_and_parquet_bit_for_bit(tmp_path, data):
     n = data.draw(st.integers(1, 12))

@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import lfmdr_gym
 from lfmdr_gym.exploration import RandomWalkPolicy
@@ -21,6 +23,7 @@ from lfmdr_gym.histories.observations import (
     landmark_ids,
     observations_to_history,
 )
+from mappers.core.sensors import COLUMNS_PER_STEP, sensors_of
 
 
 def assert_same_history(a: History, b: History) -> None:
@@ -94,15 +97,17 @@ def _logged(seed: int = 0) -> History:
 
 def test_timeline_gaps_empty_steps_and_string_ids_survive(tmp_path):
     h = _logged()
+    h = h.replace(meta={"robots": ["r0", "r1", "r2", "r3"]})  # the robots' names
     names = [f"tag-{k}" for k in "hgfedcba"]  # not in sorted order: attrs keep the row order
     log = history_to_observations(h, landmarks=names)
     assert log.observations["landmark"].map(type).eq(str).all()
-    assert log.observations.attrs["empty_frames"] == [[int(v) for v in h.timeline[7]]]
+    assert set(log.observations["robot"]) == {"r0", "r1", "r3"}  # r2 took no step
+    assert log.observations.attrs["empty_frames"] == [["r0", int(h.timeline[7, 1])]]
     path = write_observations(log.observations, tmp_path / "o.csv")
     back = observations_to_history(read_observations(path), log.anchors, truth=log.truth)
     assert_same_history(h, back)
     assert landmark_ids(back).tolist() == names and back.meta["landmarks"] == names
-    assert back.meta["robots"] == [0, 1, 2, 3]
+    assert back.meta["robots"] == ["r0", "r1", "r2", "r3"]
 
 
 def _sightings() -> pd.DataFrame:
@@ -131,6 +136,16 @@ def test_frames_from_times_rows_sorted_by_id_values_aggregated():
     np.testing.assert_allclose(np.arctan2(b[2, 7], b[2, 6]), 1.1, atol=1e-12)  # circular mean
     np.testing.assert_array_equal(h.anchor_ids, [0, 1, 3])
     assert np.isnan(h.object_positions[2]).all()  # no truth: only the anchors are placed
+
+
+def test_the_history_of_a_table_saves_with_its_ids(tmp_path):
+    table = _sightings()
+    table.attrs = {"source": "a detector", "bag": tmp_path / "run.bag"}  # a Path: kept as text
+    h = observations_to_history(table, ANCHORS)
+    back = History.load(h.save(tmp_path / "h.npz"))
+    assert back.meta["landmarks"] == ["L1", "L2", "L3", "L4"] and back.meta["robots"] == ["a", "b"]
+    assert back.meta["table_attrs"]["bag"] == str(tmp_path / "run.bag")
+    assert back.meta["source"] == "a detector"
 
 
 def test_binning_by_time_and_a_chosen_sensor():
@@ -172,6 +187,8 @@ def test_bad_anchors_and_sensors_are_refused():
         observations_to_history(_sightings(), ANCHORS.assign(z=1.0))
     with pytest.raises(ValueError, match="must all be integers or all strings"):
         observations_to_history(_sightings(), ANCHORS.assign(landmark=[1, 2, 4]))
+    with pytest.raises(ObservationTableError, match="mix integers and strings"):
+        observations_to_history(_sightings().assign(landmark=["L1", 2] + ["L3"] * 7), ANCHORS)
     with pytest.raises(ValueError, match=r"needs \['range'\] readings"):
         observations_to_history(_sightings().drop(columns="range"), ANCHORS, sensor="range")
     with pytest.raises(ValueError, match="no rows"):
@@ -190,3 +207,64 @@ def test_history_to_observations_refuses_what_a_table_cannot_hold():
         history_to_observations(h.replace(mask=mask))
     with pytest.raises(ValueError, match="not in \\(robot, tick\\) order"):
         history_to_observations(h.replace(timeline=h.timeline[::-1].copy()))
+
+
+@st.composite
+def histories(draw) -> History:
+    """Small random histories: any sensor or fused set, masked or complete, with or without a
+    timeline (robots and ticks with gaps); unobserved entries read 0, as every recorder writes."""
+    sensor = draw(st.sampled_from(["visibility", "bearing", "range", "range-bearing",
+                                   "visibility-bearing"]))
+    m, n = draw(st.integers(3, 6)), draw(st.integers(1, 12))
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    masked = draw(st.booleans())
+    seen = rng.random((m, n)) < draw(st.floats(0.0, 1.0)) if masked else np.ones((m, n), bool)
+    matrix, mask = {}, {}
+    for s in sensors_of(sensor):
+        if s == "visibility":
+            value = (rng.random((m, n)) < 0.5).astype(float)
+        elif s == "range":
+            value = np.where(rng.random((m, n)) < 0.2, 0.0, rng.uniform(0, 5, (m, n)))
+        else:
+            theta = rng.uniform(-np.pi, np.pi, (m, n))
+            value = np.stack([np.cos(theta), np.sin(theta)], axis=-1).reshape(m, 2 * n)
+        cols = COLUMNS_PER_STEP[s]
+        keep = np.repeat(seen, cols, axis=1)
+        matrix[s], mask[s] = np.where(keep, value, 0.0), keep
+    timeline = None
+    if draw(st.booleans()):
+        robots = np.sort(rng.integers(0, 3, n))
+        ticks = np.concatenate([np.sort(rng.choice(100, (robots == r).sum(), replace=False))
+                                for r in range(3)])
+        timeline = np.column_stack([robots, ticks])
+    pos = rng.uniform(-3, 3, (m, 2))
+    single = len(matrix) == 1
+    return History(sensor=sensor, matrix=matrix[sensor] if single else matrix,
+                   mask=(mask[sensor] if single else mask) if masked else None,
+                   object_positions=pos, anchor_ids=[0, 1, 2], anchor_positions=pos[:3],
+                   timeline=timeline)
+
+
+@settings(max_examples=30, deadline=None)
+@given(h=histories())
+def test_property_history_table_history_is_bit_identical(h):
+    log = history_to_observations(h)
+    if not len(log.observations):  # nothing observed: a log of no sightings maps nothing
+        with pytest.raises(ValueError, match="no rows: nothing was sighted"):
+            observations_to_history(log.observations, log.anchors, truth=log.truth)
+        return
+    assert_same_history(h, observations_to_history(log.observations, log.anchors, truth=log.truth))
+
+
+def test_declared_landmarks_and_robots_set_the_order_and_read_like_the_ids(tmp_path):
+    path = tmp_path / "o.csv"
+    path.write_text('# landmarks: ["9", 3, 5, 7]\n# robots: [2, "1"]\n'
+                    "time,robot,landmark,bearing\n0.0,1,3,0.1\n0.0,2,5,0.2\n0.5,2,7,0.3\n")
+    anchors = pd.DataFrame({"landmark": [3, 5, 7], "x": [0.0, 1.0, 0.0], "y": [0.0, 0.0, 1.0]})
+    h = observations_to_history(read_observations(path), anchors)
+    assert h.meta["landmarks"] == [9, 3, 5, 7] and h.meta["robots"] == [2, 1]
+    np.testing.assert_array_equal(h.timeline, [[0, 0], [0, 1], [1, 0]])  # robot 2 first
+    np.testing.assert_array_equal(h.mask[:, 0::2], [[0, 0, 0], [0, 0, 1], [1, 0, 0], [0, 1, 0]])
+    path.write_text('# landmarks: [3, 5]\ntime,landmark,bearing\n0.0,3,0.1\n0.0,7,0.2\n')
+    with pytest.raises(ValueError, match=r"landmarks \[7\] are in the table but not in its"):
+        observations_to_history(read_observations(path), anchors)
