@@ -63,9 +63,9 @@ def _rows(a, rows):
     return None if a is None else a[rows]
 
 
-def _model(result: Map, est, mapped: np.ndarray, X, mask) -> np.ndarray:
+def _model(result: Map, est, mapped: np.ndarray, X, mask, timeline) -> np.ndarray:
     local = np.searchsorted(mapped, np.asarray(result.anchor_ids, dtype=int))
-    cov_local = adjustment_covariances(est, X, mask, local)
+    cov_local = adjustment_covariances(est, X, mask, local, timeline)
     d = result.positions.shape[1]
     cov = np.full((len(result.positions), d, d), np.nan)
     cov[mapped] = cov_local
@@ -102,12 +102,12 @@ def _bootstrap(result: Map, n_steps: int, refit: Callable[[np.ndarray], np.ndarr
 
 def with_covariances(result: Map, uncertainty, *, est: Any, mapped: np.ndarray, X: Any,
                      mask: Any, n_steps: int, refit: Callable[[np.ndarray], np.ndarray],
-                     random_state) -> Map:
+                     random_state, timeline=None) -> Map:
     """``result`` with its ``covariances`` (module docstring) for ``uncertainty`` (False: the map
     as it is). ``est`` is the fitted estimator, ``mapped`` the rows it was fitted on, ``X`` and
     ``mask`` what it was fitted on (all rows; a mapping per sensor for fused histories);
     ``refit(steps)`` maps the history restricted to those steps (with repeats) and returns the
-    (M, d) positions. ValueError for an unknown mode, or ``"model"`` for a method without one."""
+    (M, d) positions; ``timeline`` the steps' (robot, tick), or None. ValueError for an unknown mode, or ``"model"`` for a method without one."""
     mode = check_uncertainty(uncertainty)
     if mode is False:
         return result
@@ -119,7 +119,7 @@ def with_covariances(result: Map, uncertainty, *, est: Any, mapped: np.ndarray, 
             raise ValueError(
                 f"uncertainty='model' needs a method that ends with a bundle adjustment "
                 f"(BEARING-BA, LOC-SMA refined), not {result.method!r}: use 'bootstrap' or True")
-        cov = _model(result, est, mapped, _rows(X, mapped), _rows(mask, mapped))
+        cov = _model(result, est, mapped, _rows(X, mapped), _rows(mask, mapped), timeline)
     else:
         cov = _bootstrap(result, n_steps, refit, random_state, notes)
     return dataclasses.replace(result, covariances=_finish(result, cov),

@@ -228,4 +228,5 @@ def _with_covariances(result, uncertainty, est, mapped, histories, anchor_ids, a
         if sp.issparse(X):  # the adjustments read dense histories
             X, M = X.toarray(), (M.toarray() if sp.issparse(M) else M)
     return with_covariances(result, uncertainty, est=est, mapped=mapped, X=X, mask=M,
-                            n_steps=n_steps, refit=refit, random_state=random_state)
+                            n_steps=n_steps, refit=refit, random_state=random_state,
+                            timeline=timeline)

@@ -11,7 +11,7 @@ from mappers.core.uncertainty import coverage
 from tests.synthetic_walk import ANCHORS, layout, sensed, walk
 
 
-def _bearing(seed, n_objects=20, n_steps=200, noise_deg=2.0):
+def _bearing(seed, n_objects=16, n_steps=150, noise_deg=2.0):
     P, poses = layout(n_objects, seed), walk(n_steps, seed=seed)
     _, b, _ = sensed(P, poses)
     b = b + np.random.default_rng(seed).normal(0.0, np.radians(noise_deg), b.shape)
@@ -89,10 +89,12 @@ def test_range_bearing_model():
 
 
 def test_bootstrap_of_a_visibility_map():
-    P, poses = layout(16, 4), walk(200, seed=4)
-    X = (sensed(P, poses)[0] < 0.35).astype(float)
+    P, poses = layout(12, 4), walk(150, seed=4)
+    X = (sensed(P, poses)[0] < 0.4).astype(float)
     m = _quiet(X, ANCHORS, P[ANCHORS], uncertainty=True)
     assert m.method == "CAL-SMA"
     _check_shape(m, len(P))
-    again = _quiet(X, ANCHORS, P[ANCHORS], uncertainty="bootstrap")
-    np.testing.assert_array_equal(m.covariances, again.covariances)  # seeded by random_state
+    # centimetres of spread for centimetres of error, not metres or microns
+    radius = np.sqrt(np.trace(m.covariances[4:], axis1=1, axis2=2)).mean()
+    error = np.linalg.norm(m.positions[4:] - P[4:], axis=1).mean()
+    assert 0.2 < radius / error < 5.0

@@ -65,13 +65,10 @@ def test_sample_size_factor_is_hotellings_and_tends_to_one():
     assert sample_size_factor(20, 2) == pytest.approx(1.25, abs=0.01)
     assert 1.0 < sample_size_factor(2000, 2) < 1.01
     # the widened region holds 95 % of fresh draws when the covariance comes from 20 samples
-    rng = np.random.default_rng(3)
-    hits = []
-    for _ in range(4000):
-        x = rng.normal(size=(21, 2))
-        cov = np.cov(x[:20].T) * sample_size_factor(20, 2)
-        hits.append(x[20] @ np.linalg.solve(cov, x[20]) <= chi2_quantile(2))
-    assert np.mean(hits) == pytest.approx(0.95, abs=0.015)
+    x = np.random.default_rng(3).normal(size=(4000, 21, 2))
+    cov = sample_covariances(x[:, :20].transpose(1, 0, 2), 20) * sample_size_factor(20, 2)
+    q = np.einsum("ni,nij,nj->n", x[:, 20], np.linalg.inv(cov), x[:, 20])
+    assert np.mean(q <= chi2_quantile(2)) == pytest.approx(0.95, abs=0.015)
 
 
 def test_transform_covariances_is_the_linear_map_of_row_vectors():
@@ -99,3 +96,13 @@ def test_mahalanobis_of_singular_and_infinite_covariances():
     e = np.array([[1.0, 0.0], [0.0, 1.0], [5.0, 5.0]])
     q = mahalanobis_squared(e, cov)
     assert q[0] == pytest.approx(1.0) and np.isinf(q[1]) and q[2] == 0.0
+
+
+def test_step_blocks_keep_robots_apart():
+    from mappers.viewpoints.marginals import step_blocks
+
+    assert np.array_equal(step_blocks(9), np.repeat([0, 1, 2], 3))
+    timeline = np.array([[0, 0], [1, 0], [0, 1], [1, 1], [0, 2], [1, 2], [0, 3], [1, 3]])
+    b = step_blocks(8, timeline)  # blocks of 3 steps, each robot's own
+    assert len(set(b[timeline[:, 0] == 0]) & set(b[timeline[:, 0] == 1])) == 0
+    assert b[0] == b[2] == b[4] != b[6]
