@@ -14,7 +14,16 @@ true poses and layout (:mod:`bench_fusion_sim`'s sensors):
 * ``range-bearing``: 360 degrees, 2 degrees and 2 cm of noise, fused (``LOC-SMA`` refined by its
   range-bearing adjustment; model);
 * ``bearing-view90``: bearings through a 90-degree view (masked), 2 degrees of noise
-  (``BEARING-BA``; model).
+  (``BEARING-BA``; model);
+* ``visibility-other-sim``: visibility from a second, independent world
+  (:func:`bench_view_other_sim.other_sim`: uniform layout without spacing rule, no occlusion,
+  its own walk, a 0.55 m visibility radius, 360-degree view), 50 objects, ``--steps`` steps —
+  the body of data the bootstrap's inflation
+  (:data:`mappers.covariances.BOOTSTRAP_INFLATION`) was chosen on; ``visibility`` confirms it.
+
+The line ``inflation for 0.95`` printed per set is the factor on the covariances that would put
+95 % of its landmarks inside their regions (how :data:`mappers.covariances.BOOTSTRAP_INFLATION`
+was chosen, on ``visibility-other-sim``).
 
 ``mrclam``: every MRCLAM run under ``--data`` mapped from range and bearing fused (the logged-run
 default, ``LOC-SMA``), scored against motion capture. ``mrclam-inflated`` asks what a calibrated
@@ -47,6 +56,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 from bench_fusion_sim import simulate_camera, visibility_history
+from bench_view_other_sim import other_sim
 
 import lfmdr_gym  # noqa: F401  (registers the env ids)
 from lfmdr_gym import collect
@@ -55,7 +65,8 @@ from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
 from mappers import build_map
 from mappers.core.uncertainty import chi2_quantile, mahalanobis_squared, rms_radius
 
-SETS = ("visibility", "bearing", "range-bearing", "bearing-view90", "mrclam")
+SETS = ("visibility", "bearing", "range-bearing", "bearing-view90", "visibility-other-sim",
+        "mrclam")
 FIELDS = ("set", "layout", "method", "n_scored", "inside", "rms_radius", "mpe", "cpu_map",
           "cpu_uncertainty", "wall_map", "wall_uncertainty")
 
@@ -89,12 +100,18 @@ def map_row(name, layout, histories, anchors, truth, **kwargs) -> dict:
         raise AssertionError(f"{name} {layout}: uncertainty=True changed the map")
     objects = np.setdiff1d(np.arange(len(truth)), anchors)
     n, inside, radius, mpe = score(m.positions, m.covariances, truth, objects)
-    return {"set": name, "layout": layout, "method": m.method, "n_scored": n, "inside": inside,
+    ok = objects[np.all(np.isfinite(m.positions[objects]), axis=1)]
+    q = mahalanobis_squared(truth[ok] - m.positions[ok], m.covariances[ok])
+    return {"_q": q, "set": name, "layout": layout, "method": m.method, "n_scored": n, "inside": inside,
             "rms_radius": radius, "mpe": mpe, "cpu_map": cpu0, "cpu_uncertainty": cpu1,
             "wall_map": wall0, "wall_uncertainty": wall1}
 
 
 def simulated_rows(seed: int, steps: int, sets) -> list[dict]:
+    rows = []
+    if not set(sets) - {"visibility-other-sim", "mrclam"}:
+        P, X, _ = other_sim(seed, n=steps, fov=360.0)
+        return [map_row("visibility-other-sim", seed, X, np.arange(4), P, sensor="visibility")]
     env = gym.make("LFMDR-Bearing-v0")
     history = collect(env, RandomWalkPolicy.for_env(env, seed=seed), steps, seed=seed)
     radius = env.unwrapped.world.object_radius
@@ -102,7 +119,6 @@ def simulated_rows(seed: int, steps: int, sets) -> list[dict]:
     env.close()
     truth, anchors = history.object_positions, history.anchor_ids
     rng = np.random.default_rng(seed)
-    rows = []
     if "visibility" in sets:
         vis = visibility_history(history, radius, visual_angle)
         rows.append(map_row("visibility", seed, vis, anchors, truth, sensor="visibility"))
@@ -112,6 +128,10 @@ def simulated_rows(seed: int, steps: int, sets) -> list[dict]:
     if "range-bearing" in sets:
         fused, _ = simulate_camera(history, 360.0, None, 2.0, 0.02, rng)
         rows.append(map_row("range-bearing", seed, fused, anchors, truth))
+    if "visibility-other-sim" in sets:
+        P, X, _ = other_sim(seed, n=steps, fov=360.0)
+        rows.append(map_row("visibility-other-sim", seed, X, np.arange(4), P,
+                            sensor="visibility"))
     if "bearing-view90" in sets:
         fused, masks = simulate_camera(history, 90.0, None, 2.0, 0.0, rng)
         rows.append(map_row("bearing-view90", seed, fused["bearing"], anchors, truth,
@@ -131,7 +151,9 @@ def mrclam_rows(data: Path) -> list[dict]:
         anchors = np.flatnonzero(np.isin(r.subjects, r.anchor_subjects))
         objects = np.setdiff1d(np.arange(len(r.subjects)), anchors)
         n, inside, radius, mpe = score(r.positions, r.covariances, r.truth, objects)
-        rows.append({"set": "mrclam", "layout": run_dir.name, "method": r.method, "n_scored": n,
+        rows.append({"_q": mahalanobis_squared(r.truth[objects] - r.positions[objects],
+                                               r.covariances[objects]),
+                     "set": "mrclam", "layout": run_dir.name, "method": r.method, "n_scored": n,
                      "inside": inside, "rms_radius": radius, "mpe": mpe, "cpu_map": cpu0,
                      "cpu_uncertainty": cpu1, "wall_map": wall0, "wall_uncertainty": wall1})
         ok = objects[np.all(np.isfinite(r.positions[objects]), axis=1)]
@@ -142,7 +164,7 @@ def mrclam_rows(data: Path) -> list[dict]:
         if not others.size:
             continue
         factor = float(np.quantile(others, 0.95)) / chi2_quantile(2)
-        rows.append({**row, "set": "mrclam-inflated",
+        rows.append({**row, "set": "mrclam-inflated", "_q": q_runs[row["layout"]] / factor,
                      "inside": int(np.sum(q_runs[row["layout"]] <= factor * chi2_quantile(2))),
                      "rms_radius": row["rms_radius"] * math.sqrt(factor)})
     return rows
@@ -171,7 +193,8 @@ def write_csv(path: Path, rows: list[dict]) -> None:
     writer = csv.DictWriter(buf, fieldnames=FIELDS, lineterminator="\n")
     writer.writeheader()
     for r in rows:
-        writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+        writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()
+                         if k != "_q"})
     atomic_write_text(path, buf.getvalue())
 
 
@@ -205,6 +228,9 @@ def main(argv=None) -> int:
     for s in summary(rows):
         print(f"{s['set']:<16}{s['layouts']:>8}{s['coverage']:>10.3f}{s['sharpness']:>11.2f}"
               f"{s['mpe']:>10.4f}{s['time_ratio']:>8.2f}  {s['method']}")
+    for name in dict.fromkeys(r["set"] for r in rows):
+        q = np.concatenate([r["_q"] for r in rows if r["set"] == name])
+        print(f"{name}: inflation for 0.95 = {np.nanquantile(q, 0.95) / chi2_quantile(2):.3f}")
     return 0
 
 
