@@ -308,8 +308,9 @@ def plot_estimate(
     """True positions, estimates, and a line between (paper figures 6, 7, 9), saved atomically.
 
     Anchors are drawn as squares; unmapped objects (NaN estimates) as grey crosses at the truth;
-    objects are labelled by ``labels`` (default: their index); ``trail`` (N, >=2) draws the
-    robot's path faintly underneath, when the data has one. The title is wrapped to the
+    objects are labelled by ``labels`` (default: their index) at their truth, or at their
+    estimate where the truth is unknown (NaN: a log mapped without ground truth); ``trail``
+    (N, >=2) draws the robot's path faintly underneath, when the data has one. The title is wrapped to the
     figure's width; ``notes`` (e.g. the map's warnings) are written in full below the plot,
     each wrapped, and the figure grows to hold them. ``covariances`` ((M, 2, 2),
     ``Map.covariances``) draws each estimate's 95 % ellipse
@@ -344,10 +345,10 @@ def plot_estimate(
         ax.scatter(*truth[known & ~mapped].T, s=40, marker="x", color="grey", label="unmapped")
     if trail is not None:
         ax.plot(*np.asarray(trail)[:, :2].T, color="0.85", lw=0.4, zorder=0)
-    for j, label in enumerate(labels):
-        if known[j]:
-            ax.annotate(str(label), truth[j], fontsize=6, color="0.4", xytext=(2, 2),
-                        textcoords="offset points")
+    for j, label in enumerate(labels):  # at the truth; where it is unknown, at the estimate
+        if known[j] or mapped[j]:
+            ax.annotate(str(label), truth[j] if known[j] else est[j], fontsize=6, color="0.4",
+                        xytext=(2, 2), textcoords="offset points")
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
