@@ -31,8 +31,9 @@ _MIN_SPAN = 1e-3
 """Smallest second singular value [m] of three or more points for a rigid registration (not on
 one line)."""
 
-_MIN_RAY_ANGLE = np.deg2rad(3.0)
-"""Smallest angle between two of an object's rays for a least-squares intersection."""
+_MIN_RAY_ANGLE = np.deg2rad(10.0)
+"""Smallest angle between two of an object's rays for a least-squares intersection (closer
+rays place it too uncertainly along them for the adjustment to recover)."""
 
 
 def _groups(obs: RayObservations) -> list[np.ndarray]:
@@ -70,8 +71,14 @@ def register_points(obs: RayObservations, anchor_ids: np.ndarray, anchor_positio
     while todo.any():
         seed = max(np.flatnonzero(todo), key=lambda t: groups[t].size)
         pieces.append(_grow_piece(obs, pts, groups, todo, seed))
-    for piece in _merge_pieces(pieces):
-        _place_piece(piece, anchor_ids, anchor_positions, P, R, C)
+    P[anchor_ids] = anchor_positions
+    pieces = _merge_pieces(pieces)
+    pairs = _pair_distances(obs, pts, groups)
+    while pieces:  # place the pieces the placed points fix, until none is left that they fix
+        left = [piece for piece in pieces if not _place_piece(piece, P, R, C, pairs)]
+        if len(left) == len(pieces):
+            break
+        pieces = left
     pending &= np.isnan(C[:, 0])
     while True:  # the steps left: registered to the placed points in the world
         known = np.all(np.isfinite(P), axis=1)
@@ -148,24 +155,88 @@ def _merge_pieces(pieces):
     return merged
 
 
-def _place_piece(piece, anchor_ids, anchor_positions, P, R, C) -> None:
-    """A piece's points and poses in the world by the similarity onto the anchors it holds (none
-    if they are fewer than 3 or on one line); points already placed by a larger piece stay."""
+def _pair_distances(obs, pts, groups) -> dict[tuple[int, int], float]:
+    """Pose-free distances: per pair of objects seen in one step with ranges, the median over
+    those steps of the distance between their points (the law of cosines)."""
+    found: dict[tuple[int, int], list[float]] = {}
+    for g in groups:
+        if g.size < 2:
+            continue
+        d = np.linalg.norm(pts[g][:, None] - pts[g][None], axis=2)
+        o = obs.obj[g]
+        for a in range(g.size):
+            for b in range(a + 1, g.size):
+                found.setdefault((int(o[a]), int(o[b])), []).append(float(d[a, b]))
+    return {k: float(np.median(v)) for k, v in found.items()}
+
+
+def _place_piece(piece, P, R, C, pairs) -> bool:
+    """Place a piece in the world when the points placed already fix it: three or more of its
+    points placed, not on a line (a similarity), or two and pose-free distances from its other
+    points to placed ones (the turn about the line through the two is the one that fits those
+    distances best, :func:`_hinge`). Points placed already stay; returns whether it was placed."""
     total, count, poses = piece
-    placed = count > 0
-    has = placed[anchor_ids]
-    if has.sum() < 3 or not _spans(anchor_positions[has]):
-        return
-    local = total[placed] / count[placed, None]
-    Q = total[anchor_ids[has]] / count[anchor_ids[has], None]
-    if not _spans(Q):
-        return
-    Rs, s, t = umeyama(Q, anchor_positions[has], True)
-    new = placed & ~np.all(np.isfinite(P), axis=1)
-    P[new] = (s * local @ Rs.T + t)[new[placed]]
+    mine = count > 0
+    local = np.full_like(total, np.nan)
+    local[mine] = total[mine] / count[mine, None]
+    known = np.all(np.isfinite(P), axis=1)
+    common = np.flatnonzero(mine & known)
+    if common.size >= 3 and _spans(P[common]) and _spans(local[common]):
+        Rs, s, t = umeyama(local[common], P[common], True)
+    elif common.size == 2:
+        found = _hinge(local, P, common, mine & ~known, known & ~mine, pairs)
+        if found is None:
+            return False
+        Rs, s, t = found
+    else:
+        return False
+    new = mine & ~known
+    P[new] = s * local[new] @ Rs.T + t
     for k, (Rt, ct) in poses.items():
         R[k] = Rs @ Rt
         C[k] = s * Rs @ ct + t
+    return True
+
+
+def _rotation_onto(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The rotation taking the unit vector ``a`` onto the unit vector ``b`` (Rodrigues)."""
+    v, c = np.cross(a, b), float(a @ b)
+    if c < -1.0 + 1e-12:  # opposite: half a turn about any perpendicular
+        p = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+        p /= np.linalg.norm(p)
+        return 2.0 * np.outer(p, p) - np.eye(3)
+    K = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    return np.eye(3) + K + K @ K / (1.0 + c)
+
+
+def _hinge(local, P, common, movers, others, pairs, n_angles: int = 720):
+    """``(R, s, t)`` placing a piece that shares two points with the placed ones: those two fix
+    the scale and a line, and the turn about the line is the one (of ``n_angles``) whose placed
+    ``movers`` best fit their pose-free distances to the placed ``others``; None without such
+    distances."""
+    a, b = common
+    use = [(i, j, d) for (i, j), d in pairs.items()
+           for i, j in ((i, j), (j, i)) if movers[i] and others[j]]
+    if not use:
+        return None
+    la, lb, wa, wb = local[a], local[b], P[a], P[b]
+    if np.linalg.norm(lb - la) < _MIN_SPAN or np.linalg.norm(wb - wa) < _MIN_SPAN:
+        return None
+    s = np.linalg.norm(wb - wa) / np.linalg.norm(lb - la)
+    axis = (wb - wa) / np.linalg.norm(wb - wa)
+    R0 = _rotation_onto((lb - la) / np.linalg.norm(lb - la), axis)
+    i, j, d = (np.array(v) for v in zip(*use, strict=True))
+    x0 = s * (local[i] - la) @ R0.T  # the movers about wa, before the turn
+    best = None
+    for theta in np.linspace(0.0, 2.0 * np.pi, n_angles, endpoint=False):
+        K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]],
+                      [-axis[1], axis[0], 0.0]])
+        Rt = np.eye(3) + np.sin(theta) * K + (1.0 - np.cos(theta)) * K @ K
+        err = np.sum((np.linalg.norm(wa + x0 @ Rt.T - P[j], axis=1) - d) ** 2)
+        if best is None or err < best[0]:
+            best = (err, Rt @ R0)
+    Rs = best[1]
+    return Rs, s, wa - s * Rs @ la
 
 
 def orthogonal_iteration(p: np.ndarray, u: np.ndarray, iters: int = 60):
@@ -193,7 +264,7 @@ def orthogonal_iteration(p: np.ndarray, u: np.ndarray, iters: int = 60):
 
 def triangulate(C: np.ndarray, d: np.ndarray):
     """``(p, ok)``: the point where the lines ``C + s d`` (k lines, unit ``d`` in the world) pass
-    closest in least squares, and whether two of the rays diverge by at least 3 degrees."""
+    closest in least squares, and whether two of the rays diverge by at least 10 degrees."""
     A = np.eye(3)[None] - d[:, :, None] * d[:, None, :]
     p = np.linalg.solve(A.sum(axis=0) + 1e-12 * np.eye(3), np.einsum("kij,kj->i", A, C))
     cosines = d @ d.T

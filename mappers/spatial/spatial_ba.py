@@ -1,0 +1,82 @@
+"""SPATIAL-BA: a 3-D map from rays (and ranges) by the 6-DoF viewpoint bundle adjustment.
+
+Rays and ranges: the steps are registered to one another by their common objects
+(:func:`mappers.spatial.registration.register_points`; pose-free, as the law of cosines makes
+the distances of two objects seen in one step), placed by the anchors, then continued by rays
+(:func:`~mappers.spatial.registration.register_rays`) and adjusted jointly
+(:func:`mappers.spatial.adjustment.adjust_viewpoints`). Rays alone: the same adjustment started
+from the anchors by resection and intersection. No odometry, no motion model: every step's pose
+is estimated from what it saw.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from mappers.core.align_3d import check_anchors_3d
+from mappers.spatial.adjustment import adjust_viewpoints
+from mappers.spatial.rays import ray_observations
+from mappers.spatial.registration import register_points, register_rays
+
+__all__ = ["SpatialAdjustment"]
+
+
+class SpatialAdjustment:
+    """The 6-DoF viewpoint bundle adjustment as an estimator (see the module's docstring).
+
+    Args:
+        bearing_noise: the rays' angle noise [rad] (default 1 degree).
+        range_noise, range_growth: a range's noise [m], ``range_noise + range_growth * r**2``.
+        loss, loss_scale: the robust loss ("cauchy", "huber" or None) at that many noise units.
+        max_iter: Levenberg-Marquardt iterations at most.
+        fit_range_scale: estimate one factor of all ranges (a stereo calibration's scale error).
+
+    Attributes (after fit): ``embedding_`` (M, 3) world positions, NaN for objects it could not
+    place; ``rotations_`` (N, 3, 3) and ``positions_`` (N, 3) the steps' poses (NaN: step not
+    used); ``range_scale_``; ``n_iter_``.
+    """
+
+    def __init__(self, bearing_noise: float = float(np.deg2rad(1.0)), range_noise: float = 0.02,
+                 range_growth: float = 0.0, loss: str | None = "cauchy", loss_scale: float = 3.0,
+                 max_iter: int = 200, fit_range_scale: bool = False):
+        self.bearing_noise = bearing_noise
+        self.range_noise = range_noise
+        self.range_growth = range_growth
+        self.loss = loss
+        self.loss_scale = loss_scale
+        self.max_iter = max_iter
+        self.fit_range_scale = fit_range_scale
+
+    def fit(self, X, y=None, *, anchor_ids, anchor_positions, mask=None, masks=None):
+        """Fit to a 3-D bearing history ``X`` (M, 3N) or fused histories ``{"bearing": rays,
+        "range": ranges (M, N)}`` (``masks`` keyed alike), with 3-D anchors (held fixed)."""
+        if isinstance(X, Mapping):
+            if "bearing" not in X:
+                raise ValueError(f"SPATIAL-BA maps rays: fused histories need a 'bearing' entry, "
+                                 f"got {sorted(X)}")
+            masks = dict(masks or {})
+            obs = ray_observations(X["bearing"], masks.get("bearing"), X.get("range"),
+                                   masks.get("range"))
+        else:
+            obs = ray_observations(X, mask)
+        ids, pos = check_anchors_3d(anchor_ids, anchor_positions, obs.n_objects)
+        if np.isfinite(obs.range).any():
+            start = register_rays(obs, ids, pos, start=register_points(obs, ids, pos))
+        else:
+            start = register_rays(obs, ids, pos)
+        fixed = np.zeros(obs.n_objects, dtype=bool)
+        fixed[ids] = True
+        res = adjust_viewpoints(obs, *start, fixed, bearing_noise=self.bearing_noise,
+                                range_noise=self.range_noise, range_growth=self.range_growth,
+                                loss=self.loss, loss_scale=self.loss_scale,
+                                max_iter=self.max_iter, fit_range_scale=self.fit_range_scale)
+        self.embedding_ = res.points
+        self.rotations_, self.positions_ = res.rotations, res.positions
+        self.range_scale_, self.n_iter_ = res.range_scale, res.n_iter
+        return self
+
+    def fit_transform(self, X, y=None, **inputs) -> np.ndarray:
+        """Fit and return ``embedding_`` (M, 3)."""
+        return self.fit(X, y, **inputs).embedding_
