@@ -254,7 +254,9 @@ def orthogonal_iteration(p: np.ndarray, u: np.ndarray, iters: int = 60):
     for _ in range(iters):
         t = F @ np.mean(np.einsum("kij,kj->ki", V, p @ Rcw.T) - p @ Rcw.T, axis=0)
         q = np.einsum("kij,kj->ki", V, p @ Rcw.T + t)
-        Rcw, _, _ = umeyama(p, q, False)
+        previous, (Rcw, _, _) = Rcw, umeyama(p, q, False)
+        if np.abs(Rcw - previous).max() < 1e-10:
+            break
     t = F @ np.mean(np.einsum("kij,kj->ki", V, p @ Rcw.T) - p @ Rcw.T, axis=0)
     cam = p @ Rcw.T + t
     cos = np.einsum("kj,kj->k", cam, u) / np.maximum(np.linalg.norm(cam, axis=1), 1e-12)
@@ -285,14 +287,16 @@ def register_rays(obs: RayObservations, anchor_ids: np.ndarray, anchor_positions
         P, R, C = (a.copy() for a in start)
     P[anchor_ids] = anchor_positions
     groups = _groups(obs)
+    tried = np.zeros(n, dtype=np.int64)  # the placed objects a step saw when last tried
     for _ in range(rounds):
         known = np.all(np.isfinite(P), axis=1)
         grew = False
         for t in np.flatnonzero(np.isnan(C[:, 0])):
             g = groups[t]
             g = g[known[obs.obj[g]]]
-            if g.size < 3 or not _spans(P[obs.obj[g]]):
+            if g.size < 3 or g.size == tried[t] or not _spans(P[obs.obj[g]]):
                 continue
+            tried[t] = g.size
             Rt, ct, rms = orthogonal_iteration(P[obs.obj[g]], obs.ray[g])
             if rms <= max_rms:
                 R[t], C[t], grew = Rt, ct, True

@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from mappers.core.align_3d import check_anchors_3d
 from mappers.spatial.adjustment import adjust_viewpoints
@@ -52,6 +53,11 @@ class SpatialAdjustment:
     def fit(self, X, y=None, *, anchor_ids, anchor_positions, mask=None, masks=None):
         """Fit to a 3-D bearing history ``X`` (M, 3N) or fused histories ``{"bearing": rays,
         "range": ranges (M, N)}`` (``masks`` keyed alike), with 3-D anchors (held fixed)."""
+        # the matrices are small (6 x 6 poses, 3F x 3F objects): one BLAS thread is fastest
+        with threadpool_limits(limits=1):
+            return self._fit(X, mask, masks, anchor_ids, anchor_positions)
+
+    def _fit(self, X, mask, masks, anchor_ids, anchor_positions):
         if isinstance(X, Mapping):
             if "bearing" not in X:
                 raise ValueError(f"SPATIAL-BA maps rays: fused histories need a 'bearing' entry, "
