@@ -18,6 +18,7 @@ from threadpoolctl import threadpool_limits
 
 from mappers.core.align_3d import check_anchors_3d
 from mappers.spatial.adjustment import adjust_viewpoints
+from mappers.spatial.covisibility_3d import CoVisibility3D
 from mappers.spatial.rays import ray_observations
 from mappers.spatial.registration import register_points, register_rays
 
@@ -71,7 +72,10 @@ class SpatialAdjustment:
         if np.isfinite(obs.range).any():
             start = register_rays(obs, ids, pos, start=register_points(obs, ids, pos))
         else:
-            start = register_rays(obs, ids, pos)
+            start = self._rays_start(obs, ids, pos)
+        if not np.isfinite(start[2][:, 0]).any():
+            raise ValueError("SPATIAL-BA could not place any step: no step sees three placed "
+                             "objects (anchors, or objects placed from them) not on one line")
         fixed = np.zeros(obs.n_objects, dtype=bool)
         fixed[ids] = True
         res = adjust_viewpoints(obs, *start, fixed, bearing_noise=self.bearing_noise,
@@ -82,6 +86,26 @@ class SpatialAdjustment:
         self.rotations_, self.positions_ = res.rotations, res.positions
         self.range_scale_, self.n_iter_ = res.range_scale, res.n_iter
         return self
+
+    @staticmethod
+    def _rays_start(obs, ids, pos):
+        """Rays alone: resection and intersection from the anchors; where that leaves steps
+        unplaced, the sightings' 3-D map (COVIS-3D) stands in for the objects' positions to
+        resect them roughly (their rays to it within 30 degrees), and the objects are intersected
+        again from those steps."""
+        start = register_rays(obs, ids, pos)
+        if np.isfinite(start[2][:, 0]).mean() > 0.5:
+            return start
+        seen = np.zeros((obs.n_objects, obs.n_steps))
+        seen[obs.obj, obs.step] = 1.0
+        try:
+            rough = CoVisibility3D().fit_transform(seen, anchor_ids=ids, anchor_positions=pos)
+        except ValueError:
+            return start
+        _, R, C = register_rays(obs, ids, pos, start=(rough, *start[1:]),
+                                max_rms=np.deg2rad(30.0), rounds=1)
+        fresh = np.full_like(rough, np.nan)
+        return register_rays(obs, ids, pos, start=(fresh, R, C))
 
     def fit_transform(self, X, y=None, **inputs) -> np.ndarray:
         """Fit and return ``embedding_`` (M, 3)."""
