@@ -95,7 +95,8 @@ def adjust_viewpoints(obs: RayObservations, P0: np.ndarray, R0: np.ndarray, C0: 
                       range_noise: float = 0.02, range_growth: float = 0.0,
                       loss: str | None = "cauchy", loss_scale: float = 3.0,
                       max_iter: int = 100, tol: float = 1e-10,
-                      fit_range_scale: bool = False, scale_rounds: int = 4) -> AdjustmentResult:
+                      fit_range_scale: bool = False, scale_rounds: int = 4,
+                      anchor_noise: float | None = None) -> AdjustmentResult:
     """Adjust the points and the steps' poses to the sightings (see the module's docstring).
 
     Args:
@@ -114,9 +115,14 @@ def adjust_viewpoints(obs: RayObservations, P0: np.ndarray, R0: np.ndarray, C0: 
             alike; STAR-loc's are 1.5-3 % short): after each adjustment the ranges are
             multiplied by the median ratio of the adjusted distances to them, ``scale_rounds``
             times at most (the anchors, held fixed, set the scale).
+        anchor_noise: None: the ``fixed`` objects are held exactly where they are; a number
+            [m]: they are adjusted too, held by a prior of that standard deviation (the anchors'
+            survey error), so that the map keeps the shape its sightings give it.
     """
+    if anchor_noise is not None and not anchor_noise > 0:
+        raise ValueError(f"anchor_noise must be None or > 0, got {anchor_noise!r}")
     result = _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, loss,
-                     loss_scale, max_iter, tol)
+                     loss_scale, max_iter, tol, anchor_noise)
     has_r = np.isfinite(obs.range)
     factor = 1.0
     for _ in range(scale_rounds if fit_range_scale and has_r.any() else 0):
@@ -129,14 +135,14 @@ def adjust_viewpoints(obs: RayObservations, P0: np.ndarray, R0: np.ndarray, C0: 
         factor *= k
         obs = obs._replace(range=obs.range * k)
         result = _adjust(obs, P, R, C, fixed, bearing_noise, range_noise, range_growth, loss,
-                         loss_scale, max_iter, tol)
+                         loss_scale, max_iter, tol, anchor_noise)
         if abs(k - 1.0) < 1e-4:
             break
     return result._replace(range_scale=factor)
 
 
 def _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, loss, loss_scale,
-            max_iter, tol) -> AdjustmentResult:
+            max_iter, tol, anchor_noise=None) -> AdjustmentResult:
     """One adjustment of :func:`adjust_viewpoints` (the ranges as they are)."""
     if loss not in ("cauchy", "huber", None):
         raise ValueError(f"loss must be 'cauchy', 'huber' or None, got {loss!r}")
@@ -147,16 +153,20 @@ def _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, lo
     posed = np.all(np.isfinite(C), axis=1)
     keep = placed[obs.obj] & posed[obs.step]
     prob = _Problem(obs, keep, bearing_noise, range_noise, range_growth)
-    free = placed & ~np.asarray(fixed, dtype=bool)
+    fixed = np.asarray(fixed, dtype=bool)
+    free = placed & (~fixed if anchor_noise is None else np.ones(len(P), dtype=bool))
     free_index = np.full(len(P), -1)
     free_index[free] = np.arange(free.sum())
+    soft = np.flatnonzero(fixed & free)  # anchors held by a prior of anchor_noise [m]
+    target = P0[soft]
     steps = np.flatnonzero(posed)
     step_index = np.full(len(C), -1)
     step_index[steps] = np.arange(steps.size)
 
     def cost_of(P, R, C):
         e = prob.residuals(P, R, C)[0]
-        return float(robust_cost(np.linalg.norm(e, axis=1), loss_scale, loss).sum())
+        prior = 0.0 if not soft.size else 0.5 * np.sum((P[soft] - target) ** 2) / anchor_noise**2
+        return float(robust_cost(np.linalg.norm(e, axis=1), loss_scale, loss).sum()) + prior
 
     cost, lam, it = cost_of(P, R, C), 1e-3, 0
     for it in range(1, max_iter + 1):  # noqa: B007 - the count is returned
@@ -165,6 +175,9 @@ def _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, lo
         Jc, Jp = prob.jacobians(R, v, nv, vh)
         step_blocks = _normal_blocks(prob, e, w, Jc, Jp, step_index[prob.t], free_index,
                                      steps.size, int(free.sum()))
+        if soft.size:  # the anchors' prior: (p - anchor) / anchor_noise, Jacobian I / noise
+            step_blocks[1][free_index[soft]] += np.eye(3) / anchor_noise**2
+            step_blocks[4][free_index[soft]] += (P[soft] - target) / anchor_noise**2
         improved = False
         while lam < 1e8:
             dc, dp = schur_step(*step_blocks, lam)

@@ -16,7 +16,7 @@ from collections.abc import Mapping
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from mappers.core.align_3d import check_anchors_3d
+from mappers.core.align_3d import check_anchors_3d, umeyama
 from mappers.spatial.adjustment import adjust_viewpoints
 from mappers.spatial.covisibility_3d import CoVisibility3D
 from mappers.spatial.rays import ray_observations
@@ -34,6 +34,11 @@ class SpatialAdjustment:
         loss, loss_scale: the robust loss ("cauchy", "huber" or None) at that many noise units.
         max_iter: Levenberg-Marquardt iterations at most.
         fit_range_scale: estimate one factor of all ranges (a stereo calibration's scale error).
+        anchor_noise: None: the anchors are held fixed; a number [m]: they are adjusted under a
+            prior of that deviation, and the adjusted map is then placed on them by the
+            least-squares similarity (Umeyama 1991): the map keeps the shape and, with ranges,
+            the scale its sightings give it, then one scale factor takes it to the anchors'
+            (a stereo camera's ranges on STAR-loc are 1.5-3 % short).
 
     Attributes (after fit): ``embedding_`` (M, 3) world positions, NaN for objects it could not
     place; ``rotations_`` (N, 3, 3) and ``positions_`` (N, 3) the steps' poses (NaN: step not
@@ -42,7 +47,8 @@ class SpatialAdjustment:
 
     def __init__(self, bearing_noise: float = float(np.deg2rad(1.0)), range_noise: float = 0.02,
                  range_growth: float = 0.0, loss: str | None = "cauchy", loss_scale: float = 3.0,
-                 max_iter: int = 200, fit_range_scale: bool = False):
+                 max_iter: int = 200, fit_range_scale: bool = False,
+                 anchor_noise: float | None = None):
         self.bearing_noise = bearing_noise
         self.range_noise = range_noise
         self.range_growth = range_growth
@@ -50,6 +56,7 @@ class SpatialAdjustment:
         self.loss_scale = loss_scale
         self.max_iter = max_iter
         self.fit_range_scale = fit_range_scale
+        self.anchor_noise = anchor_noise
 
     def fit(self, X, y=None, *, anchor_ids, anchor_positions, mask=None, masks=None):
         """Fit to a 3-D bearing history ``X`` (M, 3N) or fused histories ``{"bearing": rays,
@@ -81,7 +88,14 @@ class SpatialAdjustment:
         res = adjust_viewpoints(obs, *start, fixed, bearing_noise=self.bearing_noise,
                                 range_noise=self.range_noise, range_growth=self.range_growth,
                                 loss=self.loss, loss_scale=self.loss_scale,
-                                max_iter=self.max_iter, fit_range_scale=self.fit_range_scale)
+                                max_iter=self.max_iter, fit_range_scale=self.fit_range_scale,
+                                anchor_noise=self.anchor_noise)
+        if self.anchor_noise is not None:  # the map's own shape, placed on the anchors
+            Rs, scale, t = umeyama(res.points[ids], pos, True)
+            res = res._replace(points=scale * res.points @ Rs.T + t,
+                               rotations=Rs @ res.rotations,
+                               positions=scale * res.positions @ Rs.T + t)
+            self.similarity_scale_ = scale
         self.embedding_ = res.points
         self.rotations_, self.positions_ = res.rotations, res.positions
         self.range_scale_, self.n_iter_ = res.range_scale, res.n_iter
