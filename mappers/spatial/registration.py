@@ -25,13 +25,13 @@ import numpy as np
 from mappers.core.align_3d import umeyama
 from mappers.spatial.rays import RayObservations
 
-__all__ = ["orthogonal_iteration", "register_points", "register_rays", "triangulate"]
+__all__ = ["MIN_RAY_ANGLE", "orthogonal_iteration", "register_points", "register_rays", "triangulate"]
 
 _MIN_SPAN = 1e-3
 """Smallest second singular value [m] of three or more points for a rigid registration (not on
 one line)."""
 
-_MIN_RAY_ANGLE = np.deg2rad(10.0)
+MIN_RAY_ANGLE = np.deg2rad(10.0)
 """Smallest angle between two of an object's rays for a least-squares intersection (closer
 rays place it too uncertainly along them for the adjustment to recover)."""
 
@@ -270,7 +270,7 @@ def triangulate(C: np.ndarray, d: np.ndarray):
     A = np.eye(3)[None] - d[:, :, None] * d[:, None, :]
     p = np.linalg.solve(A.sum(axis=0) + 1e-12 * np.eye(3), np.einsum("kij,kj->i", A, C))
     cosines = d @ d.T
-    return p, bool(np.min(cosines) < np.cos(_MIN_RAY_ANGLE))
+    return p, bool(np.min(cosines) < np.cos(MIN_RAY_ANGLE))
 
 
 def register_rays(obs: RayObservations, anchor_ids: np.ndarray, anchor_positions: np.ndarray,

@@ -20,7 +20,7 @@ from mappers.core.align_3d import check_anchors_3d, umeyama
 from mappers.spatial.adjustment import adjust_viewpoints
 from mappers.spatial.covisibility_3d import CoVisibility3D
 from mappers.spatial.rays import ray_observations
-from mappers.spatial.registration import register_points, register_rays
+from mappers.spatial.registration import MIN_RAY_ANGLE, register_points, register_rays
 
 __all__ = ["SpatialAdjustment"]
 
@@ -39,16 +39,21 @@ class SpatialAdjustment:
             least-squares similarity (Umeyama 1991): the map keeps the shape and, with ranges,
             the scale its sightings give it, then one scale factor takes it to the anchors'
             (a stereo camera's ranges on STAR-loc are 1.5-3 % short).
+        max_ray_error: an adjusted object whose rays miss it by more than this median angle
+            [rad], that lies behind the sensor in most of its sightings, or (rays alone) whose
+            rays diverge by less than 10 degrees (its depth along them is not fixed) was not
+            placed consistently: it is left unmapped (NaN, listed in ``inconsistent_``) rather than
+            reported where the adjustment left it.
 
     Attributes (after fit): ``embedding_`` (M, 3) world positions, NaN for objects it could not
-    place; ``rotations_`` (N, 3, 3) and ``positions_`` (N, 3) the steps' poses (NaN: step not
+    place or placed inconsistently (``inconsistent_``, see ``max_ray_error``); ``rotations_`` (N, 3, 3) and ``positions_`` (N, 3) the steps' poses (NaN: step not
     used); ``range_scale_``; ``n_iter_``.
     """
 
     def __init__(self, bearing_noise: float = float(np.deg2rad(1.0)), range_noise: float = 0.02,
                  range_growth: float = 0.0, loss: str | None = "cauchy", loss_scale: float = 3.0,
                  max_iter: int = 200, fit_range_scale: bool = False,
-                 anchor_noise: float | None = None):
+                 anchor_noise: float | None = None, max_ray_error: float = float(np.deg2rad(5.0))):
         self.bearing_noise = bearing_noise
         self.range_noise = range_noise
         self.range_growth = range_growth
@@ -57,6 +62,7 @@ class SpatialAdjustment:
         self.max_iter = max_iter
         self.fit_range_scale = fit_range_scale
         self.anchor_noise = anchor_noise
+        self.max_ray_error = max_ray_error
 
     def fit(self, X, y=None, *, anchor_ids, anchor_positions, mask=None, masks=None):
         """Fit to a 3-D bearing history ``X`` (M, 3N) or fused histories ``{"bearing": rays,
@@ -96,7 +102,10 @@ class SpatialAdjustment:
                                rotations=Rs @ res.rotations,
                                positions=scale * res.positions @ Rs.T + t)
             self.similarity_scale_ = scale
-        self.embedding_ = res.points
+        self.inconsistent_ = _inconsistent(obs, res, self.max_ray_error, ids)
+        points = res.points.copy()
+        points[self.inconsistent_] = np.nan
+        self.embedding_ = points
         self.rotations_, self.positions_ = res.rotations, res.positions
         self.range_scale_, self.n_iter_ = res.range_scale, res.n_iter
         return self
@@ -124,3 +133,26 @@ class SpatialAdjustment:
     def fit_transform(self, X, y=None, **inputs) -> np.ndarray:
         """Fit and return ``embedding_`` (M, 3)."""
         return self.fit(X, y, **inputs).embedding_
+
+
+def _inconsistent(obs, res, max_error: float, anchors) -> np.ndarray:
+    """Ids of the placed, non-anchor objects whose sightings from the posed steps miss them by a
+    median angle above ``max_error``, or that lie behind the sensor in most of them."""
+    P, R, C = res.points, res.rotations, res.positions
+    use = np.all(np.isfinite(P[obs.obj]), axis=1) & np.isfinite(C[obs.step, 0])
+    v = np.einsum("kji,kj->ki", R[obs.step[use]], P[obs.obj[use]] - C[obs.step[use]])
+    cos = np.einsum("kj,kj->k", v, obs.ray[use]) / np.maximum(np.linalg.norm(v, axis=1), 1e-12)
+    angle = np.arccos(np.clip(cos, -1.0, 1.0))
+    world = np.einsum("kij,kj->ki", R[obs.step[use]], obs.ray[use])  # the rays in the world
+    ranged = np.isfinite(obs.range[use])
+    bad = []
+    for i in np.unique(obs.obj[use]):
+        mine = obs.obj[use] == i
+        a = angle[mine]
+        # rays alone fix an object's depth only where its rays diverge (as an intersection)
+        parallel = not ranged[mine].any() and np.min(world[mine] @ world[mine].T) > np.cos(
+            MIN_RAY_ANGLE)
+        if i not in anchors and (np.median(a) > max_error or np.mean(a > np.pi / 2) > 0.5
+                                 or parallel):
+            bad.append(int(i))
+    return np.array(bad, dtype=np.int64)
