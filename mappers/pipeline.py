@@ -22,6 +22,7 @@ from mappers.core.uncertainty import check_uncertainty
 from mappers.covariances import with_covariances
 from mappers.defaults import choose_for_history
 from mappers.fitting import Map, check_inputs, fit_checked, fit_fused_method
+from mappers.spatial.pipeline_3d import anchor_dimension, build_map_3d
 
 __all__ = ["Map", "MapWarning", "build_map", "default_method"]
 
@@ -57,7 +58,9 @@ def build_map(
             such a mapping (a fused ``lfmdr_gym.History``, whose ``timeline`` is then used
             unless given).
         anchor_ids: (A,) ids of the anchor objects, A >= 3, distinct, in [0, M).
-        anchor_positions: (A, 2) their known positions [m]; not collinear.
+        anchor_positions: (A, 2) their known positions [m]; not collinear. (A, 3) positions
+            make a 3-D map (:func:`mappers.spatial.pipeline_3d.build_map_3d`: 3-D rays, rays
+            and ranges, or sightings; ``Map.positions`` is then (M, 3)).
         method: a label of :data:`mappers.METHODS` (case-insensitive) that maps this kind of
             history; None = the default for the sensor and for complete or masked histories
             (:func:`mappers.defaults.choose_method`, from :data:`mappers.defaults.DEFAULTS`,
@@ -93,6 +96,12 @@ def build_map(
         ValueError: bad input, naming the problem. MappingError (a ValueError) when the method
         itself fails (e.g. Hessian LLE's eigenproblem), naming the method and the cause.
     """
+    if anchor_dimension(anchor_positions) == 3:
+        result = build_map_3d(histories, anchor_ids, anchor_positions, method, sensor=sensor,
+                              mask=mask, **params)
+        for note in result.warnings:
+            warnings.warn(note, MapWarning, stacklevel=2)
+        return result
     parts = getattr(histories, "parts", None)
     if isinstance(parts, Mapping) and not isinstance(histories, Mapping):
         # a fused History (lfmdr_gym): its single-sensor parts, each with its own mask
