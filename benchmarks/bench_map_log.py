@@ -9,7 +9,7 @@ corners are the anchors; the truth scores the map. The log is written as Parquet
 CSV) outside the timing, then the command is run in a fresh process and timed as a user would
 see it.
 
-    python benchmarks/bench_map_log.py                        # 1,000,000 rows, range-bearing
+    python benchmarks/bench_map_log.py                        # 1,000,000 rows, range
     python benchmarks/bench_map_log.py --rows 200000 --sensor bearing --bin 1
     python benchmarks/bench_map_log.py --repeat 3             # median of 3 runs
 
@@ -93,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rows", type=int, default=1_000_000)
     ap.add_argument("--landmarks", type=int, default=200)
-    ap.add_argument("--sensor", default="range-bearing")
+    ap.add_argument("--sensor", default="range")
     ap.add_argument("--bin", type=float, default=None, help="--bin of lfmdr map (seconds)")
     ap.add_argument("--method", default=None)
     ap.add_argument("--csv", action="store_true", help="write the log as CSV, not Parquet")

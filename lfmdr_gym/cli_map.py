@@ -214,6 +214,6 @@ def _cmd_convert_rosbag(args: argparse.Namespace) -> int:
 
     table = rosbag.run(args)
     write_observations(table, args.out)
-    print(f"{args.bag} {args.topic}: {len(table)} sightings of {table['landmark'].nunique()} "
+    print(f"{args.src} {args.topic}: {len(table)} sightings of {table['landmark'].nunique()} "
           f"landmarks; wrote {args.out}")
     return 0

@@ -344,6 +344,14 @@ def read_rosbag(
         else:
             rays = np.asarray(found.xyz, dtype=float)
             _check_positions(rays, found, topic)
+    except RosbagError:
+        raise
+    except Exception as err:
+        # a damaged bag fails inside rosbags as it reads or decodes a message: its own errors,
+        # sqlite3's, an AssertionError, a KeyError of a connection type... (found by fuzzing,
+        # tests/gym/datasets/test_fuzz_bags.py); each is the bag's fault, said as such
+        raise RosbagError(f"cannot read ROS bag {path}: damaged or not as written "
+                          f"({type(err).__name__}: {err})") from err
     finally:
         reader.close()
     landmark, families = _landmarks(found)

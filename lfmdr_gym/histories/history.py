@@ -436,7 +436,7 @@ class History:
                 files = set(data.files)
                 if "format" not in files or str(data["format"]) != FORMAT:
                     raise HistoryFileError(f"{path} is not an lfmdr history file (no '{FORMAT}' tag)")
-                version = int(data["format_version"])
+                version = _version(data["format_version"], path)
                 if version not in READABLE_VERSIONS:
                     raise HistoryFileError(
                         f"{path} has history format version {version}; this lfmdr reads "
@@ -451,7 +451,7 @@ class History:
         try:
             sensor = str(fields["sensor"])
             if version >= 3 and sensor in FUSED_SENSORS:  # (4 is 3 with 3-D positions)
-                names = [str(n) for n in fields["sensors"]]
+                names = _names(fields["sensors"])
                 parts = {n: {k[len(n) + 1:]: v for k, v in fields.items() if k.startswith(n + ".")}
                          for n in names}
                 for n, part in parts.items():
@@ -469,13 +469,44 @@ class History:
                 anchor_positions=fields["anchor_positions"],
                 robot_poses=fields.get("robot_poses"),
                 mask=mask,
-                meta=json.loads(str(fields["meta"])),
+                meta=_meta(fields["meta"]),
                 timeline=fields.get("timeline"),
             )
         except KeyError as exc:
             raise HistoryFileError(f"{path} lacks the field {exc.args[0]!r}") from exc
-        except ValueError as exc:
+        except (ValueError, TypeError, OverflowError) as exc:
+            # TypeError / OverflowError: a field of the wrong kind (a 2-D array where a number
+            # belongs, a count beyond int64) that the checks above do not name
             raise HistoryFileError(f"{path} holds an inconsistent history: {exc}") from exc
+
+
+def _version(value: np.ndarray, path: Path) -> int:
+    """The format version a file states: a single integer, nothing else read as one."""
+    value = np.asarray(value)
+    if value.shape != () or value.dtype.kind not in "iu":
+        raise HistoryFileError(f"{path} states no integer format version (got {value.dtype} "
+                               f"of shape {value.shape})")
+    return int(value)
+
+
+def _names(value: np.ndarray) -> list[str]:
+    """The sensors a fused history's file lists: a 1-D array of strings."""
+    value = np.asarray(value)
+    if value.ndim != 1 or value.dtype.kind != "U":
+        raise ValueError(f"'sensors' must list the fused sensors' names, got {value.dtype} of "
+                         f"shape {value.shape}")
+    return [str(n) for n in value]
+
+
+def _meta(value: np.ndarray) -> dict:
+    """The file's meta data: one JSON object (as :meth:`History.save` writes it)."""
+    value = np.asarray(value)
+    if value.shape != () or value.dtype.kind != "U":
+        raise ValueError(f"'meta' must be one JSON string, got {value.dtype} of shape {value.shape}")
+    meta = json.loads(str(value))  # a json.JSONDecodeError is a ValueError
+    if not isinstance(meta, dict):
+        raise ValueError(f"'meta' must hold a JSON object, got {type(meta).__name__}")
+    return meta
 
 
 def _mask_get(self: History) -> Any:
