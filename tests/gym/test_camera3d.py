@@ -207,3 +207,24 @@ def test_compact_and_vector_recording_give_the_same_3d_history():
     assert [h.dimension for h in vec] == [3, 3]
     np.testing.assert_array_equal(vec[0].object_positions, plain.object_positions)
     assert vec[0].parts["bearing"].shape == (50, 180)
+
+
+def test_build_map_maps_a_camera3d_history_in_3d():
+    """A noise-free walk's rays and ranges map every tag to within rounding (build_map picks
+    the 3-D default from the (A, 3) anchors); a visibility walk gives a 3-D map too."""
+    from mappers import build_map
+
+    h = collect("LFMDR-Camera3D-v0", RandomWalkPolicy(), 400, seed=5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = build_map(h, h.anchor_ids, h.anchor_positions)
+    rest = np.setdiff1d(np.arange(h.n_objects), h.anchor_ids)
+    assert m.positions.shape == (50, 3) and not m.unmapped
+    err = np.linalg.norm(m.positions[rest] - h.object_positions[rest], axis=1)
+    assert err.max() < 1e-4
+    vis = collect("LFMDR-Camera3D-v0", RandomWalkPolicy(), 400, seed=5,
+                  make_kwargs={"sensor": "visibility"})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        mv = build_map(vis, vis.anchor_ids, vis.anchor_positions)
+    assert mv.positions.shape == (50, 3)
