@@ -44,7 +44,8 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("mappers", "lfmdr_gym")
 FORBIDDEN_IN_MAPPERS = ("gymnasium", "gym", "pygame", "lfmdr_gym")
 MAX_LINES = 600
-FAMILIES = ("smacof", "paper", "calibrated", "masked", "viewpoints", "fused", "online")
+FAMILIES = ("smacof", "paper", "calibrated", "masked", "viewpoints", "fused", "online",
+            "spatial")
 """The method families of ``mappers``: each imports ``mappers.core``, the layer below it, and
 another family only through the names that family's ``__init__`` declares."""
 

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import argparse
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -93,16 +94,29 @@ def _topics_listing(topics: dict[str, Any]) -> str:
     )
 
 
-def _open(path: Path) -> Any:
-    """An open ``AnyReader`` on ``path``, or RosbagError saying why it cannot be read."""
+def _paths(path: str | os.PathLike | Sequence[str | os.PathLike]) -> list[Path]:
+    """The bag's path(s): one bag, or the .bag files of a split ROS 1 recording."""
+    paths = [Path(path)] if isinstance(path, str | os.PathLike) else [Path(p) for p in path]
+    if not paths:
+        raise RosbagError(f"no ROS bag given ({_LAYOUT})")
+    if len(paths) > 1 and any(p.suffix != ".bag" for p in paths):
+        raise RosbagError("several paths are read together only as the .bag files of one split "
+                          f"ROS 1 recording; got {[str(p) for p in paths]} ({_LAYOUT})")
+    missing = [str(p) for p in paths if not p.exists()]
+    if missing:
+        raise RosbagError(f"ROS bag {', '.join(missing)} does not exist ({_LAYOUT})")
+    return paths
+
+
+def _open(paths: list[Path]) -> Any:
+    """An open ``AnyReader`` on ``paths``, or RosbagError saying why they cannot be read."""
     require_rosbags()
     from rosbags.highlevel import AnyReader
 
-    if not path.exists():
-        raise RosbagError(f"ROS bag {path} does not exist ({_LAYOUT})")
-    store = shared_typestore(1 if path.suffix == ".bag" else 2)
+    path = paths[0] if len(paths) == 1 else [str(p) for p in paths]
+    store = shared_typestore(1 if paths[0].suffix == ".bag" else 2)
     try:
-        reader = AnyReader([path], default_typestore=store)
+        reader = AnyReader(paths, default_typestore=store)
         reader.open()
     except Exception as err:  # rosbags raises its own errors, sqlite3's, OSError, ... per container
         raise RosbagError(f"cannot read ROS bag {path}: {err} ({_LAYOUT})") from err
@@ -255,7 +269,7 @@ def _check_positions(xyz: np.ndarray, found: _Detections, topic: str) -> None:
 
 
 def read_rosbag(
-    path: str | os.PathLike,
+    path: str | os.PathLike | Sequence[str | os.PathLike],
     topic: str,
     *,
     camera_info_topic: str | None = None,
@@ -267,7 +281,8 @@ def read_rosbag(
     """Read a topic of AprilTag detections from a ROS bag into an observation table.
 
     Args:
-        path: A ROS 1 ``.bag`` file, or a ROS 2 bag folder (sqlite3 or MCAP storage).
+        path: A ROS 1 ``.bag`` file, or a ROS 2 bag folder (sqlite3 or MCAP storage); or a list of
+            the ``.bag`` files of a split ROS 1 recording, read as one (messages in time order).
         topic: The detection topic; its type must be one of
             :data:`~lfmdr_gym.datasets.ros_messages.DETECTION_ARRAY_TYPES`.
         camera_info_topic: The ``sensor_msgs/CameraInfo`` topic of the camera, needed (only) for
@@ -299,8 +314,9 @@ def read_rosbag(
         raise ValueError(f"time_source must be one of {TIME_SOURCES}, got {time_source!r}")
     if bundles not in BUNDLE_CHOICES:
         raise ValueError(f"bundles must be one of {BUNDLE_CHOICES}, got {bundles!r}")
-    path = Path(path)
-    reader = _open(path)
+    paths = _paths(path)
+    path = paths[0] if len(paths) == 1 else [str(p) for p in paths]
+    reader = _open(paths)
     try:
         topics = reader.topics
         if topic not in topics:
@@ -328,6 +344,14 @@ def read_rosbag(
         else:
             rays = np.asarray(found.xyz, dtype=float)
             _check_positions(rays, found, topic)
+    except RosbagError:
+        raise
+    except Exception as err:
+        # a damaged bag fails inside rosbags as it reads or decodes a message: its own errors,
+        # sqlite3's, an AssertionError, a KeyError of a connection type... (found by fuzzing,
+        # tests/gym/datasets/test_fuzz_bags.py); each is the bag's fault, said as such
+        raise RosbagError(f"cannot read ROS bag {path}: damaged or not as written "
+                          f"({type(err).__name__}: {err})") from err
     finally:
         reader.close()
     landmark, families = _landmarks(found)
@@ -341,7 +365,7 @@ def read_rosbag(
         columns["range"] = np.linalg.norm(rays, axis=1)
     table = pd.DataFrame(columns)
     table.attrs.update(
-        source="rosbag", path=str(path), topic=topic, msgtype=msgtype,
+        source="rosbag", path=path if isinstance(path, list) else str(path), topic=topic, msgtype=msgtype,
         time_source=time_source, camera_frame=next(iter(found.camera_frames)),
         families=families, messages=found.messages, skipped_bundles=found.bundles,
     )
@@ -352,8 +376,9 @@ def read_rosbag(
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add ``lfmdr convert rosbag``'s arguments (the bag and :func:`read_rosbag`'s options)."""
-    parser.add_argument("src", metavar="BAG",
-                        help="a ROS 1 .bag file or a ROS 2 bag folder (sqlite3 or MCAP)")
+    parser.add_argument("src", metavar="BAG", nargs="+",
+                        help="a ROS 1 .bag file (or the .bag files of a split recording) or a ROS 2 "
+                             "bag folder (sqlite3 or MCAP)")
     parser.add_argument("--topic", required=True,
                         help=f"the detection topic (types: {', '.join(DETECTION_ARRAY_TYPES)})")
     parser.add_argument("--camera-info", default=None, metavar="TOPIC",
@@ -373,5 +398,6 @@ def run(args: argparse.Namespace) -> pd.DataFrame:
     robot = args.robot
     if robot is not None and str(robot).isdigit():
         robot = int(robot)
-    return read_rosbag(args.src, args.topic, camera_info_topic=args.camera_info, robot=robot,
+    src = args.src[0] if len(args.src) == 1 else args.src
+    return read_rosbag(src, args.topic, camera_info_topic=args.camera_info, robot=robot,
                        time_source=args.time, rectified=args.rectified, bundles=args.bundles)

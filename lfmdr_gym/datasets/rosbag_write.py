@@ -160,6 +160,9 @@ def _detection(store: Any, msgtype: str, header: Any, tag: int, family: str, xyz
 
 
 def _camera_info(store: Any, header: Any, camera: CameraIntrinsics, ros_version: int) -> Any:
+    """A ``CameraInfo`` of ``camera``: ``P = [K | 0]``, ``R = I`` (a monocular camera), and an
+    image size twice the principal point's coordinates (the simulated camera has no other; the
+    reader does not use it)."""
     cls = store.types[CAMERA_INFO]
     P = np.zeros((3, 4))
     P[:, :3] = camera.K

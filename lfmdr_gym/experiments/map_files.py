@@ -235,9 +235,10 @@ def score_against_truth(
 
 
 def _plot(path: Path, rows: Sequence[Mapping[str, Any]], truth: Any, anchors: Mapping[int, Any],
-          title: str, notes: Sequence[str]) -> None:
+          title: str, notes: Sequence[str], cov: np.ndarray | None = None) -> None:
     """``map.png``: estimates and truth seen from above (x, y), anchors (row -> known position)
-    as squares; without truth, the estimates are labelled."""
+    as squares; without truth, the estimates are labelled; with covariances ((M, d, d)), each
+    estimate's 95 % ellipse (of its x-y block)."""
     from lfmdr_gym.experiments.figures import plot_estimate
 
     est = np.array([[np.nan if r[a] is None else r[a] for a in ("x", "y")] for r in rows])
@@ -246,7 +247,8 @@ def _plot(path: Path, rows: Sequence[Mapping[str, Any]], truth: Any, anchors: Ma
                      np.asarray(anchors[k], dtype=float)[:2] if k in anchors else (np.nan, np.nan)
                      for k, r in enumerate(rows)])
     plot_estimate(est, true, sorted(anchors), path, title=title, notes=notes,
-                  labels=[str(r["landmark"]) for r in rows])
+                  labels=[str(r["landmark"]) for r in rows],
+                  covariances=None if cov is None else cov[:, :2, :2])
 
 
 def write_map_files(
@@ -292,6 +294,7 @@ def write_map_files(
         if plot:
             anchors = dict(zip((int(a) for a in anchor_rows), np.asarray(anchor_positions),
                                strict=True))
-            _plot(files.path("map.png"), rows, truth, anchors, title, tuple(result.warnings))
+            _plot(files.path("map.png"), rows, truth, anchors, title, tuple(result.warnings),
+                  _covariances(result, len(rows), np.asarray(result.positions).shape[1]))
         names = files.names
     return MapFiles(out, tuple(out / n for n in names), scores)

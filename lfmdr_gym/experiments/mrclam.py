@@ -74,6 +74,9 @@ class MRCLAMMap:
         report: the loader's filtering report.
         history_meta: ``History.meta`` of the binned history.
         csv_path, png_path: files written (None when ``out`` is None).
+        covariances: (M, 2, 2) each landmark's position covariance in the ground-truth frame
+            (``Map.covariances``; zero for anchors, NaN for unmapped), None unless asked for
+            (``uncertainty=``).
     """
 
     run: str
@@ -92,6 +95,7 @@ class MRCLAMMap:
     history_meta: dict[str, Any]
     csv_path: Path | None = None
     png_path: Path | None = None
+    covariances: np.ndarray | None = None
 
     @property
     def mode(self) -> str:
@@ -267,6 +271,7 @@ def map_mrclam_run(
     plot: bool = True,
     zero_fill: bool = False,
     mode: str | None = None,
+    uncertainty: bool | str = False,
     **params: Any,
 ) -> MRCLAMMap:
     """Map one MRCLAM run from one sensor and score it against motion capture.
@@ -299,6 +304,8 @@ def map_mrclam_run(
         plot: write ``map.png`` (needs matplotlib) when ``out`` is given.
         zero_fill: map the history with its unobserved entries as zeros and no mask (the paper's
             pipeline on logged data), so methods for complete histories apply.
+        uncertainty: each landmark's covariance (``build_map(uncertainty=...)``, kept in
+            ``MRCLAMMap.covariances`` and drawn as 95 % ellipses in ``map.png``).
         **params: the method's parameters (e.g. ``quantile=0.95``, ``min_co=5``).
     """
     from mappers import build_map
@@ -312,7 +319,8 @@ def map_mrclam_run(
         histories = (histories.replace(mask=None) if isinstance(key, str) else
                      {s: h.replace(mask=None) for s, h in histories.items()})
     history = histories if isinstance(key, str) else next(iter(histories.values()))
-    result = build_map(histories, history.anchor_ids, history.anchor_positions, method, **params)
+    result = build_map(histories, history.anchor_ids, history.anchor_positions, method,
+                       uncertainty=uncertainty, **params)
     run = history.meta["run"]
     subjects = np.asarray(history.meta["subjects"], dtype=np.int64)
     msgs = [*report.warnings, *_warn_map(result, histories, run, sensor, subjects)]
@@ -324,7 +332,7 @@ def map_mrclam_run(
         subjects=subjects, positions=result.positions, truth=history.object_positions,
         anchor_subjects=tuple(int(s) for s in subjects[history.anchor_ids]), mpe=mpe, moe=moe,
         centroid_mpe=centroid_mpe, warnings=tuple(msgs), report=report,
-        history_meta={**history.meta, "sensor": sensor},
+        history_meta={**history.meta, "sensor": sensor}, covariances=result.covariances,
     )
     return outcome if out is None else _write(outcome, Path(out), plot)
 
@@ -361,5 +369,6 @@ def _write(result: MRCLAMMap, out: Path, plot: bool) -> MRCLAMMap:
         title = (f"{result.run} {result.sensor} ({result.method}): MPE {result.mpe:.2f} m, "
                  f"MOE {result.moe:.1f} %")
         plot_estimate(result.positions, result.truth, anchors, png_path, title=title,
-                      labels=result.subjects, notes=result.warnings)
+                      labels=result.subjects, notes=result.warnings,
+                      covariances=result.covariances)
     return dataclasses.replace(result, csv_path=csv_path, png_path=png_path)

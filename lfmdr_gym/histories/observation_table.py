@@ -34,6 +34,7 @@ import json
 import math
 import os
 import re
+import zlib
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -153,6 +154,13 @@ def normalise_ids(values: pd.Series, what: str, where: _Where) -> pd.Series:
         _fail(where, pos, what, f"{what} ids mix integers and strings ({_show(arr[codes[pos]])} "
               "among strings); give them all as one or the other", int(rows.sum()))
     if len(arr) and pd.Series(arr).str.fullmatch(_INT).all():
+        # a string of 19 or more digits may be beyond int64 (astype would raise OverflowError)
+        big = [k for k, v in enumerate(arr) if len(v) > 18 and not -2**63 <= int(v) < 2**63]
+        if big:
+            rows = np.isin(codes, big)
+            pos = int(np.flatnonzero(rows)[0])
+            _fail(where, pos, what, f"{what} id {arr[codes[pos]]} does not fit in 64 bits",
+                  int(rows.sum()))
         return pd.Series(arr.astype(np.int64)[codes], index=values.index)
     return pd.Series(arr[codes], index=values.index, dtype=object)
 
@@ -368,11 +376,23 @@ def _read(path: str | os.PathLike, id_columns: tuple[str, ...]) -> tuple[pd.Data
             arrow = pq.read_table(path)
         except (pa.ArrowException, OSError) as exc:
             raise ObservationTableError(f"{path} is not a readable Parquet file: {exc}") from exc
-        table = arrow.to_pandas()
-        raw = (arrow.schema.metadata or {}).get(PARQUET_KEY)
-        table.attrs = json.loads(raw) if raw else {}
+        try:
+            # a damaged schema or metadata (pandas' own or ours): bad JSON or UTF-8 (ValueError),
+            # an unknown dtype name (TypeError), a missing key
+            table = arrow.to_pandas()
+            raw = (arrow.schema.metadata or {}).get(PARQUET_KEY)
+            attrs = json.loads(raw) if raw else {}
+        except (pa.ArrowException, ValueError, TypeError, KeyError) as exc:
+            raise ObservationTableError(f"{path} is not a readable Parquet file (damaged schema "
+                                        f"or metadata): {exc!r}") from exc
+        if not isinstance(attrs, dict):
+            raise ObservationTableError(f"{path}: its lfmdr metadata is not a JSON object")
+        table.attrs = attrs
         return table, _Where(str(path), None)
-    attrs, n_comments = _read_comments(path)
+    try:
+        attrs, n_comments = _read_comments(path)
+    except (UnicodeDecodeError, OSError, EOFError, zlib.error) as exc:  # (OSError: bad gzip)
+        raise ObservationTableError(f"{path} is not a readable CSV table: {exc}") from exc
     sep = "\t" if path.suffix.lower() == ".tsv" else ","
     try:
         # ids as text (made integers where they spell one: normalise_ids). Floats must read back
@@ -382,7 +402,8 @@ def _read(path: str | os.PathLike, id_columns: tuple[str, ...]) -> tuple[pd.Data
         table = pd.read_csv(path, skiprows=n_comments, sep=sep, **exact,
                             dtype={c: str for c in id_columns}, keep_default_na=False,
                             na_values=["", "NaN", "nan", "NA"])
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError,
+            EOFError, zlib.error) as exc:  # (OSError, EOFError, zlib.error: a damaged .csv.gz)
         raise ObservationTableError(f"{path} is not a readable CSV table: {exc}") from exc
     table.columns = [str(c) for c in table.columns]
     table.attrs = attrs

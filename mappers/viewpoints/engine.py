@@ -26,6 +26,7 @@ __all__ = [
     "robust_cost",
     "robust_weights",
     "scatter_sum",
+    "schur_step",
     "wrap_angles",
 ]
 
@@ -90,7 +91,8 @@ def scatter_sum(idx: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
     """Per index, the sum of ``values`` (K,) or (K, ...) over the observations with that index."""
     if values.ndim == 1:
         return np.bincount(idx, weights=values, minlength=n)
-    flat = values.reshape(len(values), -1)
+    # the trailing size spelt out: reshape(0, -1) cannot infer it when there are no values
+    flat = values.reshape(len(values), int(np.prod(values.shape[1:])))
     out = np.stack([np.bincount(idx, weights=flat[:, k], minlength=n) for k in range(flat.shape[1])],
                    axis=1)
     return out.reshape((n, *values.shape[1:]))
@@ -208,21 +210,34 @@ def normal_blocks(P, C, phi, obs, w, free_index, n_free):
 
 def joint_step(U, V, Wf, g, h, lam):
     """The damped Gauss-Newton step (Levenberg-Marquardt, ``diag *= 1 + lam``) of the poses and
-    the free objects, the poses eliminated per step (Schur complement on the objects)."""
-    n, f = len(U), len(V)
+    the free objects, the poses eliminated per step (Schur complement on the objects): the planar
+    case of :func:`schur_step` (3 pose and 2 object parameters)."""
+    return schur_step(U, V, Wf, g, h, lam)
+
+
+def schur_step(U, V, Wf, g, h, lam):
+    """The damped Gauss-Newton step (Levenberg-Marquardt, ``diag *= 1 + lam``) of the poses and
+    the free objects, each pose's block eliminated (Schur complement on the objects), for any
+    number of pose parameters ``p`` and object coordinates ``d``: ``U`` (N, p, p), ``V`` (F, d, d),
+    ``Wf`` (N, p, d F), ``g`` (N, p), ``h`` (F, d). Returns the pose steps (N, p) and the object
+    steps (F, d). The planar adjustments use p = 3, d = 2; the 3-D ones
+    (:mod:`mappers.spatial`) p = 6, d = 3."""
+    n, p = U.shape[:2]
+    f, d = V.shape[:2]
+    diag = np.arange(p)
     U = U.copy()
-    U[:, [0, 1, 2], [0, 1, 2]] *= 1.0 + lam
-    U[:, [0, 1, 2], [0, 1, 2]] += 1e-12
+    U[:, diag, diag] *= 1.0 + lam
+    U[:, diag, diag] += 1e-12
     Ui = np.linalg.inv(U)
-    S = np.zeros((2 * f, 2 * f))
+    S = np.zeros((d * f, d * f))
     idx = np.arange(f)
-    for r in range(2):
-        for c in range(2):
-            S[2 * idx + r, 2 * idx + c] = V[:, r, c] * (1.0 + lam if r == c else 1.0)
-    Y = Ui @ Wf  # (N, 3, 2F)
-    S -= Wf.reshape(3 * n, -1).T @ Y.reshape(3 * n, -1)
+    for r in range(d):
+        for c in range(d):
+            S[d * idx + r, d * idx + c] = V[:, r, c] * (1.0 + lam if r == c else 1.0)
+    Y = Ui @ Wf  # (N, p, dF)
+    S -= Wf.reshape(p * n, -1).T @ Y.reshape(p * n, -1)
     Uig = np.einsum("nij,nj->ni", Ui, g)
-    rhs = -h.reshape(-1) + Wf.reshape(3 * n, -1).T @ Uig.reshape(-1)
-    dp = np.linalg.solve(S + 1e-12 * np.eye(2 * f), rhs)
+    rhs = -h.reshape(-1) + Wf.reshape(p * n, -1).T @ Uig.reshape(-1)
+    dp = np.linalg.solve(S + 1e-12 * np.eye(d * f), rhs)
     dc = -Uig - Y @ dp
-    return dc, dp.reshape(f, 2)
+    return dc, dp.reshape(f, d)

@@ -106,6 +106,37 @@ def test_the_rays_give_the_true_bearings_in_the_horizontal_plane(bags):
     np.testing.assert_allclose(bearing, truth, atol=1e-9)
 
 
+@pytest.mark.parametrize("msgtype", [APRILTAG_ROS, APRILTAG_MSGS])
+def test_the_table_keeps_the_contract_and_becomes_a_history(bags, tmp_path, msgtype):
+    from lfmdr_gym.histories.observation_table import (
+        check_observations,
+        read_observations,
+        write_observations,
+    )
+    from lfmdr_gym.histories.observations import landmark_ids, observations_to_history
+
+    table = read_rosbag(bags["sqlite3", msgtype], TOPIC, camera_info_topic="/camera_info",
+                        robot=1)
+    check_observations(table)
+    back = read_observations(write_observations(table, tmp_path / "obs.csv"))
+    pd.testing.assert_frame_equal(back, table, check_exact=False, rtol=1e-15)
+    assert back.attrs == table.attrs
+    ids = np.arange(8) * 3 + 1
+    anchors = pd.DataFrame({"landmark": ids[:4], "x": LANDMARKS[:4, 0], "y": LANDMARKS[:4, 1]})
+    history = observations_to_history(table, anchors)
+    assert history.sensor == ("range-bearing" if msgtype == APRILTAG_ROS else "bearing")
+    assert history.n_steps == table["frame"].nunique()
+    bearing = history.matrix["bearing"] if history.fused else history.matrix
+    mask = history.mask["bearing"] if history.fused else history.mask
+    # every sighting is one observed cell holding the true bearing's cosine and sine
+    rows = np.searchsorted(landmark_ids(history), table["landmark"].to_numpy())
+    step = table["frame"].to_numpy()  # frames are 0.. in order, so steps are frames
+    truth = np.arctan2(-DETECTIONS["x"].to_numpy(), DETECTIONS["z"].to_numpy())
+    np.testing.assert_allclose(bearing[rows, 2 * step], np.cos(truth), atol=1e-9)
+    np.testing.assert_allclose(bearing[rows, 2 * step + 1], np.sin(truth), atol=1e-9)
+    assert mask.sum() == 2 * len(table)
+
+
 def test_robot_column_and_bag_times(bags):
     table = read_rosbag(bags["rosbag1", APRILTAG_ROS], TOPIC, robot="r2", time_source="bag")
     assert list(table.columns[:4]) == ["time", "landmark", "robot", "frame"]
@@ -122,6 +153,22 @@ def test_the_cli_options_read_the_same_table(bags):
                               "--robot", "4"])
     expected = read_rosbag(path, TOPIC, camera_info_topic="/camera_info", robot=4)
     pd.testing.assert_frame_equal(run(args), expected)
+
+
+def test_a_split_ros1_recording_reads_as_one(bags, tmp_path):
+    late = DETECTIONS["time"] >= T0 + 1.4
+    parts = [write_detection_bag(tmp_path / f"part{i}.bag", DETECTIONS[sel], container="rosbag1")
+             for i, sel in enumerate((late, ~late))]  # in any order: messages come in time order
+    whole = read_rosbag(bags["rosbag1", APRILTAG_ROS], TOPIC)
+    split = read_rosbag(parts, TOPIC)
+    pd.testing.assert_frame_equal(split, whole)
+    assert split.attrs["path"] == [str(p) for p in parts]
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    pd.testing.assert_frame_equal(run(parser.parse_args([*map(str, parts), "--topic", TOPIC])),
+                                  whole)
+    with pytest.raises(RosbagError, match="only as the .bag files of one split ROS 1 recording"):
+        read_rosbag([parts[0], bags["mcap", ISAAC_ROS]], TOPIC)
 
 
 def test_mixed_tag_families_become_string_landmarks(tmp_path):
@@ -271,10 +318,16 @@ def test_bad_options_are_refused(bags):
         read_rosbag(bags["mcap", ISAAC_ROS], TOPIC, bundles="merge")
 
 
-def test_without_rosbags_the_error_says_how_to_install_it(monkeypatch):
-    monkeypatch.setitem(sys.modules, "rosbags", None)
+def test_without_rosbags_the_error_says_how_to_install_it(monkeypatch, bags, tmp_path):
+    for name in [m for m in sys.modules if m == "rosbags" or m.startswith("rosbags.")]:
+        monkeypatch.setitem(sys.modules, name, None)  # as if not installed
     with pytest.raises(ImportError, match=r"pip install 'lfmdr\[ros\]'"):
         require_rosbags()
+    with pytest.raises(ImportError, match=r"pip install 'lfmdr\[ros\]'"):
+        read_rosbag(bags["mcap", ISAAC_ROS], TOPIC)
+    with pytest.raises(ImportError, match=r"pip install 'lfmdr\[ros\]'"):
+        write_detection_bag(tmp_path / "x", DETECTIONS, container="mcap")
+    assert list(tmp_path.iterdir()) == []
 
 
 # ---- writer ------------------------------------------------------------------------------------

@@ -113,3 +113,19 @@ def test_a_failure_leaves_the_folder_as_it_was(tmp_path, monkeypatch):
     with pytest.raises(RuntimeError, match="no figure today"):
         write_map_files(tmp_path, _map(), IDS, ANCHORS, ANCHOR_POS, truth={"tag_a": (0, 0)})
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def test_figure_draws_the_95_percent_ellipses(tmp_path, monkeypatch):
+    pytest.importorskip("matplotlib")
+    from lfmdr_gym import render
+
+    drawn = []
+    real = render.draw_ellipses
+    monkeypatch.setattr(render, "draw_ellipses",
+                        lambda ax, pos, cov, **kw: drawn.append(real(ax, pos, cov, **kw)))
+    cov = np.tile(np.eye(2) * 0.01, (5, 1, 1))
+    cov[ANCHORS] = 0.0
+    cov[3] = np.nan
+    write_map_files(tmp_path, _map(covariances=cov), IDS, ANCHORS, ANCHOR_POS)
+    assert drawn == [1]  # the one mapped non-anchor landmark
+    assert (tmp_path / "map.png").read_bytes()[:4] == b"\x89PNG"

@@ -1,0 +1,143 @@
+"""STAR-loc: map every sequence from its detections alone, per sensor, and print the non-anchor
+MPE against the tag survey (issue 34).
+
+    python benchmarks/bench_starloc.py [--data DIR] [--sensors range-bearing,bearing,visibility]
+        [--out docs/results/starloc/starloc.csv]
+        [--figure docs/guide/starloc_3d.png --figure-sequence loop-2d_s3]
+
+Anchors: six surveyed tags seen in >= 3 image pairs (the lowest, then farthest-point order);
+scored: the other tags seen in >= 3 image pairs; ``mapped`` is the share of them placed (a tag
+left unmapped is missing from the MPE, and at least 90 % should be mapped). Also the baseline
+of every tag at the anchors' centroid. Sensors: ``range-bearing`` the stereo camera (left rays
+and stereo ranges, SPATIAL-BA), ``bearing`` the left camera's rays (SPATIAL-BA), ``visibility``
+the sightings (COVIS-3D); the parameters are :data:`lfmdr_gym.experiments.starloc.STARLOC_PARAMS`.
+Goals on setup s3: stereo <= 0.05 m, bearing <= 0.10 m, visibility <= 1.0 m. The data:
+``<repo>/../shared/data/starloc`` (its README; never copied into the repository).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import sys
+import warnings
+from pathlib import Path
+
+import matplotlib
+import numpy as np
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402 - after choosing the non-interactive backend
+
+from lfmdr_gym.atomic import atomic_savefig, atomic_write_text  # noqa: E402
+from lfmdr_gym.datasets.starloc import (  # noqa: E402
+    read_starloc,
+    scored_tags,
+    starloc_anchors,
+    starloc_survey,
+)
+from lfmdr_gym.experiments.starloc import map_starloc  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_DATA = ROOT.parent / "shared" / "data" / "starloc"
+FIELDS = ["sequence", "setup", "sensor", "method", "mpe", "mapped", "n_scored", "centroid_mpe",
+          "cpu_s"]
+
+
+def centroid_mpe(seq: Path) -> float:
+    """The MPE of every scored tag put at the anchors' centroid."""
+    table, survey = read_starloc(seq, "visibility"), starloc_survey(seq)
+    anchors = starloc_anchors(table, survey)
+    xyz = survey.set_index("landmark")[["x", "y", "z"]]
+    centre = xyz.loc[anchors].to_numpy(dtype=float).mean(axis=0)
+    scored = xyz.loc[scored_tags(table, survey, anchors)].to_numpy(dtype=float)
+    return float(np.linalg.norm(scored - centre, axis=1).mean())
+
+
+def draw_views(seq: Path, path: Path) -> None:
+    """Three orthographic views (top, front, side) of the stereo map of ``seq`` against the tag
+    survey, anchors marked, saved to ``path`` (PNG)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = map_starloc(seq, "range-bearing")
+    xyz = starloc_survey(seq).set_index("landmark")[["x", "y", "z"]]
+    tags = sorted(r.positions)
+    est = np.array([r.positions[t] for t in tags])
+    tru = xyz.loc[tags].to_numpy(dtype=float)
+    anchor = np.isin(tags, r.anchors)
+    fig, axes = plt.subplots(1, 3, figsize=(13, 4.4))
+    for ax, (a, b), name in zip(axes, [(0, 1), (0, 2), (1, 2)], ["top (x, y)", "front (x, z)",
+                                                                  "side (y, z)"], strict=True):
+        for k in range(len(tags)):
+            ax.plot([tru[k, a], est[k, a]], [tru[k, b], est[k, b]], color="0.6", lw=0.8)
+        ax.scatter(tru[:, a], tru[:, b], s=28, facecolors="none", edgecolors="k", label="survey")
+        ax.scatter(est[~anchor, a], est[~anchor, b], s=12, c="tab:blue", label="map")
+        ax.scatter(est[anchor, a], est[anchor, b], s=60, marker="^", c="tab:red", label="anchor")
+        ax.set_title(name)
+        ax.set_aspect("equal")
+        ax.set_xlabel("xyz"[a] + " [m]")
+        ax.set_ylabel("xyz"[b] + " [m]")
+    axes[0].legend(loc="best", fontsize=8)
+    fig.suptitle(f"STAR-loc {r.sequence}: SPATIAL-BA from the stereo detections, "
+                 f"MPE {r.mpe:.3f} m over {r.n_scored} tags ({r.mapped:.0%} mapped)")
+    fig.tight_layout()
+    atomic_savefig(fig, path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
+    parser.add_argument("--sensors", default="range-bearing,bearing,visibility")
+    parser.add_argument("--out", type=Path, default=None, help="write the rows as CSV here")
+    parser.add_argument("--figure", type=Path, default=None,
+                        help="draw three orthographic views of one sequence's stereo map here")
+    parser.add_argument("--figure-sequence", default="loop-2d_s3")
+    parser.add_argument("--no-table", action="store_true", help="only draw the figure")
+    args = parser.parse_args(argv)
+    if args.figure is not None:
+        draw_views(args.data / "data" / args.figure_sequence, args.figure)
+        print(f"wrote {args.figure}")
+        if args.no_table:
+            return 0
+    folders = sorted(p for p in (args.data / "data").iterdir() if p.is_dir()) \
+        if (args.data / "data").is_dir() else []
+    if not folders:
+        print(f"no STAR-loc sequences under {args.data / 'data'}", file=sys.stderr)
+        return 1
+    rows = []
+    print(f"{'sequence':18s} {'sensor':14s} {'MPE [m]':>8s} {'mapped':>7s} {'scored':>6s} "
+          f"{'centroid':>8s} {'CPU [s]':>7s}")
+    for seq in folders:
+        base = centroid_mpe(seq)
+        for sensor in args.sensors.split(","):
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")  # the map's notes: unmapped tags counted
+                    r = map_starloc(seq, sensor)
+            except ValueError as exc:  # a sequence too short to map: a row that says so
+                print(f"{seq.name:18s} {sensor:14s} failed: {exc}", flush=True)
+                rows.append({"sequence": seq.name, "setup": seq.name.rsplit("_", 1)[-1],
+                             "sensor": sensor, "method": "failed", "mpe": "nan", "mapped": "0",
+                             "n_scored": "", "centroid_mpe": f"{base:.4f}", "cpu_s": ""})
+                continue
+            rows.append({"sequence": r.sequence, "setup": r.sequence.rsplit("_", 1)[-1],
+                         "sensor": sensor, "method": r.method, "mpe": f"{r.mpe:.4f}",
+                         "mapped": f"{r.mapped:.3f}", "n_scored": r.n_scored,
+                         "centroid_mpe": f"{base:.4f}", "cpu_s": f"{r.cpu_seconds:.2f}"})
+            print(f"{r.sequence:18s} {sensor:14s} {r.mpe:8.3f} {r.mapped:7.0%} {r.n_scored:6d} "
+                  f"{base:8.3f} {r.cpu_seconds:7.2f}", flush=True)
+    if args.out is not None:
+        buf = io.StringIO()
+        writer = csv.DictWriter(buf, fieldnames=FIELDS, lineterminator="\n")
+        writer.writeheader()
+        writer.writerows(rows)
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(args.out, buf.getvalue())
+        print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,213 @@
+"""The 6-DoF viewpoint bundle adjustment: the 3-D form of BEARING-BA and of the range-bearing
+adjustment.
+
+Each step's viewpoint is a pose of space: a rotation (sensor -> world, updated by a rotation
+vector, ``R <- R exp([delta]x)``) and a position ``c``. An object at ``p`` is seen along
+``v = R^T (p - c)``. The residuals of a sighting are the ray's angle error in its two tangent
+directions (divided by ``bearing_noise``) and, where a range was measured, ``|v| - range``
+(divided by ``range_noise``). The objects and the poses are estimated jointly by
+Levenberg-Marquardt with each pose's 6 x 6 block eliminated by the Schur complement, on the
+engine the planar adjustments use (:func:`mappers.viewpoints.schur_step`, Triggs et al., *Bundle
+Adjustment — A Modern Synthesis*, 2000), under a Cauchy or Huber loss (iteratively reweighted)
+so that a wrong detection does not pull the map. The anchors are held fixed, which fixes the
+gauge (position, rotation and, for rays alone, scale). No motion model: the steps' poses are
+independent of one another.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from mappers.spatial.rays import RayObservations
+from mappers.viewpoints import robust_cost, robust_weights, scatter_sum, schur_step
+
+__all__ = ["AdjustmentResult", "adjust_viewpoints"]
+
+
+class AdjustmentResult(NamedTuple):
+    """The adjusted points (M, 3), rotations (N, 3, 3), positions (N, 3), the final robust cost
+    the number of Levenberg-Marquardt iterations, and the factor the ranges were multiplied by
+    (``fit_range_scale``)."""
+
+    points: np.ndarray
+    rotations: np.ndarray
+    positions: np.ndarray
+    cost: float
+    n_iter: int
+    range_scale: float = 1.0
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    z = np.zeros(len(v))
+    return np.stack([np.stack([z, -v[:, 2], v[:, 1]], 1), np.stack([v[:, 2], z, -v[:, 0]], 1),
+                     np.stack([-v[:, 1], v[:, 0], z], 1)], 1)
+
+
+def _tangent_bases(u: np.ndarray) -> np.ndarray:
+    """(K, 3, 2): two unit vectors perpendicular to each unit ray and to each other."""
+    helper = np.where(np.abs(u[:, [0]]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    b1 = np.cross(u, helper)
+    b1 /= np.linalg.norm(b1, axis=1, keepdims=True)
+    return np.stack([b1, np.cross(u, b1)], axis=2)
+
+
+class _Problem:
+    """The sightings of the registered steps, with their noise, in the form the solver needs."""
+
+    def __init__(self, obs: RayObservations, keep: np.ndarray, bearing_noise: float,
+                 range_noise: float, range_growth: float):
+        self.t, self.i, self.u = obs.step[keep], obs.obj[keep], obs.ray[keep]
+        r = obs.range[keep]
+        self.has_r = np.isfinite(r)
+        self.r = np.where(self.has_r, r, 0.0)
+        self.B = _tangent_bases(self.u)
+        self.sb = bearing_noise
+        self.sr = range_noise + range_growth * self.r**2
+
+    def residuals(self, P, R, C):
+        """(K, 3) normalised residuals (the range row 0 where none was measured) and the
+        offsets ``v`` in the sensor's frame."""
+        v = np.einsum("kji,kj->ki", R[self.t], P[self.i] - C[self.t])
+        nv = np.maximum(np.linalg.norm(v, axis=1), 1e-9)
+        vh = v / nv[:, None]
+        e = np.zeros((len(v), 3))
+        e[:, :2] = np.einsum("kjb,kj->kb", self.B, vh) / self.sb
+        e[:, 2] = np.where(self.has_r, (nv - self.r) / self.sr, 0.0)
+        return e, v, nv, vh
+
+    def jacobians(self, R, v, nv, vh):
+        """d residual / d pose (K, 3, 6) and d residual / d point (K, 3, 3)."""
+        proj = np.eye(3)[None] - vh[:, :, None] * vh[:, None, :]
+        de = np.empty((len(v), 3, 3))
+        de[:, :2] = np.einsum("kjb,kjl->kbl", self.B, proj) / (nv * self.sb)[:, None, None]
+        de[:, 2] = np.where(self.has_r[:, None], vh / self.sr[:, None], 0.0)
+        Rt = R[self.t].transpose(0, 2, 1)
+        Jp = de @ Rt
+        Jc = np.concatenate([de @ _skew(v), -Jp], axis=2)
+        return Jc, Jp
+
+
+def adjust_viewpoints(obs: RayObservations, P0: np.ndarray, R0: np.ndarray, C0: np.ndarray,
+                      fixed: np.ndarray, *, bearing_noise: float = np.deg2rad(1.0),
+                      range_noise: float = 0.02, range_growth: float = 0.0,
+                      loss: str | None = "cauchy", loss_scale: float = 3.0,
+                      max_iter: int = 100, tol: float = 1e-10,
+                      fit_range_scale: bool = False, scale_rounds: int = 4,
+                      anchor_noise: float | None = None) -> AdjustmentResult:
+    """Adjust the points and the steps' poses to the sightings (see the module's docstring).
+
+    Args:
+        obs: the sightings (:func:`mappers.spatial.rays.ray_observations`).
+        P0: (M, 3) start points; NaN rows are objects not placed (their sightings are unused).
+        R0, C0: (N, 3, 3) rotations sensor -> world and (N, 3) positions; NaN: step not used.
+        fixed: (M,) bool, the objects held where they are (the anchors).
+        bearing_noise: the rays' angle noise [rad] the residuals are divided by.
+        range_noise, range_growth: a range's noise [m] is ``range_noise + range_growth *
+            range**2`` (a stereo camera's depth error grows with the square of the depth).
+        loss: "cauchy", "huber" or None (least squares), at ``loss_scale`` noise units.
+        max_iter, tol: at most this many iterations; stop when the cost falls by less than
+            ``tol`` of itself.
+        fit_range_scale: also estimate one factor of all ranges (a stereo camera's depth is
+            ``focal * baseline / disparity``, so an error of its calibration scales every range
+            alike; STAR-loc's are 1.5-3 % short): after each adjustment the ranges are
+            multiplied by the median ratio of the adjusted distances to them, ``scale_rounds``
+            times at most (the anchors, held fixed, set the scale).
+        anchor_noise: None: the ``fixed`` objects are held exactly where they are; a number
+            [m]: they are adjusted too, held by a prior of that standard deviation (the anchors'
+            survey error), so that the map keeps the shape its sightings give it.
+    """
+    if anchor_noise is not None and not anchor_noise > 0:
+        raise ValueError(f"anchor_noise must be None or > 0, got {anchor_noise!r}")
+    result = _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, loss,
+                     loss_scale, max_iter, tol, anchor_noise)
+    has_r = np.isfinite(obs.range)
+    factor = 1.0
+    for _ in range(scale_rounds if fit_range_scale and has_r.any() else 0):
+        P, R, C = result.points, result.rotations, result.positions
+        used = has_r & np.all(np.isfinite(P[obs.obj]), axis=1) & np.isfinite(C[obs.step, 0])
+        if not used.any():
+            break
+        dist = np.linalg.norm(P[obs.obj[used]] - C[obs.step[used]], axis=1)
+        k = float(np.median(dist / obs.range[used]))
+        factor *= k
+        obs = obs._replace(range=obs.range * k)
+        result = _adjust(obs, P, R, C, fixed, bearing_noise, range_noise, range_growth, loss,
+                         loss_scale, max_iter, tol, anchor_noise)
+        if abs(k - 1.0) < 1e-4:
+            break
+    return result._replace(range_scale=factor)
+
+
+def _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, loss, loss_scale,
+            max_iter, tol, anchor_noise=None) -> AdjustmentResult:
+    """One adjustment of :func:`adjust_viewpoints` (the ranges as they are)."""
+    if loss not in ("cauchy", "huber", None):
+        raise ValueError(f"loss must be 'cauchy', 'huber' or None, got {loss!r}")
+    if not bearing_noise > 0 or not range_noise > 0 or range_growth < 0:
+        raise ValueError("bearing_noise and range_noise must be > 0, range_growth >= 0")
+    P, R, C = P0.copy(), R0.copy(), C0.copy()
+    placed = np.all(np.isfinite(P), axis=1)
+    posed = np.all(np.isfinite(C), axis=1)
+    keep = placed[obs.obj] & posed[obs.step]
+    prob = _Problem(obs, keep, bearing_noise, range_noise, range_growth)
+    fixed = np.asarray(fixed, dtype=bool)
+    free = placed & (~fixed if anchor_noise is None else np.ones(len(P), dtype=bool))
+    free_index = np.full(len(P), -1)
+    free_index[free] = np.arange(free.sum())
+    soft = np.flatnonzero(fixed & free)  # anchors held by a prior of anchor_noise [m]
+    target = P0[soft]
+    steps = np.flatnonzero(posed)
+    step_index = np.full(len(C), -1)
+    step_index[steps] = np.arange(steps.size)
+
+    def cost_of(P, R, C):
+        e = prob.residuals(P, R, C)[0]
+        prior = 0.0 if not soft.size else 0.5 * np.sum((P[soft] - target) ** 2) / anchor_noise**2
+        return float(robust_cost(np.linalg.norm(e, axis=1), loss_scale, loss).sum()) + prior
+
+    cost, lam, it = cost_of(P, R, C), 1e-3, 0
+    for it in range(1, max_iter + 1):  # noqa: B007 - the count is returned
+        e, v, nv, vh = prob.residuals(P, R, C)
+        w = robust_weights(np.linalg.norm(e, axis=1), loss_scale, loss)
+        Jc, Jp = prob.jacobians(R, v, nv, vh)
+        step_blocks = _normal_blocks(prob, e, w, Jc, Jp, step_index[prob.t], free_index,
+                                     steps.size, int(free.sum()))
+        if soft.size:  # the anchors' prior: (p - anchor) / anchor_noise, Jacobian I / noise
+            step_blocks[1][free_index[soft]] += np.eye(3) / anchor_noise**2
+            step_blocks[4][free_index[soft]] += (P[soft] - target) / anchor_noise**2
+        improved = False
+        while lam < 1e8:
+            dc, dp = schur_step(*step_blocks, lam)
+            Pn, Rn, Cn = P.copy(), R.copy(), C.copy()
+            Pn[free] += dp
+            Rn[steps] = R[steps] @ Rotation.from_rotvec(dc[:, :3]).as_matrix()
+            Cn[steps] += dc[:, 3:]
+            new = cost_of(Pn, Rn, Cn)
+            if new < cost:
+                P, R, C, improved = Pn, Rn, Cn, True
+                lam = max(lam / 10.0, 1e-9)
+                break
+            lam *= 10.0
+        if not improved or cost - new <= tol * cost:
+            cost = new if improved else cost
+            break
+        cost = new
+    return AdjustmentResult(P, R, C, cost, it)
+
+
+def _normal_blocks(prob, e, w, Jc, Jp, t, free_index, n_steps, n_free):
+    """The Gauss-Newton normal blocks of the poses and the free points, as
+    :func:`mappers.viewpoints.schur_step` takes them."""
+    U = scatter_sum(t, w[:, None, None] * np.einsum("kri,krj->kij", Jc, Jc), n_steps)
+    g = scatter_sum(t, w[:, None] * np.einsum("kri,kr->ki", Jc, e), n_steps)
+    f = free_index[prob.i]
+    k = np.flatnonzero(f >= 0)
+    V = scatter_sum(f[k], w[k, None, None] * np.einsum("kri,krj->kij", Jp[k], Jp[k]), n_free)
+    h = scatter_sum(f[k], w[k, None] * np.einsum("kri,kr->ki", Jp[k], e[k]), n_free)
+    W = np.zeros((n_steps, 6, n_free, 3))
+    np.add.at(W, (t[k], slice(None), f[k], slice(None)),
+              w[k, None, None] * np.einsum("kri,krj->kij", Jc[k], Jp[k]))
+    return U, V, W.reshape(n_steps, 6, 3 * n_free), g, h

@@ -1,0 +1,81 @@
+"""``build_map`` in 3-D: what :func:`mappers.build_map` does when the anchors are (A, 3).
+
+The dimension comes from the anchors: (A, 3) anchor positions give a 3-D map. Histories:
+visibility (M, N) of 0/1 -> ``COVIS-3D``; a 3-D bearing history (M, 3N) of unit rays, or fused
+``{"bearing": rays, "range": (M, N)}`` -> ``SPATIAL-BA`` (:mod:`mappers.spatial.rays` says the
+layout). A 2-D bearing history of (cos, sin) pairs with 3-D anchors is refused, naming it.
+"""
+
+from __future__ import annotations
+
+import inspect
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from mappers.fitting import Map
+from mappers.spatial.covisibility_3d import CoVisibility3D
+from mappers.spatial.spatial_ba import SpatialAdjustment
+
+__all__ = ["METHODS_3D", "anchor_dimension", "build_map_3d"]
+
+METHODS_3D = {"SPATIAL-BA": SpatialAdjustment, "COVIS-3D": CoVisibility3D}
+"""The 3-D methods by label: rays (and ranges) -> SPATIAL-BA, sightings -> COVIS-3D."""
+
+
+def anchor_dimension(anchor_positions: Any) -> int | None:
+    """2 or 3: the columns of the anchor positions when they are an (A, 2) or (A, 3) array;
+    None when they are neither (the 2-D checks then name the problem)."""
+    try:
+        shape = np.shape(anchor_positions)
+    except (TypeError, ValueError):
+        return None
+    return shape[1] if len(shape) == 2 and shape[1] in (2, 3) else None
+
+
+def _unpack(histories, sensor, mask):
+    parts = getattr(histories, "parts", None)
+    if isinstance(parts, Mapping) and not isinstance(histories, Mapping):
+        histories = {k: getattr(v, "matrix", v) for k, v in parts.items()}
+    if isinstance(histories, Mapping):
+        masks = mask if isinstance(mask, Mapping) else {}
+        return dict(histories), "range-bearing" if "range" in histories else "bearing", masks
+    if hasattr(histories, "matrix") and not isinstance(histories, np.ndarray):
+        sensor = sensor if sensor is not None else getattr(histories, "sensor", None)
+        mask = mask if mask is not None else getattr(histories, "mask", None)
+        histories = histories.matrix
+    X = np.asarray(histories, dtype=float)
+    if sensor is None:
+        observed = X if mask is None else X[np.asarray(mask, dtype=bool)]
+        sensor = "visibility" if np.all((observed == 0) | (observed == 1)) else "bearing"
+    if sensor not in ("visibility", "bearing"):
+        raise ValueError(f"with 3-D anchors a single history is 'visibility' or 'bearing' (3-D "
+                         f"rays); ranges go with rays as fused histories, got sensor {sensor!r}")
+    return X, sensor, mask
+
+
+def build_map_3d(histories, anchor_ids, anchor_positions, method: str | None = None, *,
+                 sensor: str | None = None, mask=None, **params) -> Map:
+    """The 3-D map of the objects (see the module's docstring): a :class:`mappers.Map` whose
+    ``positions`` and ``embedding`` are (M, 3), NaN rows for the objects listed in
+    ``unmapped``. ``method``: ``"SPATIAL-BA"`` or ``"COVIS-3D"`` (None: by the sensor);
+    ``params`` go to the method."""
+    X, sensor, mask = _unpack(histories, sensor, mask)
+    label = method.upper() if isinstance(method, str) else (
+        "COVIS-3D" if sensor == "visibility" else "SPATIAL-BA")
+    if label not in METHODS_3D:
+        raise ValueError(f"method {method!r} does not map in 3-D; 3-D methods: {list(METHODS_3D)}")
+    if (label == "COVIS-3D") != (sensor == "visibility"):
+        raise ValueError(f"method {label!r} does not map {sensor} histories")
+    est = METHODS_3D[label](**params)
+    inputs = {"masks": mask} if isinstance(X, Mapping) else {"mask": mask}
+    Y = est.fit_transform(X, anchor_ids=anchor_ids, anchor_positions=anchor_positions, **inputs)
+    placed = np.all(np.isfinite(Y), axis=1)
+    unmapped = tuple(int(i) for i in np.flatnonzero(~placed))
+    notes = (f"{len(unmapped)} object(s) could not be placed: {list(unmapped)[:20]}",) \
+        if unmapped else ()
+    return Map(positions=Y, unmapped=unmapped, embedding=Y.copy(), method=label,
+               params={k: getattr(est, k) for k in inspect.signature(type(est)).parameters},
+               sensor=sensor, warnings=notes, affine=None,
+               anchor_ids=tuple(int(i) for i in np.asarray(anchor_ids)))

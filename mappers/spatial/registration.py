@@ -1,0 +1,315 @@
+"""Start maps in 3-D from the sightings alone: frames registered to one another by their common
+objects, without odometry and without a motion model.
+
+* Rays and ranges (:func:`register_points`): each step gives its objects' 3-D points in the
+  sensor's frame (range times ray), so the angle between two rays and the two ranges fix their
+  distance whatever the pose (the law of cosines). Steps that share three objects not on a line
+  are registered rigidly (Kabsch/Umeyama, no scale) one after another from a seed step; each
+  chain of registered steps is a rigid piece, which the anchors it holds (three or more, not on
+  a line) place in the world by a similarity.
+* Rays alone (:func:`register_rays`): the anchors are the first known points; a step that sees
+  three or more known objects is resected by orthogonal iteration (Lu, Hager & Mjolsness, *Fast
+  and globally convergent pose estimation from video images*, IEEE TPAMI 22(6), 2000), and an
+  object seen from two or more resected steps with rays that diverge is placed where its rays
+  pass closest (least-squares intersection); until nothing more can be placed.
+
+Both return the start of the 6-DoF adjustment (:mod:`mappers.spatial.adjustment`): the points
+(NaN where not placed) and each step's pose (rotation sensor -> world and position; NaN where
+not registered).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mappers.core.align_3d import umeyama
+from mappers.spatial.rays import RayObservations
+
+__all__ = ["MIN_RAY_ANGLE", "orthogonal_iteration", "register_points", "register_rays", "triangulate"]
+
+_MIN_SPAN = 1e-3
+"""Smallest second singular value [m] of three or more points for a rigid registration (not on
+one line)."""
+
+MIN_RAY_ANGLE = np.deg2rad(10.0)
+"""Smallest angle between two of an object's rays for a least-squares intersection (closer
+rays place it too uncertainly along them for the adjustment to recover)."""
+
+
+def _groups(obs: RayObservations) -> list[np.ndarray]:
+    """Each step's sightings (indices into the observations)."""
+    cuts = np.flatnonzero(np.diff(obs.step)) + 1
+    groups = [np.array([], dtype=np.int64)] * obs.n_steps
+    for g in np.split(np.arange(len(obs.step)), cuts):
+        if g.size:
+            groups[obs.step[g[0]]] = g
+    return groups
+
+
+def _spans(points: np.ndarray) -> bool:
+    if len(points) < 3:
+        return False
+    s = np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
+    return bool(s[1] > _MIN_SPAN)
+
+
+def register_points(obs: RayObservations, anchor_ids: np.ndarray, anchor_positions: np.ndarray):
+    """``(P, R, C)``: points (M, 3), rotations sensor -> world (N, 3, 3) and positions (N, 3)
+    from the steps' 3-D points (rays times ranges; sightings without a range are not used),
+    each rigid piece placed by its anchors (see the module's docstring), then every step that
+    sees three placed objects registered to them in the world, until none is left; NaN where not
+    placed."""
+    m, n = obs.n_objects, obs.n_steps
+    pts = obs.ray * obs.range[:, None]
+    groups = [g[np.isfinite(obs.range[g])] for g in _groups(obs)]
+    P = np.full((m, 3), np.nan)
+    R = np.full((n, 3, 3), np.nan)
+    C = np.full((n, 3), np.nan)
+    todo = np.array([g.size >= 3 and _spans(pts[g]) for g in groups])
+    pending = todo.copy()
+    pieces = []
+    while todo.any():
+        seed = max(np.flatnonzero(todo), key=lambda t: groups[t].size)
+        pieces.append(_grow_piece(obs, pts, groups, todo, seed))
+    P[anchor_ids] = anchor_positions
+    pieces = _merge_pieces(pieces)
+    pairs = _pair_distances(obs, pts, groups)
+    while pieces:  # place the pieces the placed points fix, until none is left that they fix
+        left = [piece for piece in pieces if not _place_piece(piece, P, R, C, pairs)]
+        if len(left) == len(pieces):
+            break
+        pieces = left
+    pending &= np.isnan(C[:, 0])
+    while True:  # the steps left: registered to the placed points in the world
+        known = np.all(np.isfinite(P), axis=1)
+        grew = False
+        for t in np.flatnonzero(pending):
+            g = groups[t]
+            s = g[known[obs.obj[g]]]
+            if s.size < 3 or not _spans(pts[s]):
+                continue
+            R[t], _, C[t] = umeyama(pts[s], P[obs.obj[s]], False)
+            pending[t], grew = False, True
+            new = g[~np.all(np.isfinite(P[obs.obj[g]]), axis=1)]
+            P[obs.obj[new]] = pts[new] @ R[t].T + C[t]
+        if not grew:
+            break
+    return P, R, C
+
+
+def _grow_piece(obs, pts, groups, todo, seed):
+    """One rigid piece grown from ``seed`` (its frame the seed step's): its points' sums and
+    counts, and its steps' poses; the steps it takes are struck from ``todo``."""
+    m = obs.n_objects
+    total, count = np.zeros((m, 3)), np.zeros(m)
+    poses = {seed: (np.eye(3), np.zeros(3))}
+    todo[seed] = False
+    g = groups[seed]
+    np.add.at(total, obs.obj[g], pts[g])
+    np.add.at(count, obs.obj[g], 1)
+    while True:
+        known = count > 0
+        shared = {t: g[known[obs.obj[g]]] for t in np.flatnonzero(todo)
+                  for g in [groups[t]]}
+        ready = [t for t, s in shared.items() if s.size >= 3 and _spans(pts[s])]
+        if not ready:
+            break
+        for t in sorted(ready, key=lambda t: -shared[t].size):
+            s = shared[t]
+            here = total[obs.obj[s]] / count[obs.obj[s], None]
+            Rt, _, ct = umeyama(pts[s], here, False)
+            poses[t] = (Rt, ct)
+            todo[t] = False
+            g = groups[t]
+            np.add.at(total, obs.obj[g], pts[g] @ Rt.T + ct)
+            np.add.at(count, obs.obj[g], 1)
+    return total, count, poses
+
+
+def _merge_pieces(pieces):
+    """The pieces joined where one shares three or more objects (not on a line) with another:
+    the smaller registered rigidly onto the larger, repeatedly, largest first."""
+    pieces = sorted(pieces, key=lambda p: -int((p[1] > 0).sum()))
+    merged = []
+    while pieces:
+        total, count, poses = pieces.pop(0)
+        grew = True
+        while grew:
+            grew = False
+            for k, (t2, c2, p2) in enumerate(pieces):
+                common = np.flatnonzero((count > 0) & (c2 > 0))
+                if common.size < 3:
+                    continue
+                here = total[common] / count[common, None]
+                there = t2[common] / c2[common, None]
+                if not (_spans(here) and _spans(there)):
+                    continue
+                Rm, _, cm = umeyama(there, here, False)
+                total = total + t2 @ Rm.T + c2[:, None] * cm
+                count = count + c2
+                poses.update({t: (Rm @ Rt, Rm @ ct + cm) for t, (Rt, ct) in p2.items()})
+                del pieces[k]
+                grew = True
+                break
+        merged.append((total, count, poses))
+    return merged
+
+
+def _pair_distances(obs, pts, groups) -> dict[tuple[int, int], float]:
+    """Pose-free distances: per pair of objects seen in one step with ranges, the median over
+    those steps of the distance between their points (the law of cosines)."""
+    found: dict[tuple[int, int], list[float]] = {}
+    for g in groups:
+        if g.size < 2:
+            continue
+        d = np.linalg.norm(pts[g][:, None] - pts[g][None], axis=2)
+        o = obs.obj[g]
+        for a in range(g.size):
+            for b in range(a + 1, g.size):
+                found.setdefault((int(o[a]), int(o[b])), []).append(float(d[a, b]))
+    return {k: float(np.median(v)) for k, v in found.items()}
+
+
+def _place_piece(piece, P, R, C, pairs) -> bool:
+    """Place a piece in the world when the points placed already fix it: three or more of its
+    points placed, not on a line (a similarity), or two and pose-free distances from its other
+    points to placed ones (the turn about the line through the two is the one that fits those
+    distances best, :func:`_hinge`). Points placed already stay; returns whether it was placed."""
+    total, count, poses = piece
+    mine = count > 0
+    local = np.full_like(total, np.nan)
+    local[mine] = total[mine] / count[mine, None]
+    known = np.all(np.isfinite(P), axis=1)
+    common = np.flatnonzero(mine & known)
+    if common.size >= 3 and _spans(P[common]) and _spans(local[common]):
+        Rs, s, t = umeyama(local[common], P[common], True)
+    elif common.size == 2:
+        found = _hinge(local, P, common, mine & ~known, known & ~mine, pairs)
+        if found is None:
+            return False
+        Rs, s, t = found
+    else:
+        return False
+    new = mine & ~known
+    P[new] = s * local[new] @ Rs.T + t
+    for k, (Rt, ct) in poses.items():
+        R[k] = Rs @ Rt
+        C[k] = s * Rs @ ct + t
+    return True
+
+
+def _rotation_onto(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The rotation taking the unit vector ``a`` onto the unit vector ``b`` (Rodrigues)."""
+    v, c = np.cross(a, b), float(a @ b)
+    if c < -1.0 + 1e-12:  # opposite: half a turn about any perpendicular
+        p = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+        p /= np.linalg.norm(p)
+        return 2.0 * np.outer(p, p) - np.eye(3)
+    K = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    return np.eye(3) + K + K @ K / (1.0 + c)
+
+
+def _hinge(local, P, common, movers, others, pairs, n_angles: int = 720):
+    """``(R, s, t)`` placing a piece that shares two points with the placed ones: those two fix
+    the scale and a line, and the turn about the line is the one (of ``n_angles``) whose placed
+    ``movers`` best fit their pose-free distances to the placed ``others``; None without such
+    distances."""
+    a, b = common
+    use = [(i, j, d) for (i, j), d in pairs.items()
+           for i, j in ((i, j), (j, i)) if movers[i] and others[j]]
+    if not use:
+        return None
+    la, lb, wa, wb = local[a], local[b], P[a], P[b]
+    if np.linalg.norm(lb - la) < _MIN_SPAN or np.linalg.norm(wb - wa) < _MIN_SPAN:
+        return None
+    s = np.linalg.norm(wb - wa) / np.linalg.norm(lb - la)
+    axis = (wb - wa) / np.linalg.norm(wb - wa)
+    R0 = _rotation_onto((lb - la) / np.linalg.norm(lb - la), axis)
+    i, j, d = (np.array(v) for v in zip(*use, strict=True))
+    x0 = s * (local[i] - la) @ R0.T  # the movers about wa, before the turn
+    best = None
+    for theta in np.linspace(0.0, 2.0 * np.pi, n_angles, endpoint=False):
+        K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]],
+                      [-axis[1], axis[0], 0.0]])
+        Rt = np.eye(3) + np.sin(theta) * K + (1.0 - np.cos(theta)) * K @ K
+        err = np.sum((np.linalg.norm(wa + x0 @ Rt.T - P[j], axis=1) - d) ** 2)
+        if best is None or err < best[0]:
+            best = (err, Rt @ R0)
+    Rs = best[1]
+    return Rs, s, wa - s * Rs @ la
+
+
+def orthogonal_iteration(p: np.ndarray, u: np.ndarray, iters: int = 60):
+    """``(R, c, rms)``: the pose (rotation sensor -> world, position) of a sensor that sees the
+    known points ``p`` (k, 3), k >= 3, along the unit rays ``u`` (k, 3), by Lu, Hager &
+    Mjolsness's orthogonal iteration (2000), started from a depth of the points' spread over
+    their rays' spread; ``rms`` is the root mean square of the rays' angle errors [rad]."""
+    k = len(p)
+    V = u[:, :, None] * u[:, None, :]  # line-of-sight projections
+    F = np.linalg.inv(np.eye(3) - V.mean(axis=0))
+    spread_p = np.linalg.norm(p - p.mean(axis=0), axis=1).mean()
+    spread_u = np.linalg.norm(u - u.mean(axis=0), axis=1).mean()
+    q = u * (spread_p / max(spread_u, 1e-6))  # points along their rays at one depth
+    Rcw, _, tcw = umeyama(p, q, False)
+    for _ in range(iters):
+        t = F @ np.mean(np.einsum("kij,kj->ki", V, p @ Rcw.T) - p @ Rcw.T, axis=0)
+        q = np.einsum("kij,kj->ki", V, p @ Rcw.T + t)
+        previous, (Rcw, _, _) = Rcw, umeyama(p, q, False)
+        if np.abs(Rcw - previous).max() < 1e-10:
+            break
+    t = F @ np.mean(np.einsum("kij,kj->ki", V, p @ Rcw.T) - p @ Rcw.T, axis=0)
+    cam = p @ Rcw.T + t
+    cos = np.einsum("kj,kj->k", cam, u) / np.maximum(np.linalg.norm(cam, axis=1), 1e-12)
+    rms = float(np.sqrt(np.mean(np.arccos(np.clip(cos, -1.0, 1.0)) ** 2))) if k else np.inf
+    return Rcw.T, -Rcw.T @ t, rms
+
+
+def triangulate(C: np.ndarray, d: np.ndarray):
+    """``(p, ok)``: the point where the lines ``C + s d`` (k lines, unit ``d`` in the world) pass
+    closest in least squares, and whether two of the rays diverge by at least 10 degrees."""
+    A = np.eye(3)[None] - d[:, :, None] * d[:, None, :]
+    p = np.linalg.solve(A.sum(axis=0) + 1e-12 * np.eye(3), np.einsum("kij,kj->i", A, C))
+    cosines = d @ d.T
+    return p, bool(np.min(cosines) < np.cos(MIN_RAY_ANGLE))
+
+
+def register_rays(obs: RayObservations, anchor_ids: np.ndarray, anchor_positions: np.ndarray,
+                  *, start=None, max_rms: float = np.deg2rad(5.0), rounds: int = 50):
+    """``(P, R, C)`` from rays alone, started from the anchors (see the module's docstring): a
+    step is resected when it sees three or more placed objects and its rays fit them to
+    ``max_rms`` [rad]; an object seen from two or more resected steps at diverging angles is
+    intersected; ``rounds`` times at most. ``start``: ``(P, R, C)`` placed already (e.g. by
+    :func:`register_points`), continued from."""
+    m, n = obs.n_objects, obs.n_steps
+    if start is None:
+        P, R, C = np.full((m, 3), np.nan), np.full((n, 3, 3), np.nan), np.full((n, 3), np.nan)
+    else:
+        P, R, C = (a.copy() for a in start)
+    P[anchor_ids] = anchor_positions
+    groups = _groups(obs)
+    tried = np.zeros(n, dtype=np.int64)  # the placed objects a step saw when last tried
+    for _ in range(rounds):
+        known = np.all(np.isfinite(P), axis=1)
+        grew = False
+        for t in np.flatnonzero(np.isnan(C[:, 0])):
+            g = groups[t]
+            g = g[known[obs.obj[g]]]
+            if g.size < 3 or g.size == tried[t] or not _spans(P[obs.obj[g]]):
+                continue
+            tried[t] = g.size
+            Rt, ct, rms = orthogonal_iteration(P[obs.obj[g]], obs.ray[g])
+            if rms <= max_rms:
+                R[t], C[t], grew = Rt, ct, True
+        seen_from = np.isfinite(C[obs.step, 0]) & ~known[obs.obj]
+        for i in np.unique(obs.obj[seen_from]):
+            k = np.flatnonzero(seen_from & (obs.obj == i))
+            if k.size < 2:
+                continue
+            d = np.einsum("kij,kj->ki", R[obs.step[k]], obs.ray[k])
+            p, ok = triangulate(C[obs.step[k]], d)
+            ahead = np.einsum("kj,kj->k", p - C[obs.step[k]], d) > 0
+            if ok and ahead.all():
+                P[i], grew = p, True
+        if not grew:
+            break
+    return P, R, C

@@ -1,0 +1,158 @@
+"""SPATIAL-BA: a 3-D map from rays (and ranges) by the 6-DoF viewpoint bundle adjustment.
+
+Rays and ranges: the steps are registered to one another by their common objects
+(:func:`mappers.spatial.registration.register_points`; pose-free, as the law of cosines makes
+the distances of two objects seen in one step), placed by the anchors, then continued by rays
+(:func:`~mappers.spatial.registration.register_rays`) and adjusted jointly
+(:func:`mappers.spatial.adjustment.adjust_viewpoints`). Rays alone: the same adjustment started
+from the anchors by resection and intersection. No odometry, no motion model: every step's pose
+is estimated from what it saw.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from mappers.core.align_3d import check_anchors_3d, umeyama
+from mappers.spatial.adjustment import adjust_viewpoints
+from mappers.spatial.covisibility_3d import CoVisibility3D
+from mappers.spatial.rays import ray_observations
+from mappers.spatial.registration import MIN_RAY_ANGLE, register_points, register_rays
+
+__all__ = ["SpatialAdjustment"]
+
+
+class SpatialAdjustment:
+    """The 6-DoF viewpoint bundle adjustment as an estimator (see the module's docstring).
+
+    Args:
+        bearing_noise: the rays' angle noise [rad] (default 1 degree).
+        range_noise, range_growth: a range's noise [m], ``range_noise + range_growth * r**2``.
+        loss, loss_scale: the robust loss ("cauchy", "huber" or None) at that many noise units.
+        max_iter: Levenberg-Marquardt iterations at most.
+        fit_range_scale: estimate one factor of all ranges (a stereo calibration's scale error).
+        anchor_noise: None: the anchors are held fixed; a number [m]: they are adjusted under a
+            prior of that deviation, and the adjusted map is then placed on them by the
+            least-squares similarity (Umeyama 1991): the map keeps the shape and, with ranges,
+            the scale its sightings give it, then one scale factor takes it to the anchors'
+            (a stereo camera's ranges on STAR-loc are 1.5-3 % short).
+        max_ray_error: an adjusted object whose rays miss it by more than this median angle
+            [rad], that lies behind the sensor in most of its sightings, or (rays alone) whose
+            rays diverge by less than 10 degrees (its depth along them is not fixed) was not
+            placed consistently: it is left unmapped (NaN, listed in ``inconsistent_``) rather than
+            reported where the adjustment left it.
+
+    Attributes (after fit): ``embedding_`` (M, 3) world positions, NaN for objects it could not
+    place or placed inconsistently (``inconsistent_``, see ``max_ray_error``); ``rotations_`` (N, 3, 3) and ``positions_`` (N, 3) the steps' poses (NaN: step not
+    used); ``range_scale_``; ``n_iter_``.
+    """
+
+    def __init__(self, bearing_noise: float = float(np.deg2rad(1.0)), range_noise: float = 0.02,
+                 range_growth: float = 0.0, loss: str | None = "cauchy", loss_scale: float = 3.0,
+                 max_iter: int = 200, fit_range_scale: bool = False,
+                 anchor_noise: float | None = None, max_ray_error: float = float(np.deg2rad(5.0))):
+        self.bearing_noise = bearing_noise
+        self.range_noise = range_noise
+        self.range_growth = range_growth
+        self.loss = loss
+        self.loss_scale = loss_scale
+        self.max_iter = max_iter
+        self.fit_range_scale = fit_range_scale
+        self.anchor_noise = anchor_noise
+        self.max_ray_error = max_ray_error
+
+    def fit(self, X, y=None, *, anchor_ids, anchor_positions, mask=None, masks=None):
+        """Fit to a 3-D bearing history ``X`` (M, 3N) or fused histories ``{"bearing": rays,
+        "range": ranges (M, N)}`` (``masks`` keyed alike), with 3-D anchors (held fixed)."""
+        # the matrices are small (6 x 6 poses, 3F x 3F objects): one BLAS thread is fastest
+        with threadpool_limits(limits=1):
+            return self._fit(X, mask, masks, anchor_ids, anchor_positions)
+
+    def _fit(self, X, mask, masks, anchor_ids, anchor_positions):
+        if isinstance(X, Mapping):
+            if "bearing" not in X:
+                raise ValueError(f"SPATIAL-BA maps rays: fused histories need a 'bearing' entry, "
+                                 f"got {sorted(X)}")
+            masks = dict(masks or {})
+            obs = ray_observations(X["bearing"], masks.get("bearing"), X.get("range"),
+                                   masks.get("range"))
+        else:
+            obs = ray_observations(X, mask)
+        ids, pos = check_anchors_3d(anchor_ids, anchor_positions, obs.n_objects)
+        if np.isfinite(obs.range).any():
+            start = register_rays(obs, ids, pos, start=register_points(obs, ids, pos))
+        else:
+            start = self._rays_start(obs, ids, pos)
+        if not np.isfinite(start[2][:, 0]).any():
+            raise ValueError("SPATIAL-BA could not place any step: no step sees three placed "
+                             "objects (anchors, or objects placed from them) not on one line")
+        fixed = np.zeros(obs.n_objects, dtype=bool)
+        fixed[ids] = True
+        res = adjust_viewpoints(obs, *start, fixed, bearing_noise=self.bearing_noise,
+                                range_noise=self.range_noise, range_growth=self.range_growth,
+                                loss=self.loss, loss_scale=self.loss_scale,
+                                max_iter=self.max_iter, fit_range_scale=self.fit_range_scale,
+                                anchor_noise=self.anchor_noise)
+        if self.anchor_noise is not None:  # the map's own shape, placed on the anchors
+            Rs, scale, t = umeyama(res.points[ids], pos, True)
+            res = res._replace(points=scale * res.points @ Rs.T + t,
+                               rotations=Rs @ res.rotations,
+                               positions=scale * res.positions @ Rs.T + t)
+            self.similarity_scale_ = scale
+        self.inconsistent_ = _inconsistent(obs, res, self.max_ray_error, ids)
+        points = res.points.copy()
+        points[self.inconsistent_] = np.nan
+        self.embedding_ = points
+        self.rotations_, self.positions_ = res.rotations, res.positions
+        self.range_scale_, self.n_iter_ = res.range_scale, res.n_iter
+        return self
+
+    @staticmethod
+    def _rays_start(obs, ids, pos):
+        """Rays alone: resection and intersection from the anchors; where that leaves steps
+        unplaced, the sightings' 3-D map (COVIS-3D) stands in for the objects' positions to
+        resect them roughly (their rays to it within 30 degrees), and the objects are intersected
+        again from those steps."""
+        start = register_rays(obs, ids, pos)
+        if np.isfinite(start[2][:, 0]).mean() > 0.5:
+            return start
+        seen = np.zeros((obs.n_objects, obs.n_steps))
+        seen[obs.obj, obs.step] = 1.0
+        try:
+            rough = CoVisibility3D().fit_transform(seen, anchor_ids=ids, anchor_positions=pos)
+        except ValueError:
+            return start
+        _, R, C = register_rays(obs, ids, pos, start=(rough, *start[1:]),
+                                max_rms=np.deg2rad(30.0), rounds=1)
+        fresh = np.full_like(rough, np.nan)
+        return register_rays(obs, ids, pos, start=(fresh, R, C))
+
+    def fit_transform(self, X, y=None, **inputs) -> np.ndarray:
+        """Fit and return ``embedding_`` (M, 3)."""
+        return self.fit(X, y, **inputs).embedding_
+
+
+def _inconsistent(obs, res, max_error: float, anchors) -> np.ndarray:
+    """Ids of the placed, non-anchor objects whose sightings from the posed steps miss them by a
+    median angle above ``max_error``, or that lie behind the sensor in most of them."""
+    P, R, C = res.points, res.rotations, res.positions
+    use = np.all(np.isfinite(P[obs.obj]), axis=1) & np.isfinite(C[obs.step, 0])
+    v = np.einsum("kji,kj->ki", R[obs.step[use]], P[obs.obj[use]] - C[obs.step[use]])
+    cos = np.einsum("kj,kj->k", v, obs.ray[use]) / np.maximum(np.linalg.norm(v, axis=1), 1e-12)
+    angle = np.arccos(np.clip(cos, -1.0, 1.0))
+    world = np.einsum("kij,kj->ki", R[obs.step[use]], obs.ray[use])  # the rays in the world
+    ranged = np.isfinite(obs.range[use])
+    bad = []
+    for i in np.unique(obs.obj[use]):
+        mine = obs.obj[use] == i
+        a = angle[mine]
+        # rays alone fix an object's depth only where its rays diverge (as an intersection)
+        parallel = not ranged[mine].any() and np.min(world[mine] @ world[mine].T) > np.cos(
+            MIN_RAY_ANGLE)
+        if i not in anchors and (np.median(a) > max_error or np.mean(a > np.pi / 2) > 0.5
+                                 or parallel):
+            bad.append(int(i))
+    return np.array(bad, dtype=np.int64)
