@@ -88,6 +88,8 @@ def map_observation_log(
     from lfmdr_gym.histories.observation_table import read_landmarks, read_observations
     from lfmdr_gym.histories.observations import landmark_ids, observations_to_history
 
+    if out is not None and Path(out).exists() and not Path(out).is_dir():
+        raise ValueError(f"cannot write to output directory {str(out)!r}: it is a file")
     table = read_observations(path)
     anchor_table = read_landmarks(anchors, what="anchors")
     truth_table = read_landmarks(truth, what="truth") if truth is not None else None

@@ -182,3 +182,12 @@ def test_convert_rosbag_then_map(tmp_path, capsys):
     scores = json.loads((tmp_path / "m" / "scores.json").read_text())
     assert scores["n_scored"] == 10
     assert scores["mpe_nonanchor"] < 0.01  # exact poses from the camera: an exact map
+
+
+def test_out_that_is_a_file_is_refused(tmp_path, capsys):
+    _, _, log, anchors, _ = _episode(tmp_path, "LFMDR-Visibility-v0", steps=100)
+    blocker = tmp_path / "blocker"
+    blocker.write_text("mine")
+    assert main(["map", str(log), "--anchors", str(anchors), "--out", str(blocker)]) == 2
+    assert "cannot write to output directory" in capsys.readouterr().err
+    assert blocker.read_text() == "mine"
