@@ -7,6 +7,7 @@
 
     env = gym.make("LFMDR-Visibility-v0")   # or "LFMDR-Bearing-v0", "LFMDR-Range-v0",
     # "LFMDR-RangeBearing-v0", "LFMDR-VisibilityBearing-v0", "LFMDR-Camera-v0"
+    env = gym.make("LFMDR-Camera3D-v0")     # tags at heights, a pitched camera: 3-D maps
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ __all__ = [
     "LFMDREnv",
     "POLICIES", "RandomWalkPolicy", "as_policy",
     "History", "collect", "collect_vector",
-    "ENV_IDS", "PRESETS", "env_id_for",
+    "ENV_IDS", "ENV_IDS_3D", "PRESETS", "env_id_for",
 ]
 
 MAX_EPISODE_STEPS = 2000
@@ -54,6 +55,21 @@ def env_id_for(sensor: str) -> str:
         check_sensor(sensor)
     return next(env_id for env_id, s in ENV_IDS.items() if s == sensor and env_id not in PRESETS)
 
+
+ENV_IDS_3D: dict[str, str] = {"LFMDR-Camera3D-v0": "range-bearing"}
+"""Registered 3-D id -> its default sensor: LFMDR-Camera3D-v0, tags at heights on posts and walls
+read by a pitched camera (:class:`lfmdr_gym.camera3d_env.Camera3DEnv`; ``sensor=`` in
+``gym.make`` picks visibility, bearing or range instead). Kept apart from :data:`ENV_IDS`, whose
+envs are planar."""
+
+for _env_id, _sensor in ENV_IDS_3D.items():
+    if _env_id not in registry:
+        register(
+            id=_env_id,
+            entry_point="lfmdr_gym.camera3d_env:Camera3DEnv",
+            kwargs={"sensor": _sensor},
+            max_episode_steps=MAX_EPISODE_STEPS,
+        )
 
 for _env_id, _sensor in ENV_IDS.items():  # one loop, as panda-gym registers its variants
     if _env_id not in registry:  # a second import (or importlib.reload) must not re-register

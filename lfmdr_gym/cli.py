@@ -1,9 +1,11 @@
 """The ``lfmdr`` command: parse, call one library function, print. No logic of its own.
 
 Subcommands: ``reproduce`` (the paper's protocol), ``run`` (one episode mapped at its
-checkpoints), ``map`` (map a saved history), ``collect`` (record a random-walk episode),
-``mrclam`` (map a real MRCLAM run) and ``compare`` (check a fresh table against a reference). Bad options exit with status 2 and a one-line message;
-Ctrl-C exits with 130 after saying how to resume.
+checkpoints), ``map`` (map a saved history or an observation log), ``collect`` (record a
+random-walk episode), ``mrclam`` (map a real MRCLAM run), ``compare`` (check a fresh table
+against a reference) and ``convert`` (a dataset or a ROS bag to an observation table); ``map``
+and ``convert`` live in :mod:`lfmdr_gym.cli_map`. Bad options exit with status 2 and a one-line
+message; Ctrl-C exits with 130 after saying how to resume.
 """
 
 from __future__ import annotations
@@ -11,9 +13,18 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
-import textwrap
 from collections.abc import Sequence
 from typing import Any
+
+from lfmdr_gym.cli_common import (
+    Formatter,
+    add_command,
+    add_method_options,
+    add_sensor_option,
+    positive_int,
+    print_warnings,
+)
+from lfmdr_gym.cli_map import add_convert, add_map
 
 _POLICY_HELP = ("exploration policy, a name of lfmdr_gym.POLICIES (random-walk, coverage, "
                 "coverage-scan, rl, spread, even)")
@@ -27,37 +38,6 @@ _DESCRIPTION = """\
 Localisation-free mapping by dimensionality reduction (Yairi 2007): a robot's per-object
 observation histories are embedded in the plane and aligned to a few anchors; no pose is estimated.
 """
-
-
-class _Formatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
-    """Shows defaults, except the uninformative None/False (the help text explains those)."""
-
-    def _get_help_string(self, action: argparse.Action) -> str | None:
-        if action.default is None or action.default is False or action.required:
-            return action.help
-        return super()._get_help_string(action)
-
-
-def _text(*paragraphs: str) -> str:
-    """Help paragraphs wrapped for the terminal (the raw formatter keeps the blank lines)."""
-    return "\n\n".join(textwrap.fill(" ".join(p.split()), width=88) for p in paragraphs)
-
-
-def _add_command(sub: Any, name: str, summary: str, *description: str) -> argparse.ArgumentParser:
-    """A sub-command's parser: ``summary`` in ``lfmdr --help``, the ``description`` paragraphs
-    in its own help."""
-    return sub.add_parser(name, formatter_class=_Formatter, help=summary,
-                          description=_text(*description))
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
-    return value
 
 
 def _jobs(text: str) -> int:
@@ -85,26 +65,6 @@ def _method_list(values: Sequence[str] | None) -> list[str] | None:
     if not values:
         return None
     return [name for v in values for name in _csv_list(v)]
-
-
-def _add_sensor_option(p: argparse.ArgumentParser, what: str, fused: Sequence[str] = ()) -> None:
-    """--sensor (also spelled --mode, its older name); ``fused``: fused sets also accepted."""
-    from mappers.core.sensors import SENSORS
-
-    p.add_argument("--sensor", "--mode", dest="sensor", required=True,
-                   choices=(*SENSORS, *fused), help=what)
-
-
-def _add_method_options(p: argparse.ArgumentParser, default: str) -> None:
-    """--method and --param, shared by `run`, `map` and `mrclam`."""
-    p.add_argument("--method", default=None,
-                   help="a registered method that maps this kind of history, case-insensitive "
-                        f"(e.g. CAL-SMA, 'SMA(WGT)', COVIS-AUTO; default: {default}); an older "
-                        "label maps with a warning naming its new one, or is refused naming what "
-                        "to use (e.g. VIS-BA, covis-power: docs/dead-ends.md)")
-    p.add_argument("--param", action="append", default=None, metavar="NAME=VALUE",
-                   help="method parameter overriding its default (repeatable), e.g. K=7 or "
-                        "n_neighbors=7, sigma2=1, d=4")
 
 
 _ENV_ID_HELP = ("environment id, one of lfmdr_gym.ENV_IDS (LFMDR-Visibility-v0, LFMDR-Bearing-v0, "
@@ -136,7 +96,7 @@ def _add_episode_options(p: argparse.ArgumentParser, env_help: str | None) -> No
     """``--env`` (when ``env_help`` is given: an env id) and ``--steps``, the episode to run."""
     if env_help is not None:
         p.add_argument("--env", default="LFMDR-Visibility-v0", metavar="ID", help=env_help)
-    p.add_argument("--steps", type=_positive_int, default=2000, help="episode length N")
+    p.add_argument("--steps", type=positive_int, default=2000, help="episode length N")
 
 
 def _add_seed_option(p: argparse.ArgumentParser, what: str) -> None:
@@ -148,7 +108,7 @@ def _add_policy_option(p: argparse.ArgumentParser) -> None:
 
 
 def _add_every_option(p: argparse.ArgumentParser, otherwise: str) -> None:
-    p.add_argument("--every", type=_positive_int, default=None,
+    p.add_argument("--every", type=positive_int, default=None,
                    help="checkpoint interval; must divide --steps (default: 500 for visibility, "
                         + otherwise + ")")
 
@@ -169,7 +129,7 @@ class _OldEnvKeyword(argparse.Action):
 
 
 def _add_reproduce(sub: Any) -> None:
-    p = _add_command(
+    p = add_command(
         sub, "reproduce", "run the paper's protocol and write results.csv, table.md/csv and figures",
         "Run the paper's protocol (§4.1): every (layout, pose) episode with the random-walk "
         "agent; at the last checkpoint every method over its whole parameter grid, at every "
@@ -185,10 +145,10 @@ def _add_reproduce(sub: Any) -> None:
         "With --env-kw keywords that limit sensing (fov_deg, max_range, noise, dropouts) the "
         "histories are masked and the methods default to those that map masked histories.",
     )
-    _add_sensor_option(p, "visibility (Table 1), bearing (Table 2) or range (beyond the paper: "
+    add_sensor_option(p, "visibility (Table 1), bearing (Table 2) or range (beyond the paper: "
                           "the same protocol with a range sensor)")
-    p.add_argument("--layouts", type=_positive_int, default=5, help="random object layouts")
-    p.add_argument("--poses", type=_positive_int, default=5,
+    p.add_argument("--layouts", type=positive_int, default=5, help="random object layouts")
+    p.add_argument("--poses", type=positive_int, default=5,
                    help="random start poses per layout (runs = layouts x poses)")
     _add_episode_options(p, None)
     _add_every_option(p, "200 otherwise")
@@ -213,13 +173,13 @@ def _add_reproduce(sub: Any) -> None:
 
 
 def _add_run(sub: Any) -> None:
-    p = _add_command(
+    p = add_command(
         sub, "run", "one episode, mapped at its checkpoints, scores printed, a map figure",
         "Collect one random-walk episode, map it with one method at every checkpoint, print "
         "MPE and MOE, and write history.npz, scores.csv, map.csv and map.png into --out."
     )
     _add_episode_options(p, _ENV_ID_HELP)
-    _add_method_options(p, "the default for the env's histories, as build_map chooses")
+    add_method_options(p, "the default for the env's histories, as build_map chooses")
     _add_seed_option(p, _WALK_SEED_HELP)
     _add_every_option(p, "200 otherwise, plus N itself")
     _add_env_keywords(p)
@@ -234,23 +194,8 @@ def _add_run(sub: Any) -> None:
     p.set_defaults(handler=_cmd_run)
 
 
-def _add_map(sub: Any) -> None:
-    p = _add_command(
-        sub, "map", "map a saved history (.npz); scores when it holds the ground truth",
-        "Map a saved history with one method; print MPE and MOE when the file holds every "
-        "object's true position; write map.csv and map.png into --out."
-    )
-    p.add_argument("history", metavar="HISTORY.npz", help="a history saved by lfmdr collect/run")
-    _add_method_options(p, "the default for the history's sensor and kind, as build_map chooses")
-    p.add_argument("--steps", type=_positive_int, default=None,
-                   help="map only the first N steps (default: all)")
-    p.add_argument("--out", default=None, metavar="DIR",
-                   help="output directory (default: next to the history, named after it)")
-    p.set_defaults(handler=_cmd_map)
-
-
 def _add_collect(sub: Any) -> None:
-    p = _add_command(
+    p = add_command(
         sub, "collect", "record one episode as a history file and summarise it",
         "Run one episode with an exploration policy (default: the paper's random walk) and "
         "save what the robot sensed (and the ground truth for scoring) as a History .npz; "
@@ -266,18 +211,18 @@ def _add_collect(sub: Any) -> None:
 
 
 def _add_mrclam(sub: Any) -> None:
-    p = _add_command(
+    p = add_command(
         sub, "mrclam", "map the landmarks of a real UTIAS MRCLAM run",
         "Map the landmarks of an MRCLAM run directory from the robots' logged sightings "
         "(no localisation); writes DIR/map.csv (subject, x, y) and a figure, and prints MPE "
         "and MOE over the non-anchor landmarks."
     )
     p.add_argument("run_dir", metavar="RUN_DIR", help="an MRCLAM run directory")
-    _add_sensor_option(p, "which measurement to map from (range-bearing: both measurements of "
+    add_sensor_option(p, "which measurement to map from (range-bearing: both measurements of "
                           "every sighting, fused)", fused=("range-bearing",))
     p.add_argument("--robots", type=_int_list, default=None, metavar="1,2,3,4,5",
                    help="robot subject numbers whose logs are used (default: all five)")
-    _add_method_options(p, "COVIS-ENSEMBLE for visibility and bearing, RANGE-QUANTILE for "
+    add_method_options(p, "COVIS-ENSEMBLE for visibility and bearing, RANGE-QUANTILE for "
                            "range, LOC-SMA for range-bearing; 'naive' is SMA(UNWGT) with "
                            "--zero-fill")
     p.add_argument("--zero-fill", action="store_true",
@@ -300,7 +245,7 @@ def _add_mrclam(sub: Any) -> None:
 def _add_compare(sub: Any) -> None:
     from lfmdr_gym.experiments.reproducibility import TOLERANCE
 
-    p = _add_command(
+    p = add_command(
         sub, "compare", "check that a fresh `lfmdr reproduce` run reproduces a reference table",
         "Compare the table.csv of a run directory with a reference one (e.g. "
         "docs/results/visibility): every method's mean MPE within --mpe-abs metres or "
@@ -319,11 +264,12 @@ def _add_compare(sub: Any) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``lfmdr`` (exposed for tests and documentation)."""
-    parser = argparse.ArgumentParser(prog="lfmdr", description=_DESCRIPTION, formatter_class=_Formatter)
+    parser = argparse.ArgumentParser(prog="lfmdr", description=_DESCRIPTION, formatter_class=Formatter)
     parser.add_argument("--version", action="version", version=f"lfmdr {_version()}",
                         help="print the installed version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for add in (_add_reproduce, _add_run, _add_map, _add_collect, _add_mrclam, _add_compare):
+    for add in (_add_reproduce, _add_run, add_map, _add_collect, _add_mrclam, _add_compare,
+                add_convert):
         add(sub)
     return parser
 
@@ -364,12 +310,6 @@ def _print_scores(rows: Sequence[dict[str, Any]]) -> None:
         print(line)
 
 
-def _print_warnings(notes: Sequence[str]) -> None:
-    """A map's warnings (``Map.warnings``), one line each."""
-    for note in notes:
-        print(f"warning: {note}")
-
-
 def _cmd_run(args: argparse.Namespace) -> int:
     from lfmdr_gym.experiments.env_settings import parse_env_kwargs
     from lfmdr_gym.experiments.mapping import run_episode
@@ -382,7 +322,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                        env_kwargs=parse_env_kwargs(args.env_kwargs))
     print(f"{args.env}, seed {args.seed}, {method_label(rows[-1]['method'], rows[-1]['param'])}")
     _print_scores(rows)
-    _print_warnings(rows[-1]["warnings"])
+    print_warnings(rows[-1]["warnings"])
     print(f"wrote {args.out}/history.npz, scores.csv, map.csv, map.png")
     return 0
 
@@ -405,28 +345,8 @@ def _cmd_run_online(args: argparse.Namespace) -> int:
     if unmapped:  # why: what the mapper said at the last of them
         print(f"no map at {unmapped[-1]['n_steps']} steps: {unmapped[-1]['note']}")
     if not run.rows[-1]["note"]:  # (else the final map's warnings are that reason)
-        _print_warnings(run.map.warnings)
+        print_warnings(run.map.warnings)
     print("wrote " + ", ".join(str(p) for p in run.written))
-    return 0
-
-
-def _cmd_map(args: argparse.Namespace) -> int:
-    from lfmdr_gym.experiments.mapping import map_history_file
-    from lfmdr_gym.experiments.params import method_label
-
-    info = map_history_file(args.history, args.method, params=args.param,
-                            n_steps=args.steps, out=args.out)
-    m = info["map"]
-    print(f"{info['history']!r}: {method_label(info['method'], info['param'])}")
-    if m.unmapped:
-        print(f"unmapped objects: {list(m.unmapped)}")
-    _print_warnings(m.warnings)
-    if "mpe" in info:
-        print(f"MPE {info['mpe']:.4f} m (non-anchor {info['mpe_nonanchor']:.4f} m), "
-              f"MOE {info['moe']:.2f} %")
-    else:
-        print("no ground truth in the file: not scored")
-    print(f"wrote {info['out'] / 'map.csv'} and {info['figure']}")
     return 0
 
 
@@ -464,7 +384,7 @@ def _cmd_mrclam(args: argparse.Namespace) -> int:
     params = ", ".join(f"{k}={v}" for k, v in result.params.items())
     print(f"{result.run} ({result.sensor}), {method_label(result.method, params)}, anchors "
           f"{list(result.anchor_subjects)}")
-    _print_warnings(result.warnings)
+    print_warnings(result.warnings)
     non_anchor = ~np.isin(result.subjects, result.anchor_subjects)
     mapped = int(np.sum(non_anchor & np.isfinite(result.positions).all(axis=1)))
     which = ("the" if mapped == int(non_anchor.sum())

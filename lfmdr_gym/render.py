@@ -15,7 +15,8 @@ from numpy.typing import ArrayLike
 
 from lfmdr_gym.sim.sensors import ray_directions
 
-__all__ = ["HumanViewer", "draw_frame", "draw_map", "human_rendering_error"]
+__all__ = ["HumanViewer", "draw_ellipses", "draw_frame", "draw_map", "ellipse_outlines",
+           "human_rendering_error"]
 
 BACKGROUND = (250, 250, 247)
 WALL = (60, 60, 60)
@@ -29,6 +30,7 @@ BEARING_RAY = (205, 215, 235)
 PROXIMITY_RAY = (240, 150, 40)
 ESTIMATE = (40, 90, 200)
 ERROR_LINE = (230, 120, 120)
+ELLIPSE = (120, 150, 225)
 
 
 class _Canvas:
@@ -151,6 +153,52 @@ def draw_frame(
     return canvas.img
 
 
+def ellipse_outlines(positions: ArrayLike, covariances: ArrayLike, *, level: float = 0.95,
+                     n_points: int = 48) -> np.ndarray:
+    """The ``level`` region of each object's Gaussian as a closed outline (M, n_points + 1, 2):
+    ``position + sqrt(q) L u`` for unit vectors ``u`` around the circle, ``L L^T`` the (2, 2)
+    covariance (its eigen-decomposition, so a singular one gives a segment) and ``q`` the
+    chi-squared(2) ``level`` quantile. Rows whose position or covariance is not finite, or whose
+    covariance is zero (anchors), are NaN (nothing to draw). Only the first two coordinates are
+    drawn (the plan view of a 3-D map, its covariance's x-y block)."""
+    from scipy.stats import chi2
+
+    pos = np.asarray(positions, dtype=np.float64)
+    cov = np.asarray(covariances, dtype=np.float64)
+    if pos.ndim != 2 or cov.shape != (len(pos), pos.shape[1], pos.shape[1]) or pos.shape[1] < 2:
+        raise ValueError(f"covariances must have shape (M, d, d) for positions (M, d), got "
+                         f"{cov.shape} for {pos.shape}")
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must be in (0, 1), got {level}")
+    pos, cov = pos[:, :2], cov[:, :2, :2]
+    ok = np.all(np.isfinite(pos), axis=1) & np.all(np.isfinite(cov), axis=(1, 2))
+    ok &= np.abs(cov).reshape(len(cov), -1).max(axis=1, initial=0.0) > 0
+    out = np.full((len(pos), n_points + 1, 2), np.nan)
+    if not ok.any():
+        return out
+    ev, vec = np.linalg.eigh(0.5 * (cov[ok] + cov[ok].transpose(0, 2, 1)))
+    axes = vec * np.sqrt(np.maximum(ev, 0.0) * chi2.ppf(level, 2))[:, None, :]  # columns
+    a = np.linspace(0.0, 2 * np.pi, n_points + 1)
+    circle = np.stack([np.cos(a), np.sin(a)], axis=1)  # (n + 1, 2)
+    out[ok] = pos[ok][:, None, :] + np.einsum("mij,nj->mni", axes, circle)
+    return out
+
+
+def draw_ellipses(ax, positions: ArrayLike, covariances: ArrayLike, *, level: float = 0.95,
+                  **line_kwargs):
+    """Draw each object's ``level`` (95 %) ellipse (:func:`ellipse_outlines`) on the matplotlib
+    axes ``ax`` as thin lines (``line_kwargs`` override the colour and width); returns the
+    number of ellipses drawn."""
+    outlines = ellipse_outlines(positions, covariances, level=level)
+    style = {"color": "tab:blue", "lw": 0.6, "alpha": 0.7, **line_kwargs}
+    drawn = 0
+    for line in outlines:
+        if np.isfinite(line[0, 0]):
+            ax.plot(line[:, 0], line[:, 1], **style)
+            drawn += 1
+    return drawn
+
+
 def draw_map(
     *,
     arena_half: float,
@@ -160,6 +208,7 @@ def draw_map(
     anchor_ids: ArrayLike = (),
     size: int = 480,
     view_half: float | None = None,
+    covariances: ArrayLike | None = None,
 ) -> np.ndarray:
     """Draw a map as an (size, size, 3) uint8 RGB image, in the arena's frame.
 
@@ -167,7 +216,9 @@ def draw_map(
     out); with ``truth`` (M, 2) the true objects are grey and a red line joins each estimate to
     its truth; anchors are ringed in red at their (known) positions. ``view_half``: half-side
     [m] of the square drawn, centred on the arena (default ``arena_half``; larger shows the
-    estimates that fall outside the arena, the walls then drawn smaller).
+    estimates that fall outside the arena, the walls then drawn smaller). ``covariances``
+    ((M, 2, 2), ``Map.covariances``): each estimate's 95 % ellipse in pale blue
+    (:func:`ellipse_outlines`).
     """
     if size < 32:
         raise ValueError(f"size must be >= 32 pixels, got {size}")
@@ -182,6 +233,10 @@ def draw_map(
         true = np.asarray(truth, dtype=np.float64).reshape(-1, 2)
         canvas.discs(true, object_radius, OBJECT)
         canvas.lines(true[placed], est[placed], ERROR_LINE)
+    if covariances is not None:
+        outlines = ellipse_outlines(est, covariances)
+        outlines = outlines[np.isfinite(outlines[:, 0, 0])]
+        canvas.lines(outlines[:, :-1].reshape(-1, 2), outlines[:, 1:].reshape(-1, 2), ELLIPSE)
     canvas.discs(est[placed], object_radius, ESTIMATE)
     ring = est[ids] if truth is None else np.asarray(truth, dtype=np.float64).reshape(-1, 2)[ids]
     canvas.discs(ring[np.all(np.isfinite(ring), axis=1)], object_radius * 2.2, ANCHOR,

@@ -57,6 +57,9 @@ class Map:
         warnings: repairs and degradations worth knowing (graph joined, anchors dropped, ...).
         affine: (3, 2) affine map with ``positions = [embedding, 1] @ affine``.
         anchor_ids: the anchors actually used for the fit.
+        covariances: (M, d, d) each object's position covariance [m²] in the map's frame (zero
+            for the anchors, NaN for unmapped objects), or None when ``build_map`` was not asked
+            for it (``uncertainty=``; :mod:`mappers.covariances`).
     """
 
     positions: np.ndarray
@@ -68,6 +71,7 @@ class Map:
     warnings: tuple[str, ...] = ()
     affine: np.ndarray | None = None
     anchor_ids: tuple[int, ...] = field(default=())
+    covariances: np.ndarray | None = None
 
 
 def _check_histories(histories: Any) -> np.ndarray:
@@ -311,9 +315,12 @@ def _finish(spec, merged, sensor, Y, m, mapped, ids, pos, unmapped, notes) -> Ma
 
 def fit_fused_method(spec: MethodSpec, Xs: dict[str, Any], masks: dict[str, Any], key,
                      timeline, anchor_ids, anchor_positions, *, normalize: bool | None = None,
-                     random_state: int | None = 0, params: dict[str, Any] | None = None) -> Map:
+                     random_state: int | None = 0, params: dict[str, Any] | None = None,
+                     with_estimator: bool = False) -> Map | tuple[Map, Any, np.ndarray]:
     """The map of ``spec``'s method on fused histories checked by
-    :func:`mappers.core.fused_histories.check_fused` (``Xs``, ``masks``, ``key``, ``timeline``)."""
+    :func:`mappers.core.fused_histories.check_fused` (``Xs``, ``masks``, ``key``, ``timeline``);
+    ``with_estimator``: ``(map, fitted estimator, rows it was fitted on)``, as
+    :func:`fit_checked`."""
     params = dict(params or {})
     merged = _method_params(spec, params, normalize, random_state)
     m = next(iter(Xs.values())).shape[0]
@@ -335,4 +342,5 @@ def fit_fused_method(spec: MethodSpec, Xs: dict[str, Any], masks: dict[str, Any]
     Y, caught = _embed(spec.label, est, {s: X[mapped] for s, X in Xs.items()}, inputs,
                        allow_nan_rows=True, n=mapped.size)
     notes.extend(caught)
-    return _finish(spec, merged, sensor_name(key), Y, m, mapped, ids, pos, unmapped, notes)
+    result = _finish(spec, merged, sensor_name(key), Y, m, mapped, ids, pos, unmapped, notes)
+    return (result, est, mapped) if with_estimator else result

@@ -13,10 +13,13 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+import scipy.sparse as sp
 
 from mappers.catalog import implied_params, resolve_method
 from mappers.core.fused_histories import check_fused
-from mappers.core.sensors import check_sensor_set
+from mappers.core.sensors import COLUMNS_PER_STEP, check_sensor_set
+from mappers.core.uncertainty import check_uncertainty
+from mappers.covariances import with_covariances
 from mappers.defaults import choose_for_history
 from mappers.fitting import Map, check_inputs, fit_checked, fit_fused_method
 from mappers.spatial.pipeline_3d import anchor_dimension, build_map_3d
@@ -40,6 +43,7 @@ def build_map(
     timeline: np.ndarray | None = None,
     normalize: bool | None = None,
     random_state: int | None = 0,
+    uncertainty: bool | str = False,
     **params: Any,
 ) -> Map:
     """Build a metric map of M objects from their observation histories.
@@ -74,7 +78,13 @@ def build_map(
             consecutive steps (``COVIS-ENSEMBLE``, ``DROPOUT-BLEND``, the viewpoint adjustments).
         normalize: divide each row by its norm (paper eq. 7); None = the method's choice (on for
             the paper's methods, off for those that need the raw values, such as UNFOLD).
-        random_state: seed handed to methods that take one.
+        random_state: seed handed to methods that take one (and to the bootstrap's draws).
+        uncertainty: False (the default): no covariances, ``Map.covariances`` is None and nothing
+            else changes; ``"model"``: from the normal equations of the method's bundle
+            adjustment (``BEARING-BA``, ``LOC-SMA`` refined); ``"bootstrap"``: from replicate maps
+            of a moving-block bootstrap over the steps (any method; about 20 maps' time);
+            True: ``"model"`` where the method has one, else ``"bootstrap"``
+            (:mod:`mappers.covariances`).
         **params: method parameters (``n_neighbors`` = K, ``sigma2``, ``degree``, ...).
 
     Returns:
@@ -97,12 +107,18 @@ def build_map(
         # a fused History (lfmdr_gym): its single-sensor parts, each with its own mask
         timeline = timeline if timeline is not None else getattr(histories, "timeline", None)
         histories = dict(parts)
+    uncertainty = check_uncertainty(uncertainty)
     if isinstance(histories, Mapping):
-        result = _build_fused_map(histories, anchor_ids, anchor_positions, method, sensor, mask,
-                                  timeline, normalize, random_state, params)
+        result, est, mapped = _build_fused_map(histories, anchor_ids, anchor_positions, method,
+                                               sensor, mask, timeline, normalize, random_state,
+                                               params)
     else:
-        result = _fit_map(histories, anchor_ids, anchor_positions, method, sensor, mask,
-                          timeline, normalize, random_state, params)[0]
+        result, est, mapped = _fit_map(histories, anchor_ids, anchor_positions, method, sensor,
+                                       mask, timeline, normalize, random_state, params)
+    if uncertainty is not False:
+        result = _with_covariances(result, uncertainty, est, mapped, histories, anchor_ids,
+                                   anchor_positions, sensor, mask, timeline, normalize,
+                                   random_state, params)
     for note in result.warnings:
         warnings.warn(note, MapWarning, stacklevel=2)
     return result
@@ -179,4 +195,47 @@ def _build_fused_map(histories, anchor_ids, anchor_positions, method, sensor, ma
     spec = resolve_method(method, key, masked=any(v is not None for v in masks.values()),
                           n_objects=n)
     return fit_fused_method(spec, Xs, masks, key, timeline, anchor_ids, anchor_positions,
-                            normalize=normalize, random_state=random_state, params=params)
+                            normalize=normalize, random_state=random_state, params=params,
+                            with_estimator=True)
+
+
+def _step_columns(steps: np.ndarray, per_step: int) -> np.ndarray:
+    return (steps[:, None] * per_step + np.arange(per_step)[None, :]).ravel()
+
+
+def _with_covariances(result, uncertainty, est, mapped, histories, anchor_ids, anchor_positions,
+                      sensor, mask, timeline, normalize, random_state, params) -> Map:
+    """``result`` with ``Map.covariances`` (:func:`mappers.covariances.with_covariances`): the
+    checked histories again, and the refit of a bootstrap replicate (the same method, its
+    parameters as resolved, the chosen steps' columns, mask and timeline rows)."""
+    method, params = result.method, dict(result.params)
+    if isinstance(histories, Mapping):
+        Xs, masks, _, timeline = check_fused(histories, mask, timeline)
+        n_steps = next(iter(Xs.values())).shape[1] // COLUMNS_PER_STEP[next(iter(Xs))]
+
+        def refit(steps):
+            cols = {s: _step_columns(steps, COLUMNS_PER_STEP[s]) for s in Xs}
+            return _build_fused_map(
+                {s: v[:, cols[s]] for s, v in Xs.items()}, anchor_ids, anchor_positions, method,
+                None, {s: None if v is None else v[:, cols[s]] for s, v in masks.items()},
+                None if timeline is None else np.asarray(timeline)[steps], normalize,
+                random_state, params)[0].positions
+
+        X, M = Xs, masks
+    else:
+        X, M, sensor, timeline = check_inputs(histories, sensor, mask, timeline)
+        per_step = COLUMNS_PER_STEP[sensor]
+        n_steps = X.shape[1] // per_step
+
+        def refit(steps):
+            cols = _step_columns(steps, per_step)
+            return _fit_map(X[:, cols], anchor_ids, anchor_positions, method, sensor,
+                            None if M is None else M[:, cols],
+                            None if timeline is None else np.asarray(timeline)[steps],
+                            normalize, random_state, params)[0].positions
+
+        if sp.issparse(X):  # the adjustments read dense histories
+            X, M = X.toarray(), (M.toarray() if sp.issparse(M) else M)
+    return with_covariances(result, uncertainty, est=est, mapped=mapped, X=X, mask=M,
+                            n_steps=n_steps, refit=refit, random_state=random_state,
+                            timeline=timeline)

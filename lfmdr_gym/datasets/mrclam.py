@@ -35,6 +35,8 @@ from typing import Any
 import numpy as np
 
 from lfmdr_gym.checks import check_real
+from lfmdr_gym.datasets.mrclam_layout import check_run_layout
+from lfmdr_gym.histories.binning import assemble, cell_values, time_steps
 from lfmdr_gym.histories.history import History
 from mappers.core.align import check_anchor_ids
 from mappers.core.sensors import (
@@ -59,6 +61,7 @@ __all__ = [
     "image_pairs",
     "load_mrclam",
     "read_run",
+    "run_meta",
 ]
 
 ROBOT_SUBJECTS = (1, 2, 3, 4, 5)
@@ -250,17 +253,13 @@ def _read_robot(path: Path, robot: int, barcode_to_subject: dict[int, int],
 
 
 def _check_args(run_dir: Path, robots: Sequence[int], groundtruth_fixes: str) -> tuple[int, ...]:
-    if not run_dir.is_dir():
-        raise FileNotFoundError(f"run_dir {run_dir} is not a directory")
     if groundtruth_fixes not in GROUNDTRUTH_FIXES:
         raise ValueError(f"groundtruth_fixes must be one of {GROUNDTRUTH_FIXES}, "
                          f"got {groundtruth_fixes!r}")
     robots = tuple(int(r) for r in robots)
     if not robots or len(set(robots)) != len(robots):
         raise ValueError(f"robots must be a non-empty list of distinct robot numbers, got {robots}")
-    for r in robots:
-        if not (run_dir / f"Robot{r}_Measurement.dat").is_file():
-            raise ValueError(f"robots: no Robot{r}_Measurement.dat in {run_dir}")
+    check_run_layout(run_dir, robots)  # what is missing, and where to get the dataset
     return robots
 
 
@@ -452,32 +451,6 @@ def _resolve_anchors(run: MRCLAMRun, anchors: Sequence[int] | None) -> np.ndarra
     return check_anchor_ids(np.searchsorted(run.subjects, anchors), len(run.subjects))
 
 
-def _bin_values(sensor: str, obs: np.ndarray, li: np.ndarray, inv: np.ndarray, seen: np.ndarray):
-    """(matrix, mask) of one sensor from the rows' bins: visibility 1 where seen (only sightings
-    are known: mask = seen), bearing the circular mean, range the median of the bin's readings."""
-    M, N = seen.shape
-    if sensor == "visibility":
-        return seen.astype(np.float64), seen.copy()
-    if sensor == "bearing":
-        c, s = np.zeros((M, N)), np.zeros((M, N))
-        np.add.at(c, (li, inv), np.cos(obs[:, 4]))
-        np.add.at(s, (li, inv), np.sin(obs[:, 4]))
-        norm = np.hypot(c, s)
-        ok = seen & (norm > 1e-12)
-        c = np.where(ok, c / np.where(ok, norm, 1), 0.0)
-        s = np.where(ok, s / np.where(ok, norm, 1), 0.0)
-        matrix = np.empty((M, 2 * N))
-        matrix[:, 0::2], matrix[:, 1::2] = c, s
-        return matrix, np.repeat(ok, 2, axis=1)
-    key = li * N + inv
-    order = np.argsort(key, kind="stable")
-    ks, rs = key[order], obs[order, 3]
-    starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
-    matrix = np.zeros((M, N))
-    matrix.flat[ks[starts]] = [np.median(seg) for seg in np.split(rs, starts[1:])]
-    return matrix, seen.copy()
-
-
 def bin_run(
     run: MRCLAMRun, sensor: str, bin_width: float, *, drop_empty_bins: bool = True
 ) -> tuple[np.ndarray, np.ndarray, dict[str, Any], np.ndarray]:
@@ -487,39 +460,66 @@ def bin_run(
     earliest time of all chosen robots; the robots' bins are concatenated (robot 1's, then robot
     2's, ...). ``timeline`` gives each bin's robot (its position in ``run.report.robots``) and
     index on the grid. Only what was seen is known, so ``mask`` is True exactly where a landmark
-    was sensed in the bin (:func:`_bin_values` for the values).
+    was sensed in the bin. Bearing is the circular mean and range the median of the bin's
+    readings (:mod:`lfmdr_gym.histories.binning` bins every log alike).
     """
     check_sensor(sensor)
     check_real("bin_width", bin_width, low=0.0, low_open=True)  # [s]
     obs, robots = run.obs, list(run.report.robots)
     if len(obs) == 0:
         raise ValueError(f"{run.name}: no landmark measurements left after filtering")
-    t0 = run.t0
-    n_per_robot = int(np.floor((obs[:, 1].max() - t0) / bin_width)) + 1
     robot_pos = np.searchsorted(robots, obs[:, 0]) if robots == sorted(robots) else np.array(
         [robots.index(int(r)) for r in obs[:, 0]]
     )
-    col = robot_pos * n_per_robot + np.floor((obs[:, 1] - t0) / bin_width).astype(np.int64)
-    if drop_empty_bins:
-        used, inv = np.unique(col, return_inverse=True)
-    else:
-        used, inv = np.arange(len(robots) * n_per_robot), col
-    inv = np.asarray(inv).ravel()
-    li = obs[:, 2].astype(np.int64)
-    seen = np.zeros((len(run.subjects), len(used)))
-    np.add.at(seen, (li, inv), 1.0)
-    seen = seen > 0
+    steps = time_steps(robot_pos, obs[:, 1], len(robots), bin_width,
+                       drop_empty_bins=drop_empty_bins)
+    m, n = len(run.subjects), steps.n_steps
+    cells = cell_values((sensor,), obs[:, 2].astype(np.int64), steps.step, (m, n),
+                        bearing=obs[:, 4], range_=obs[:, 3])
     info = {
         "bin_width": float(bin_width),
-        "n_bins": len(used),
-        "bins_per_robot": {str(r): int(np.sum((used // n_per_robot) == k))
+        "n_bins": n,
+        "bins_per_robot": {str(r): int(np.sum(steps.timeline[:, 0] == k))
                            for k, r in enumerate(robots)},
         "drop_empty_bins": bool(drop_empty_bins),
-        "observed_fraction": [round(float(f), 5) for f in seen.mean(axis=1)],
+        "observed_fraction": [round(float(f), 5)
+                              for f in np.bincount(cells.landmark, minlength=m) / n],
     }
-    matrix, mask = _bin_values(sensor, obs, li, inv, seen)
-    timeline = np.column_stack([used // n_per_robot, used % n_per_robot]).astype(np.int64)
-    return matrix, mask, info, timeline
+    matrix, mask = assemble(cells, sensor, sparse=False)
+    return matrix, mask, info, steps.timeline
+
+
+def run_meta(run: MRCLAMRun, sensor: str, anchor_ids: np.ndarray, seen: np.ndarray,
+             min_co: int = 3) -> dict[str, Any]:
+    """``History.meta`` of a binned run, and the warnings of what its robots saw (each also
+    warned): landmarks never sighted, and a co-observation graph that falls apart.
+
+    ``seen``: (M, N) bool, True where a landmark was sighted in a step; ``min_co``: a pair seen
+    together in fewer steps is not linked. The meta holds the run, its subjects and anchors, the
+    groups of the graph and the fields of :class:`MRCLAMReport` (its warnings these and the
+    loader's); the bins' counts are the caller's to add.
+    """
+    msgs, robots = list(run.report.warnings), list(run.report.robots)
+    comps = co_observation_components(seen, min_co)
+    never = [int(run.subjects[i]) for i in np.flatnonzero(~seen.any(axis=1))]
+    if never:
+        _warn(f"{run.name}: landmark(s) {never} were never observed by robots {robots}; "
+              "they cannot be mapped", msgs)
+    if len(comps) > 1:
+        groups = [[int(run.subjects[i]) for i in c] for c in comps]
+        _warn(f"{run.name}: the co-observation graph falls apart into {len(comps)} groups "
+              f"{groups} (pairs seen together in >= {min_co} bins): the relative placement of the "
+              "groups is not measured (a clustered layout?); a map of it places them by anchors "
+              "and lower bounds only — treat it as unreliable.", msgs)
+    report = MRCLAMReport(**{**run.report.__dict__, "warnings": tuple(msgs)})
+    return {
+        "source": "MRCLAM",
+        "sensor": sensor,
+        "subjects": run.subjects.tolist(),
+        "anchor_subjects": run.subjects[anchor_ids].tolist(),
+        "co_observation_groups": [[int(run.subjects[i]) for i in c] for c in comps],
+        **report.as_dict(),
+    }
 
 
 def load_mrclam(
@@ -563,32 +563,11 @@ def load_mrclam(
     bw = DEFAULT_BIN_WIDTH[name] if bin_width is None else bin_width
     binned = {s: bin_run(run, s, bw, drop_empty_bins=drop_empty_bins) for s in parts}
     anchor_ids = _resolve_anchors(run, anchors)
-    msgs = list(run.report.warnings)
     # co-observation from the sightings: the mask of a sensor that keeps every one of them
     first = next(s for s in ("range", "visibility", "bearing") if s in binned)
     _, mask, info, timeline = binned[first]
-    seen = mask[:, :: COLUMNS_PER_STEP[first]]
-    comps = co_observation_components(seen, min_co)
-    never = [int(run.subjects[i]) for i in np.flatnonzero(~seen.any(axis=1))]
-    if never:
-        _warn(f"{run.name}: landmark(s) {never} were never observed by robots {list(robots)}; "
-              "they cannot be mapped", msgs)
-    if len(comps) > 1:
-        groups = [[int(run.subjects[i]) for i in c] for c in comps]
-        _warn(f"{run.name}: the co-observation graph falls apart into {len(comps)} groups "
-              f"{groups} (pairs seen together in >= {min_co} bins): the relative placement of the "
-              "groups is not measured (a clustered layout?); a map of it places them by anchors "
-              "and lower bounds only — treat it as unreliable.", msgs)
-    report = MRCLAMReport(**{**run.report.__dict__, "warnings": tuple(msgs)})
-    meta = {
-        "source": "MRCLAM",
-        "sensor": name,
-        "subjects": run.subjects.tolist(),
-        "anchor_subjects": run.subjects[anchor_ids].tolist(),
-        "co_observation_groups": [[int(run.subjects[i]) for i in c] for c in comps],
-        **report.as_dict(),
-        **info,
-    }
+    meta = run_meta(run, name, anchor_ids, mask[:, :: COLUMNS_PER_STEP[first]], min_co)
+    meta.update(info)
     if len(parts) == 1:
         matrix, mask = binned[name][0], binned[name][1]
     else:

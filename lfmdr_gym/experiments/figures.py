@@ -266,10 +266,11 @@ def plot_curves(
 
 
 def plot_map(positions: np.ndarray, history: History, path: Path, *, title: str = "",
-             notes: Sequence[str] = ()) -> Path:
+             notes: Sequence[str] = (), covariances: np.ndarray | None = None) -> Path:
     """An example map (paper figures 6, 7, 9) of a history: see :func:`plot_estimate`."""
     return plot_estimate(positions, history.object_positions, history.anchor_ids, path,
-                         title=title, trail=history.robot_poses, notes=notes)
+                         title=title, trail=history.robot_poses, notes=notes,
+                         covariances=covariances)
 
 
 # Characters per line of the map figure's title (fontsize 9) and notes (fontsize 7) on its
@@ -302,14 +303,18 @@ def plot_estimate(
     labels: Sequence[int] | np.ndarray | None = None,
     trail: np.ndarray | None = None,
     notes: Sequence[str] = (),
+    covariances: np.ndarray | None = None,
 ) -> Path:
     """True positions, estimates, and a line between (paper figures 6, 7, 9), saved atomically.
 
     Anchors are drawn as squares; unmapped objects (NaN estimates) as grey crosses at the truth;
-    objects are labelled by ``labels`` (default: their index); ``trail`` (N, >=2) draws the
-    robot's path faintly underneath, when the data has one. The title is wrapped to the
+    objects are labelled by ``labels`` (default: their index) at their truth, or at their
+    estimate where the truth is unknown (NaN: a log mapped without ground truth); ``trail``
+    (N, >=2) draws the robot's path faintly underneath, when the data has one. The title is wrapped to the
     figure's width; ``notes`` (e.g. the map's warnings) are written in full below the plot,
-    each wrapped, and the figure grows to hold them.
+    each wrapped, and the figure grows to hold them. ``covariances`` ((M, 2, 2),
+    ``Map.covariances``) draws each estimate's 95 % ellipse
+    (:func:`lfmdr_gym.render.draw_ellipses`).
     """
     est = np.asarray(positions, dtype=float)
     truth = np.asarray(truth, dtype=float)
@@ -332,14 +337,18 @@ def plot_estimate(
     ax.scatter(*est[mapped & ~anchors].T, s=16, marker="x", color="tab:blue", label="estimate")
     ax.scatter(*truth[known & anchors].T, s=60, marker="s", facecolors="none",
                edgecolors="tab:green", label="anchor")
+    if covariances is not None:
+        from lfmdr_gym.render import draw_ellipses
+
+        draw_ellipses(ax, est, covariances)
     if np.any(known & ~mapped):
         ax.scatter(*truth[known & ~mapped].T, s=40, marker="x", color="grey", label="unmapped")
     if trail is not None:
         ax.plot(*np.asarray(trail)[:, :2].T, color="0.85", lw=0.4, zorder=0)
-    for j, label in enumerate(labels):
-        if known[j]:
-            ax.annotate(str(label), truth[j], fontsize=6, color="0.4", xytext=(2, 2),
-                        textcoords="offset points")
+    for j, label in enumerate(labels):  # at the truth; where it is unknown, at the estimate
+        if known[j] or mapped[j]:
+            ax.annotate(str(label), truth[j] if known[j] else est[j], fontsize=6, color="0.4",
+                        xytext=(2, 2), textcoords="offset points")
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")

@@ -132,7 +132,8 @@ def _online(env_id, steps, *, seed, policy, method, params, every, frame_every, 
                 reach = float(np.abs(placed).max()) + _VIEW_MARGIN if placed.size else 0.0
                 picture = draw_map(arena_half=world.arena_half, estimates=est, truth=truth,
                                    object_radius=world.object_radius, anchor_ids=anchors,
-                                   size=size, view_half=max(world.arena_half, reach))
+                                   size=size, view_half=max(world.arena_half, reach),
+                                   covariances=getattr(current, "covariances", None))
                 frames.append((t, np.concatenate([_resized(env.render(), size), picture], axis=1)))
     finally:
         env.close()

@@ -21,7 +21,7 @@ from lfmdr_gym.experiments.scoring import evaluate, map_history, score_map
 from lfmdr_gym.experiments.store import ensure_writable_dir
 from lfmdr_gym.histories.history import History
 
-__all__ = ["checkpoints_for", "map_history_file", "run_episode"]
+__all__ = ["checkpoints_for", "map_history_file", "method_and_params", "run_episode"]
 
 
 def checkpoints_for(steps: int, every: int | None, sensor: str | None) -> tuple[int, ...]:
@@ -43,7 +43,7 @@ def checkpoints_for(steps: int, every: int | None, sensor: str | None) -> tuple[
     return tuple(range(every, steps + 1, every))
 
 
-def _method_and_params(method: str | None, history: History, params) -> tuple[str, dict[str, Any]]:
+def method_and_params(method: str | None, history: History, params) -> tuple[str, dict[str, Any]]:
     """The registered label that maps ``history`` (None: the default ``build_map`` chooses for
     it, :func:`mappers.default_method`: by sensor, mask, size and dropouts) and its parameters
     (with those the choice or an old label stands for, e.g. ``sparse=True`` for
@@ -92,7 +92,7 @@ def run_episode(
     if out is not None:
         out = ensure_writable_dir(out)
     history = collect_history(env_id, steps, seed, env_kwargs=env_kwargs, policy=policy)
-    method, params = _method_and_params(method, history, params)
+    method, params = method_and_params(method, history, params)
     rows, last = [], None
     for n in points:
         result = evaluate(history.head(n), method, params)
@@ -127,7 +127,7 @@ def map_history_file(
     history = History.load(path)
     if n_steps is not None:
         history = history.head(n_steps)
-    method, params = _method_and_params(method, history, params)
+    method, params = method_and_params(method, history, params)
     out = ensure_writable_dir(out if out is not None else Path(path).with_suffix(""))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -1,6 +1,9 @@
 """Mapping a real MRCLAM run and scoring it against motion capture (``lfmdr mrclam``).
 
-The loader (:mod:`lfmdr_gym.datasets.mrclam`) reads and bins the run; here it is mapped with any
+The run goes through its observation table, as ``lfmdr convert mrclam`` writes it and ``lfmdr
+map`` reads it (:mod:`lfmdr_gym.datasets.mrclam_table`,
+:func:`lfmdr_gym.histories.observations.observations_to_history`: the History the loader,
+:mod:`lfmdr_gym.datasets.mrclam`, gives); here it is mapped with any
 registered method that maps its histories (:func:`mappers.build_map`), by default the one
 :func:`mappers.defaults.choose_method` names for a logged run (``logged=True``: the ``logged``
 column of :data:`mappers.defaults.DEFAULTS`), scored over the non-anchor landmarks, and written
@@ -29,10 +32,13 @@ from lfmdr_gym.datasets.mrclam import (
     ROBOT_SUBJECTS,
     MRCLAMDataWarning,
     MRCLAMReport,
-    load_mrclam,
+    read_run,
+    run_meta,
 )
+from lfmdr_gym.datasets.mrclam_table import mrclam_anchors, mrclam_landmarks, mrclam_observations
 from lfmdr_gym.histories.history import History
-from mappers.core.sensors import check_sensor_set, sensor_name
+from lfmdr_gym.histories.observations import observations_to_history
+from mappers.core.sensors import COLUMNS_PER_STEP, check_sensor_set, sensor_name, sensors_of
 
 __all__ = ["ENSEMBLE_BIN_WIDTHS", "FUSED_BIN_WIDTH", "METHOD_ALIASES", "MRCLAMMap", "map_mrclam_run"]
 
@@ -68,6 +74,9 @@ class MRCLAMMap:
         report: the loader's filtering report.
         history_meta: ``History.meta`` of the binned history.
         csv_path, png_path: files written (None when ``out`` is None).
+        covariances: (M, 2, 2) each landmark's position covariance in the ground-truth frame
+            (``Map.covariances``; zero for anchors, NaN for unmapped), None unless asked for
+            (``uncertainty=``).
     """
 
     run: str
@@ -86,6 +95,7 @@ class MRCLAMMap:
     history_meta: dict[str, Any]
     csv_path: Path | None = None
     png_path: Path | None = None
+    covariances: np.ndarray | None = None
 
     @property
     def mode(self) -> str:
@@ -138,10 +148,30 @@ def _plan(sensor: str, method: str | None, bin_width: float | None, params: dict
 
 def _load(run_dir, key, robots, bin_width, anchors, groundtruth_fixes):
     """The run's History (a fused set: a dict sensor -> History, its parts, binned alike) and
-    the loader's report."""
-    history = load_mrclam(run_dir, sensor_name(key), robots=robots, bin_width=bin_width,
-                          anchors=anchors, groundtruth_fixes=groundtruth_fixes)
-    report = MRCLAMReport.from_meta(history.meta)
+    the loader's report, through the run's observation table: what ``lfmdr convert mrclam``
+    writes (:func:`~lfmdr_gym.datasets.mrclam_table.mrclam_observations`, its anchors and ground
+    truth) and ``lfmdr map`` reads
+    (:func:`~lfmdr_gym.histories.observations.observations_to_history`), which gives the History
+    :func:`~lfmdr_gym.datasets.mrclam.load_mrclam` gives; the loader's meta and warnings added."""
+    name = sensor_name(key)
+    if bin_width is None and name not in DEFAULT_BIN_WIDTH:
+        raise ValueError(f"no default bin width for {name!r}: give bin_width (seconds)")
+    bin_width = DEFAULT_BIN_WIDTH[name] if bin_width is None else bin_width
+    run = read_run(run_dir, robots, groundtruth_fixes=groundtruth_fixes)
+    history = observations_to_history(mrclam_observations(run), mrclam_anchors(run, anchors),
+                                      truth=mrclam_landmarks(run), sensor=name,
+                                      bin_width=bin_width)
+    # co-observation from the sightings: the mask of a sensor that keeps every one of them
+    first = next(s for s in ("range", "visibility", "bearing") if s in sensors_of(name))
+    part = history.parts[first] if history.fused else history
+    seen = np.asarray(part.mask)[:, :: COLUMNS_PER_STEP[first]]
+    meta = run_meta(run, name, history.anchor_ids, seen)
+    meta.update(bin_width=float(bin_width), n_bins=history.n_steps, drop_empty_bins=True,
+                bins_per_robot={str(r): int(np.sum(history.timeline[:, 0] == k))
+                                for k, r in enumerate(run.report.robots)},
+                observed_fraction=[round(float(f), 5) for f in seen.mean(axis=1)])
+    history = history.replace(meta=meta)
+    report = MRCLAMReport.from_meta(meta)
     # a fused set is mapped from its parts (sensor -> History), as it always has been
     return (history if isinstance(key, str) else dict(history.parts)), report
 
@@ -241,6 +271,7 @@ def map_mrclam_run(
     plot: bool = True,
     zero_fill: bool = False,
     mode: str | None = None,
+    uncertainty: bool | str = False,
     **params: Any,
 ) -> MRCLAMMap:
     """Map one MRCLAM run from one sensor and score it against motion capture.
@@ -273,6 +304,8 @@ def map_mrclam_run(
         plot: write ``map.png`` (needs matplotlib) when ``out`` is given.
         zero_fill: map the history with its unobserved entries as zeros and no mask (the paper's
             pipeline on logged data), so methods for complete histories apply.
+        uncertainty: each landmark's covariance (``build_map(uncertainty=...)``, kept in
+            ``MRCLAMMap.covariances`` and drawn as 95 % ellipses in ``map.png``).
         **params: the method's parameters (e.g. ``quantile=0.95``, ``min_co=5``).
     """
     from mappers import build_map
@@ -286,7 +319,8 @@ def map_mrclam_run(
         histories = (histories.replace(mask=None) if isinstance(key, str) else
                      {s: h.replace(mask=None) for s, h in histories.items()})
     history = histories if isinstance(key, str) else next(iter(histories.values()))
-    result = build_map(histories, history.anchor_ids, history.anchor_positions, method, **params)
+    result = build_map(histories, history.anchor_ids, history.anchor_positions, method,
+                       uncertainty=uncertainty, **params)
     run = history.meta["run"]
     subjects = np.asarray(history.meta["subjects"], dtype=np.int64)
     msgs = [*report.warnings, *_warn_map(result, histories, run, sensor, subjects)]
@@ -298,7 +332,7 @@ def map_mrclam_run(
         subjects=subjects, positions=result.positions, truth=history.object_positions,
         anchor_subjects=tuple(int(s) for s in subjects[history.anchor_ids]), mpe=mpe, moe=moe,
         centroid_mpe=centroid_mpe, warnings=tuple(msgs), report=report,
-        history_meta={**history.meta, "sensor": sensor},
+        history_meta={**history.meta, "sensor": sensor}, covariances=result.covariances,
     )
     return outcome if out is None else _write(outcome, Path(out), plot)
 
@@ -335,5 +369,6 @@ def _write(result: MRCLAMMap, out: Path, plot: bool) -> MRCLAMMap:
         title = (f"{result.run} {result.sensor} ({result.method}): MPE {result.mpe:.2f} m, "
                  f"MOE {result.moe:.1f} %")
         plot_estimate(result.positions, result.truth, anchors, png_path, title=title,
-                      labels=result.subjects, notes=result.warnings)
+                      labels=result.subjects, notes=result.warnings,
+                      covariances=result.covariances)
     return dataclasses.replace(result, csv_path=csv_path, png_path=png_path)

@@ -135,11 +135,22 @@ def mask_fields(mask: Any) -> dict[str, np.ndarray]:
 
 def mask_from_fields(fields: dict[str, np.ndarray]) -> Any:
     """The stored mask from a file's arrays (either form), or None."""
-    if "mask_shape" in fields:
+    if any(name in fields for name in _SPARSE_MASK_FIELDS):  # (one missing: a KeyError)
         indices = fields["mask_indices"]
         return sp.csr_array((np.ones(indices.size, bool), indices, fields["mask_indptr"]),
-                            shape=tuple(int(v) for v in fields["mask_shape"]))
+                            shape=_shape(fields["mask_shape"], "mask_shape"))
     return fields.get("mask")
+
+
+_SPARSE_MASK_FIELDS = ("mask_indices", "mask_indptr", "mask_shape")
+
+
+def _shape(value: np.ndarray, name: str) -> tuple[int, int]:
+    """A stored (rows, columns) shape: two non-negative integers; anything else a ValueError."""
+    value = np.asarray(value)
+    if value.shape != (2,) or value.dtype.kind not in "iu" or np.any(value < 0):
+        raise ValueError(f"{name!r} must be two non-negative integers, got {value!r}")
+    return int(value[0]), int(value[1])
 
 
 def compact_fields(data: Any) -> dict[str, np.ndarray]:
@@ -158,7 +169,7 @@ def from_fields(fields: dict[str, np.ndarray]) -> Any:
     """The stored matrix from a file's arrays (either form); KeyError if neither is there."""
     if "matrix" in fields or "matrix_shape" not in fields:
         return fields["matrix"]
-    shape = tuple(int(v) for v in fields["matrix_shape"])
+    shape = _shape(fields["matrix_shape"], "matrix_shape")
     return sp.csr_array(
         (fields["matrix_data"], fields["matrix_indices"], fields["matrix_indptr"]), shape=shape
     )

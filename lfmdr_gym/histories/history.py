@@ -5,6 +5,10 @@ row per object and, per step, ``columns_per_step`` columns (:data:`mappers.core.
 1 for visibility (0/1) and range, 2 for bearing (cos, sin)). Columns are in step order, so the
 first ``n`` steps of a history are its first ``n * columns_per_step`` columns (:meth:`History.head`).
 
+A history is 2-D or 3-D (:attr:`History.dimension`): object and anchor positions have 2 or 3
+columns. A 3-D bearing history holds a unit ray per step, 3 columns ``(x, y, z)`` in the sensor's
+frame (:func:`step_columns`); visibility and range keep their one column.
+
 A *fused* history holds several sensors' histories of the same objects over the same steps (a
 camera's range and bearing, or visibility and bearing of one walk): its ``sensor`` names the set
 (:data:`mappers.core.sensors.FUSED_SENSORS`, e.g. ``"range-bearing"``), its ``matrix`` is a mapping
@@ -41,13 +45,27 @@ from mappers.core.sensors import (
 )
 
 FORMAT = "lfmdr-history"
-FORMAT_VERSION = 3
+FORMAT_VERSION = 4
 # 1: dense float64 matrix only; 2: also the compact (sparse) form; 3: also fused histories (one
 # matrix per sensor, its fields named "<sensor>.<field>") and sparse masks (mask_indices,
-# mask_indptr, mask_shape). A file is written with the lowest version that holds it, so older
-# lfmdr still reads what it can.
-READABLE_VERSIONS = (1, 2, 3)
+# mask_indptr, mask_shape); 4: 3-D histories (positions (M, 3), bearing 3 columns per step), the
+# same fields. A file is written with the lowest version that holds it, so older lfmdr still
+# reads what it can and refuses a 3-D file by its version rather than by a shape error.
+READABLE_VERSIONS = (1, 2, 3, 4)
+DIMENSIONS = (2, 3)
+"""The dimensions a history's positions can have (its map's)."""
 _ZIP_MAGIC = b"PK\x03\x04"  # an .npz is a zip archive
+
+
+def step_columns(sensor: str, dimension: int = 2) -> int:
+    """Matrix columns one step of ``sensor`` contributes in a ``dimension``-D history: as
+    :data:`mappers.core.sensors.COLUMNS_PER_STEP` in 2-D; in 3-D a bearing is a unit ray, 3
+    columns ``(x, y, z)`` in the sensor's frame."""
+    if dimension not in DIMENSIONS:
+        raise ValueError(f"dimension must be one of {list(DIMENSIONS)}, got {dimension!r}")
+    if sensor not in COLUMNS_PER_STEP:
+        raise ValueError(f"sensor must be one of {list(COLUMNS_PER_STEP)}, got {sensor!r}")
+    return 3 if (sensor == "bearing" and dimension == 3) else COLUMNS_PER_STEP[sensor]
 
 
 class HistoryFileError(ValueError):
@@ -64,14 +82,16 @@ class History:
             ``matrix`` is then a mapping sensor -> matrix (one per sensor of the set, each as
             below, the same objects and steps) and whose ``mask`` is None or a mapping with the
             same keys (a value None: that sensor complete).
-        matrix: (M, N * columns_per_step) float64, one row per object. May be given in a
+        matrix: (M, N * columns_per_step) float64, one row per object (columns_per_step:
+            :func:`step_columns` of the sensor and the dimension). May be given in a
             compact form (a ``scipy.sparse`` matrix, or float32), which is kept as given
             (:attr:`compact`); reading ``matrix`` then builds the float64 matrix if it fits in
             :data:`lfmdr_gym.histories.compact.MAX_DENSE_BYTES` (else DenseTooLargeError naming
             :attr:`sparse`, the accessor that always works).
-        object_positions: (M, 2) true object positions [m] (NaN where unknown).
+        object_positions: (M, 2) true object positions [m] (NaN where unknown); (M, 3) for a
+            3-D history (:attr:`dimension`).
         anchor_ids: (A,) indices of the anchor objects, A >= 3.
-        anchor_positions: (A, 2) known positions of the anchors [m].
+        anchor_positions: (A, 2) known positions of the anchors [m]; (A, 3) in 3-D.
         robot_poses: (N, 3) true robot pose (x, y, heading) after each step, or None for
             logged data without it. Never given to a mapper.
         mask: None when every entry was observed, else a (M, N * columns_per_step) bool array,
@@ -102,7 +122,12 @@ class History:
         if isinstance(self.__dict__["_data"], Mapping):
             raise ValueError(f"a mapping sensor -> matrix is a fused history: its sensor must name "
                              f"the set (one of {list(FUSED_SENSORS)}), got {self.sensor!r}")
-        columns = COLUMNS_PER_STEP[self.sensor]
+        obj = np.asarray(self.object_positions, dtype=np.float64)
+        if obj.ndim != 2 or obj.shape[1] not in DIMENSIONS:
+            raise ValueError(f"object_positions must have shape (M, 2) or, for a 3-D history, "
+                             f"(M, 3), got {obj.shape}")
+        dimension = obj.shape[1]
+        columns = step_columns(self.sensor, dimension)
         matrix = compact.check_compact(self.__dict__["_data"])
         if matrix.ndim != 2:
             raise ValueError(f"matrix must be 2-D (objects x columns), got shape {matrix.shape}")
@@ -110,15 +135,15 @@ class History:
         if d % columns:
             raise ValueError(
                 f"matrix has {d} columns, not a multiple of {columns} "
-                f"(columns per step for {self.sensor!r})"
+                f"(columns per step for {self.sensor!r} in {dimension}-D)"
             )
-        obj = np.asarray(self.object_positions, dtype=np.float64)
-        if obj.shape != (m, 2):
-            raise ValueError(f"object_positions must have shape ({m}, 2), got {obj.shape}")
+        if obj.shape[0] != m:
+            raise ValueError(f"object_positions must have shape ({m}, {dimension}), got {obj.shape}")
         ids = check_anchor_ids(self.anchor_ids, m, min_count=0)
         apos = np.asarray(self.anchor_positions, dtype=np.float64)
-        if apos.shape != (ids.size, 2):
-            raise ValueError(f"anchor_positions must have shape ({ids.size}, 2), got {apos.shape}")
+        if apos.shape != (ids.size, dimension):
+            raise ValueError(f"anchor_positions must have shape ({ids.size}, {dimension}) (the "
+                             f"dimension of object_positions), got {apos.shape}")
         poses = None
         if self.robot_poses is not None:
             poses = np.asarray(self.robot_poses, dtype=np.float64)
@@ -208,11 +233,16 @@ class History:
         return None if parts is None else MappingProxyType(parts)
 
     @property
+    def dimension(self) -> int:
+        """2 or 3: the dimension of the positions (and of the map built from the history)."""
+        return self.object_positions.shape[1]
+
+    @property
     def columns_per_step(self) -> int:
         """Matrix columns per step (of a fused history: over all its sensors)."""
         if self.fused:
             return sum(p.columns_per_step for p in self.parts.values())
-        return COLUMNS_PER_STEP[self.sensor]
+        return step_columns(self.sensor, self.dimension)
 
     @property
     def n_objects(self) -> int:
@@ -372,6 +402,8 @@ class History:
             per_sensor = compact.compact_fields(self.__dict__["_data"])
             if mask is not None:
                 per_sensor.update(compact.mask_fields(mask))
+        if self.dimension == 3:  # only 3-D files need version 4; 2-D files are as before
+            version = 4
         arrays: dict[str, np.ndarray] = {
             "format": np.array(FORMAT),
             "format_version": np.array(version),
@@ -404,7 +436,7 @@ class History:
                 files = set(data.files)
                 if "format" not in files or str(data["format"]) != FORMAT:
                     raise HistoryFileError(f"{path} is not an lfmdr history file (no '{FORMAT}' tag)")
-                version = int(data["format_version"])
+                version = _version(data["format_version"], path)
                 if version not in READABLE_VERSIONS:
                     raise HistoryFileError(
                         f"{path} has history format version {version}; this lfmdr reads "
@@ -418,8 +450,8 @@ class History:
             raise HistoryFileError(f"{path} is damaged or not an .npz history: {exc}") from exc
         try:
             sensor = str(fields["sensor"])
-            if version >= 3 and sensor in FUSED_SENSORS:
-                names = [str(n) for n in fields["sensors"]]
+            if version >= 3 and sensor in FUSED_SENSORS:  # (4 is 3 with 3-D positions)
+                names = _names(fields["sensors"])
                 parts = {n: {k[len(n) + 1:]: v for k, v in fields.items() if k.startswith(n + ".")}
                          for n in names}
                 for n, part in parts.items():
@@ -437,13 +469,44 @@ class History:
                 anchor_positions=fields["anchor_positions"],
                 robot_poses=fields.get("robot_poses"),
                 mask=mask,
-                meta=json.loads(str(fields["meta"])),
+                meta=_meta(fields["meta"]),
                 timeline=fields.get("timeline"),
             )
         except KeyError as exc:
             raise HistoryFileError(f"{path} lacks the field {exc.args[0]!r}") from exc
-        except ValueError as exc:
+        except (ValueError, TypeError, OverflowError) as exc:
+            # TypeError / OverflowError: a field of the wrong kind (a 2-D array where a number
+            # belongs, a count beyond int64) that the checks above do not name
             raise HistoryFileError(f"{path} holds an inconsistent history: {exc}") from exc
+
+
+def _version(value: np.ndarray, path: Path) -> int:
+    """The format version a file states: a single integer, nothing else read as one."""
+    value = np.asarray(value)
+    if value.shape != () or value.dtype.kind not in "iu":
+        raise HistoryFileError(f"{path} states no integer format version (got {value.dtype} "
+                               f"of shape {value.shape})")
+    return int(value)
+
+
+def _names(value: np.ndarray) -> list[str]:
+    """The sensors a fused history's file lists: a 1-D array of strings."""
+    value = np.asarray(value)
+    if value.ndim != 1 or value.dtype.kind != "U":
+        raise ValueError(f"'sensors' must list the fused sensors' names, got {value.dtype} of "
+                         f"shape {value.shape}")
+    return [str(n) for n in value]
+
+
+def _meta(value: np.ndarray) -> dict:
+    """The file's meta data: one JSON object (as :meth:`History.save` writes it)."""
+    value = np.asarray(value)
+    if value.shape != () or value.dtype.kind != "U":
+        raise ValueError(f"'meta' must be one JSON string, got {value.dtype} of shape {value.shape}")
+    meta = json.loads(str(value))  # a json.JSONDecodeError is a ValueError
+    if not isinstance(meta, dict):
+        raise ValueError(f"'meta' must hold a JSON object, got {type(meta).__name__}")
+    return meta
 
 
 def _mask_get(self: History) -> Any:

@@ -20,8 +20,8 @@ import numpy as np
 from lfmdr_gym.checks import check_int
 from lfmdr_gym.exploration.contract import PredictPolicy, as_policy
 from lfmdr_gym.histories.compact import COMPACT_ABOVE_BYTES, CompactSteps
-from lfmdr_gym.histories.history import History
-from mappers.core.sensors import COLUMNS_PER_STEP, FUSED_SENSORS, SENSORS
+from lfmdr_gym.histories.history import History, step_columns
+from mappers.core.sensors import FUSED_SENSORS, SENSORS
 
 __all__ = ["collect", "collect_vector"]
 
@@ -88,22 +88,24 @@ def _check_seed(seed: int | None) -> int | None:
     return int(seed)
 
 
-def _steps_to_matrix(buffer: np.ndarray, sensor: str) -> np.ndarray:
-    """(N, M, *c) per-step observations -> the (M, N * c) History matrix, c interleaved per step."""
+def _steps_to_matrix(buffer: np.ndarray, sensor: str, dimension: int = 2) -> np.ndarray:
+    """(N, M, *c) per-step observations -> the (M, N * c) History matrix, c interleaved per step
+    (c: :func:`~lfmdr_gym.histories.history.step_columns` of the sensor in ``dimension``-D)."""
     n, m = buffer.shape[:2]
     per_step = int(np.prod(buffer.shape[2:], dtype=int))
-    if per_step != COLUMNS_PER_STEP[sensor]:
+    columns = step_columns(sensor, dimension)
+    if per_step != columns:
         raise ValueError(
-            f"a {sensor!r} observation must give {COLUMNS_PER_STEP[sensor]} value(s) per object, "
+            f"a {sensor!r} observation in {dimension}-D must give {columns} value(s) per object, "
             f"got shape {buffer.shape[1:]}"
         )
     return np.moveaxis(buffer, 0, 1).reshape(m, n * per_step).astype(np.float64)
 
 
-def _steps_to_mask(observed: np.ndarray, sensor: str) -> np.ndarray:
+def _steps_to_mask(observed: np.ndarray, sensor: str, dimension: int = 2) -> np.ndarray:
     """(N, M) per-step ``observed`` flags -> the (M, N * c) History mask: a step's flag covers
-    each of its c columns (bearing: cos and sin)."""
-    c = COLUMNS_PER_STEP[sensor]
+    each of its c columns (bearing: cos and sin; in 3-D the ray's x, y, z)."""
+    c = step_columns(sensor, dimension)
     return np.repeat(observed.T.astype(bool), c, axis=1)
 
 
@@ -179,13 +181,15 @@ class _Episode:
 
     def history(self, sensor: str, meta: dict[str, Any]) -> History:
         matrices, masks = {}, {}
+        dimension = np.shape(self.truth["object_positions"])[1]  # 2, or 3 for a 3-D world
         for key, values in self.values.items():
             if self.compact:
                 matrices[key] = values.matrix(key)
                 masks[key] = values.mask() if values.masked else None
             else:
-                matrices[key] = _steps_to_matrix(values, key)
-                masks[key] = None if self.observed is None else _steps_to_mask(self.observed, key)
+                matrices[key] = _steps_to_matrix(values, key, dimension)
+                masks[key] = (None if self.observed is None
+                              else _steps_to_mask(self.observed, key, dimension))
         single = len(matrices) == 1
         masked = any(m is not None for m in masks.values())
         return History(sensor=sensor, matrix=matrices[sensor] if single else matrices,

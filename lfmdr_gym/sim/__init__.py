@@ -4,8 +4,9 @@
 :mod:`~lfmdr_gym.sim.sensors` (pure geometry of a pose and the objects),
 :mod:`~lfmdr_gym.sim.sensing_limits` (field of view, range, noise, dropouts, occlusion),
 :mod:`~lfmdr_gym.sim.kernels` (their compiled per-step loops), :mod:`~lfmdr_gym.sim.grid` (cell
-grids: the objects near a pose, separated layouts) and :mod:`~lfmdr_gym.sim.camera` (the MRCLAM
-camera's keywords).
+grids: the objects near a pose, separated layouts), :mod:`~lfmdr_gym.sim.camera` (the MRCLAM
+camera's keywords), and for the 3-D world :mod:`~lfmdr_gym.sim.tags3d` (tags on posts and walls,
+anchors) and :mod:`~lfmdr_gym.sim.view3d` (a pitched camera's rays, view and occlusion).
 """
 
 from lfmdr_gym.sim.camera import CAMERA_PRESET

@@ -134,6 +134,12 @@ class CovisCalibrated(TransformerMixin, BaseEstimator):
                         anchor_positions=anchor_positions).embedding_
 
 
+NEIGHBORS = 12
+"""``COVIS-AUTO``'s default neighbour pairs per object. Not a fixed parameter default: build_map
+refuses an ``n_neighbors`` of M or more, and the masked bearing default (BEARING-BA from
+COVIS-AUTO) failed for 12 objects or fewer (issue 35); CAL-SMA takes at most M - 1."""
+
+
 class CovisAuto(TransformerMixin, BaseEstimator):
     """``"COVIS-AUTO"``: ``covis-cal`` for a global view, the ordinal map for a local one
     (module docstring).
@@ -141,7 +147,9 @@ class CovisAuto(TransformerMixin, BaseEstimator):
     Parameters:
         min_co: as ``covis-cal``'s, and the count below which a pair is "not seen together".
         local_share: the largest share of pairs not seen together for which ``covis-cal`` maps.
-        n_neighbors, random_state: ``covis-cal``'s.
+        n_neighbors: ``covis-cal``'s (None: :data:`NEIGHBORS`, which CAL-SMA lowers to M - 1
+            for fewer objects; a number given is checked against the objects mapped).
+        random_state: ``covis-cal``'s.
         max_iter: ``covis-angle``'s SMACOF updates.
 
     ``fit(X, mask=None, *, sensor=None, anchor_ids=None, anchor_positions=None)`` maps a bearing
@@ -160,7 +168,7 @@ class CovisAuto(TransformerMixin, BaseEstimator):
         "random_state": ["random_state"],
     }
 
-    def __init__(self, *, min_co: int = 3, local_share: float = 0.1, n_neighbors: int | None = 12,
+    def __init__(self, *, min_co: int = 3, local_share: float = 0.1, n_neighbors: int | None = None,
                  max_iter: int = 300, random_state=0) -> None:
         self.min_co = min_co
         self.local_share = local_share
@@ -180,8 +188,8 @@ class CovisAuto(TransformerMixin, BaseEstimator):
         self.local_share_ = float(np.mean(Cs[off] < self.min_co)) if off.any() else 1.0
         if self.local_share_ <= self.local_share:
             self.branch_ = "covis-cal"
-            est = CovisCalibrated(min_co=self.min_co, n_neighbors=self.n_neighbors,
-                                  random_state=self.random_state)
+            k = NEIGHBORS if self.n_neighbors is None else self.n_neighbors
+            est = CovisCalibrated(min_co=self.min_co, n_neighbors=k, random_state=self.random_state)
             self.embedding_ = est.fit_transform(X, mask=mask, sensor=sensor,
                                                 anchor_ids=anchor_ids,
                                                 anchor_positions=anchor_positions)

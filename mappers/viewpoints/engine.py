@@ -91,7 +91,8 @@ def scatter_sum(idx: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
     """Per index, the sum of ``values`` (K,) or (K, ...) over the observations with that index."""
     if values.ndim == 1:
         return np.bincount(idx, weights=values, minlength=n)
-    flat = values.reshape(len(values), -1)
+    # the trailing size spelt out: reshape(0, -1) cannot infer it when there are no values
+    flat = values.reshape(len(values), int(np.prod(values.shape[1:])))
     out = np.stack([np.bincount(idx, weights=flat[:, k], minlength=n) for k in range(flat.shape[1])],
                    axis=1)
     return out.reshape((n, *values.shape[1:]))

@@ -19,7 +19,8 @@ def test_committed_page_is_the_rendered_one():
 def test_every_source_is_on_the_page_with_its_command():
     page = REPORT["render"](ROOT)
     sources = [*REPORT["PROTOCOL"].values(), REPORT["SENSING"],
-               *(s for s, _ in REPORT["VIS_BA"]), *REPORT["EXPLORATION_CAL_SMA"],
+               *(s for s, _ in REPORT["VIS_BA"]), *REPORT["UNCERTAINTY"],
+               *REPORT["EXPLORATION_CAL_SMA"],
                *(s for s, _ in REPORT["EXPLORATION_OTHER"])]
     for source in sources:
         assert (ROOT / source.path).is_file()

@@ -25,6 +25,7 @@ EXAMPLES = {
     "online_map": ["--steps", "100"],
     "map_synthetic": None,
     "mrclam_map": [str(MRCLAM), "--sensor", "range"],
+    "map_rosbag": ["--steps", "300", "--container", "mcap", "--msgtype", "apriltag_msgs"],
 }
 
 

@@ -16,7 +16,7 @@ import lfmdr_gym
 from lfmdr_gym.env import LFMDREnv
 from lfmdr_gym.sim import sensors
 
-ENV_IDS = sorted(i for i in gym.registry if i.startswith("LFMDR-"))
+ENV_IDS = sorted(i for i in gym.registry if i.startswith("LFMDR-") and i not in lfmdr_gym.ENV_IDS_3D)
 SENSOR_OF = {"LFMDR-Visibility-v0": "visibility", "LFMDR-Bearing-v0": "bearing", "LFMDR-Range-v0": "range",
              "LFMDR-RangeBearing-v0": "range-bearing", "LFMDR-VisibilityBearing-v0": "visibility-bearing",
              "LFMDR-Camera-v0": "range-bearing"}

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from map_errors import non_anchor_error
 from synthetic_camera import camera_bearings
+from synthetic_walk import ANCHORS, history, layout, walk
 
 from mappers import build_map
 from mappers.catalog import resolve_method
@@ -129,3 +130,16 @@ def test_pattern_only_methods_refuse_a_complete_bearing_history(method):
     Y = MaskedMapper(method=method).fit_transform(X, mask=mask, sensor="bearing", anchor_ids=a,
                                                   anchor_positions=P[a])
     assert np.isfinite(Y).all()
+
+
+@pytest.mark.parametrize("n_objects", [5, 8, 12])
+def test_masked_bearing_default_maps_twelve_objects_or_fewer(n_objects):
+    # COVIS-AUTO's 12 neighbours were refused for 12 objects or fewer (issue 35); its default
+    # now lets CAL-SMA take at most M - 1, while a number given is still checked
+    P = layout(n_objects, seed=1)
+    X, mask = history(P, walk(80, seed=2), "bearing", masked=True)
+    for method in (None, "COVIS-AUTO"):
+        result = build_map(X, ANCHORS, P[ANCHORS], mask=mask, method=method)
+        assert not np.isnan(result.positions).any()
+    with pytest.raises(ValueError, match="n_neighbors must be an integer in"):
+        build_map(X, ANCHORS, P[ANCHORS], mask=mask, method="COVIS-AUTO", n_neighbors=n_objects)

@@ -1,0 +1,238 @@
+"""Per-landmark uncertainty (``build_map(uncertainty=True)``): is it calibrated, sharp and cheap?
+
+    python benchmarks/bench_uncertainty.py [--layouts 25] [--steps 1000] [--seed0 12000]
+        [--sets visibility,bearing,range-bearing,bearing-view90,mrclam]
+        [--csv docs/results/uncertainty/uncertainty.csv]
+
+Simulated sets: each layout is one random walk of ``LFMDR-Bearing-v0`` (50 objects, 4 corner
+anchors), seeds ``seed0, seed0 + 1, ...`` (fresh: never used to choose a setting), and from its
+true poses and layout (:mod:`bench_fusion_sim`'s sensors):
+
+* ``visibility``: the visibility bits of the walk's poses (the env's model, occlusion on),
+  mapped by the default (``CAL-SMA``; uncertainty by the bootstrap over steps);
+* ``bearing``: 360-degree bearings with 2 degrees of Gaussian noise (``BEARING-BA``; model);
+* ``range-bearing``: 360 degrees, 2 degrees and 2 cm of noise, fused (``LOC-SMA`` refined by its
+  range-bearing adjustment; model);
+* ``bearing-view90``: bearings through a 90-degree view (masked), 2 degrees of noise
+  (``BEARING-BA``; model);
+* ``visibility-other-sim``: visibility from a second, independent world
+  (:func:`bench_view_other_sim.other_sim`: uniform layout without spacing rule, no occlusion,
+  its own walk, a 0.55 m visibility radius, 360-degree view), 50 objects, ``--steps`` steps —
+  the body of data the bootstrap's inflation
+  (:data:`mappers.covariances.BOOTSTRAP_INFLATION`) was chosen on; ``visibility`` confirms it.
+
+The line ``inflation for 0.95`` printed per set is the factor on the covariances that would put
+95 % of its landmarks inside their regions (how :data:`mappers.covariances.BOOTSTRAP_INFLATION`
+was chosen, on ``visibility-other-sim``).
+
+``mrclam``: every MRCLAM run under ``--data`` mapped from range and bearing fused (the logged-run
+default, ``LOC-SMA``), scored against motion capture. ``mrclam-inflated`` asks what a calibrated
+inflation would give: for each run, the factor on the covariances that puts 95 % of the *other*
+runs' landmarks inside their regions (leave-one-run-out: the run's figure does not come from a
+factor chosen on it), applied to that run (not a default of the library: the figures say
+whether one factor carries from run to run).
+
+Per map: the share of non-anchor landmarks whose truth lies inside their 95 % region (squared
+Mahalanobis distance at most the chi-squared(2) 0.95 quantile), the mean RMS radius of their
+95 % ellipses (:func:`mappers.core.uncertainty.rms_radius`), their mean position error, and the
+CPU and wall time of the map alone and of the map with its uncertainty (both built in turn in
+this process). The summary per set pools the landmarks of all maps: coverage (goal 0.88-0.99
+simulated, >= 0.80 real), sharpness = mean RMS radius / mean error (goal <= 3; a calibrated
+Gaussian gives about 1.95), and the ratio of the median CPU times with and without uncertainty
+(goal <= 1.5).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import math
+import statistics
+import time
+import warnings
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+from bench_fusion_sim import simulate_camera, visibility_history
+from bench_view_other_sim import other_sim
+
+import lfmdr_gym  # noqa: F401  (registers the env ids)
+from lfmdr_gym import collect
+from lfmdr_gym.atomic import atomic_write_text
+from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
+from mappers import build_map
+from mappers.core.uncertainty import chi2_quantile, mahalanobis_squared, rms_radius
+
+SETS = ("visibility", "bearing", "range-bearing", "bearing-view90", "visibility-other-sim",
+        "mrclam")
+FIELDS = ("set", "layout", "method", "n_scored", "inside", "rms_radius", "mpe", "cpu_map",
+          "cpu_uncertainty", "wall_map", "wall_uncertainty")
+
+
+def _timed(fn):
+    t, cpu = time.perf_counter(), time.process_time()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        out = fn()
+    return out, time.process_time() - cpu, time.perf_counter() - t
+
+
+def score(positions, cov, truth, objects) -> tuple[int, int, float, float]:
+    """(landmarks scored, inside their 95 % region, mean RMS radius, mean position error) over
+    ``objects`` with a finite estimate."""
+    objects = np.asarray(objects)
+    objects = objects[np.all(np.isfinite(positions[objects]), axis=1)]
+    q = mahalanobis_squared(truth[objects] - positions[objects], cov[objects])
+    radius = rms_radius(cov[objects])
+    err = np.linalg.norm(positions[objects] - truth[objects], axis=1)
+    return (len(objects), int(np.sum(q <= chi2_quantile(2))), float(np.mean(radius)),
+            float(np.mean(err)))
+
+
+def map_row(name, layout, histories, anchors, truth, **kwargs) -> dict:
+    """One map without and with uncertainty, scored."""
+    plain, cpu0, wall0 = _timed(lambda: build_map(histories, anchors, truth[anchors], **kwargs))
+    m, cpu1, wall1 = _timed(lambda: build_map(histories, anchors, truth[anchors],
+                                              uncertainty=True, **kwargs))
+    if not np.array_equal(plain.positions, m.positions, equal_nan=True):
+        raise AssertionError(f"{name} {layout}: uncertainty=True changed the map")
+    objects = np.setdiff1d(np.arange(len(truth)), anchors)
+    n, inside, radius, mpe = score(m.positions, m.covariances, truth, objects)
+    ok = objects[np.all(np.isfinite(m.positions[objects]), axis=1)]
+    q = mahalanobis_squared(truth[ok] - m.positions[ok], m.covariances[ok])
+    return {"_q": q, "set": name, "layout": layout, "method": m.method, "n_scored": n, "inside": inside,
+            "rms_radius": radius, "mpe": mpe, "cpu_map": cpu0, "cpu_uncertainty": cpu1,
+            "wall_map": wall0, "wall_uncertainty": wall1}
+
+
+def simulated_rows(seed: int, steps: int, sets) -> list[dict]:
+    rows = []
+    if not set(sets) - {"visibility-other-sim", "mrclam"}:
+        P, X, _ = other_sim(seed, n=steps, fov=360.0)
+        return [map_row("visibility-other-sim", seed, X, np.arange(4), P, sensor="visibility")]
+    env = gym.make("LFMDR-Bearing-v0")
+    history = collect(env, RandomWalkPolicy.for_env(env, seed=seed), steps, seed=seed)
+    radius = env.unwrapped.world.object_radius
+    visual_angle = math.radians(env.unwrapped.visual_angle_deg)
+    env.close()
+    truth, anchors = history.object_positions, history.anchor_ids
+    rng = np.random.default_rng(seed)
+    if "visibility" in sets:
+        vis = visibility_history(history, radius, visual_angle)
+        rows.append(map_row("visibility", seed, vis, anchors, truth, sensor="visibility"))
+    if "bearing" in sets:
+        fused, _ = simulate_camera(history, 360.0, None, 2.0, 0.0, rng)
+        rows.append(map_row("bearing", seed, fused["bearing"], anchors, truth, sensor="bearing"))
+    if "range-bearing" in sets:
+        fused, _ = simulate_camera(history, 360.0, None, 2.0, 0.02, rng)
+        rows.append(map_row("range-bearing", seed, fused, anchors, truth))
+    if "visibility-other-sim" in sets:
+        P, X, _ = other_sim(seed, n=steps, fov=360.0)
+        rows.append(map_row("visibility-other-sim", seed, X, np.arange(4), P,
+                            sensor="visibility"))
+    if "bearing-view90" in sets:
+        fused, masks = simulate_camera(history, 90.0, None, 2.0, 0.0, rng)
+        rows.append(map_row("bearing-view90", seed, fused["bearing"], anchors, truth,
+                            sensor="bearing", mask=masks["bearing"]))
+    return rows
+
+
+def mrclam_rows(data: Path) -> list[dict]:
+    from lfmdr_gym.experiments.mrclam import map_mrclam_run
+
+    rows, q_runs = [], {}
+    for run_dir in sorted(p for p in data.glob("MRCLAM_Dataset*") if p.is_dir()):
+        plain, cpu0, wall0 = _timed(lambda d=run_dir: map_mrclam_run(d, "range-bearing",
+                                                                      plot=False))
+        r, cpu1, wall1 = _timed(lambda d=run_dir: map_mrclam_run(d, "range-bearing", plot=False,
+                                                                 uncertainty=True))
+        anchors = np.flatnonzero(np.isin(r.subjects, r.anchor_subjects))
+        objects = np.setdiff1d(np.arange(len(r.subjects)), anchors)
+        n, inside, radius, mpe = score(r.positions, r.covariances, r.truth, objects)
+        rows.append({"_q": mahalanobis_squared(r.truth[objects] - r.positions[objects],
+                                               r.covariances[objects]),
+                     "set": "mrclam", "layout": run_dir.name, "method": r.method, "n_scored": n,
+                     "inside": inside, "rms_radius": radius, "mpe": mpe, "cpu_map": cpu0,
+                     "cpu_uncertainty": cpu1, "wall_map": wall0, "wall_uncertainty": wall1})
+        ok = objects[np.all(np.isfinite(r.positions[objects]), axis=1)]
+        q_runs[run_dir.name] = mahalanobis_squared(r.truth[ok] - r.positions[ok],
+                                                   r.covariances[ok])
+    for row in list(rows):  # leave-one-run-out inflation (module docstring)
+        others = np.concatenate([q for name, q in q_runs.items() if name != row["layout"]])
+        if not others.size:
+            continue
+        factor = float(np.quantile(others, 0.95)) / chi2_quantile(2)
+        rows.append({**row, "set": "mrclam-inflated", "_q": q_runs[row["layout"]] / factor,
+                     "inside": int(np.sum(q_runs[row["layout"]] <= factor * chi2_quantile(2))),
+                     "rms_radius": row["rms_radius"] * math.sqrt(factor)})
+    return rows
+
+
+def summary(rows: list[dict]) -> list[dict]:
+    """Per set: layouts, coverage, sharpness and the CPU-time ratio (module docstring)."""
+    out = []
+    for name in dict.fromkeys(r["set"] for r in rows):
+        rs = [r for r in rows if r["set"] == name]
+        n = sum(int(r["n_scored"]) for r in rs)
+        radius = sum(float(r["rms_radius"]) * int(r["n_scored"]) for r in rs) / n
+        err = sum(float(r["mpe"]) * int(r["n_scored"]) for r in rs) / n
+        out.append({
+            "set": name, "layouts": len(rs), "method": rs[0]["method"],
+            "coverage": sum(int(r["inside"]) for r in rs) / n,
+            "sharpness": radius / err, "mpe": err,
+            "time_ratio": (statistics.median(float(r["cpu_uncertainty"]) for r in rs)
+                           / statistics.median(float(r["cpu_map"]) for r in rs)),
+        })
+    return out
+
+
+def write_csv(path: Path, rows: list[dict]) -> None:
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=FIELDS, lineterminator="\n")
+    writer.writeheader()
+    for r in rows:
+        writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()
+                         if k != "_q"})
+    atomic_write_text(path, buf.getvalue())
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--layouts", type=int, default=25)
+    ap.add_argument("--steps", type=int, default=1000)
+    ap.add_argument("--seed0", type=int, default=12000)
+    ap.add_argument("--sets", default=",".join(SETS))
+    ap.add_argument("--data", type=Path, default=Path("/work/shared/data/mrclam"))
+    ap.add_argument("--csv", type=Path, default=None)
+    args = ap.parse_args(argv)
+    sets = [s for s in args.sets.split(",") if s]
+    unknown = set(sets) - set(SETS)
+    if unknown:
+        ap.error(f"unknown sets {sorted(unknown)}; choose from {list(SETS)}")
+    rows: list[dict] = []
+    if "mrclam" in sets:
+        if not args.data.is_dir():
+            ap.error(f"no MRCLAM data at {args.data}")
+        rows += mrclam_rows(args.data)
+        if args.csv:
+            write_csv(args.csv, rows)
+    for k in range(args.layouts if set(sets) - {"mrclam"} else 0):
+        rows += simulated_rows(args.seed0 + k, args.steps, sets)
+        if args.csv:
+            write_csv(args.csv, rows)  # after every layout: a partial run keeps its rows
+        print(f"layout {k + 1}/{args.layouts} done", flush=True)
+    print(f"{'set':<16}{'layouts':>8}{'coverage':>10}{'sharpness':>11}{'MPE [m]':>10}"
+          f"{'time x':>8}  method")
+    for s in summary(rows):
+        print(f"{s['set']:<16}{s['layouts']:>8}{s['coverage']:>10.3f}{s['sharpness']:>11.2f}"
+              f"{s['mpe']:>10.4f}{s['time_ratio']:>8.2f}  {s['method']}")
+    for name in dict.fromkeys(r["set"] for r in rows):
+        q = np.concatenate([r["_q"] for r in rows if r["set"] == name])
+        print(f"{name}: inflation for 0.95 = {np.nanquantile(q, 0.95) / chi2_quantile(2):.3f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,135 @@
+"""``Map.covariances``: each object's position uncertainty, for ``build_map(uncertainty=...)``.
+
+Two sources, chosen by ``uncertainty``:
+
+* ``"model"`` — from the normal equations of a bundle adjustment, where the method ends with one
+  (``BEARING-BA``, ``LOC-SMA`` refined by its range-bearing or bearing adjustment): the objects'
+  marginal covariances with the viewpoints eliminated and the anchors fixed, scaled by the
+  robustly weighted residuals' variance (:mod:`mappers.viewpoints.marginals`);
+* ``"bootstrap"`` — for every method: a moving-block bootstrap over the history's steps
+  (Künsch 1989; blocks of ``ceil(sqrt(N))`` consecutive steps, since consecutive steps of a walk
+  see nearly the same scene), :data:`BOOTSTRAP_REPLICATES` replicate histories each mapped by
+  the same method with the same anchors (each replicate's anchor fit aligns it to the anchors),
+  the covariance of the replicates' positions widened by
+  :func:`mappers.core.uncertainty.sample_size_factor` for the few replicates it comes from, and
+  by :data:`BOOTSTRAP_INFLATION` for the method's bias, which resampling cannot see.
+
+``True`` is ``"model"`` where there is one, else ``"bootstrap"``. The covariances are in the
+map's frame (a method's embedding carried by the anchor fit's linear part), zero for the anchors
+(taken as exact: they fix the frame), NaN for unmapped objects. A bootstrap costs about
+``BOOTSTRAP_REPLICATES`` maps; the model a small fraction of one (docs/guide/uncertainty.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from mappers.core.errors import MappingError
+from mappers.core.uncertainty import (
+    check_uncertainty,
+    moving_blocks,
+    sample_covariances,
+    sample_size_factor,
+    transform_covariances,
+)
+from mappers.fitting import Map
+from mappers.viewpoints import adjustment_covariances, has_model_covariances
+
+__all__ = ["BOOTSTRAP_INFLATION", "BOOTSTRAP_REPLICATES", "MIN_REPLICATES", "with_covariances"]
+
+BOOTSTRAP_REPLICATES = 20
+"""Replicate maps of a bootstrap."""
+
+BOOTSTRAP_INFLATION = 1.7
+"""Factor on every bootstrap covariance for what resampling cannot see (the method's bias):
+the factor that put 95 % of the landmarks inside their regions (1.697) on a second, independent
+simulator's visibility histories (``benchmarks/bench_uncertainty.py --sets
+visibility-other-sim --seed0 13000 --layouts 15``, run with the factor at 1), confirmed on fresh
+layouts of the project's world (``--sets visibility``; docs/guide/uncertainty.md)."""
+
+MIN_REPLICATES = 10
+"""An object placed in fewer replicates gets a NaN covariance (and a note)."""
+
+
+def _finish(result: Map, cov: np.ndarray) -> np.ndarray:
+    cov = np.array(cov, dtype=float)
+    cov[list(result.anchor_ids)] = 0.0
+    cov[list(result.unmapped)] = np.nan
+    return cov
+
+
+def _rows(a, rows):
+    """The ``rows`` of an array, of each array of a mapping (None stays None)."""
+    if isinstance(a, dict):
+        return {k: _rows(v, rows) for k, v in a.items()}
+    return None if a is None else a[rows]
+
+
+def _model(result: Map, est, mapped: np.ndarray, X, mask, timeline) -> np.ndarray:
+    local = np.searchsorted(mapped, np.asarray(result.anchor_ids, dtype=int))
+    cov_local = adjustment_covariances(est, X, mask, local, timeline)
+    d = result.positions.shape[1]
+    cov = np.full((len(result.positions), d, d), np.nan)
+    cov[mapped] = cov_local
+    return transform_covariances(cov, np.asarray(result.affine)[:d])
+
+
+def _bootstrap(result: Map, n_steps: int, refit: Callable[[np.ndarray], np.ndarray],
+               random_state, notes: list[str]) -> np.ndarray:
+    rng = np.random.default_rng(random_state)
+    block = max(1, math.ceil(math.sqrt(n_steps)))
+    reps, failed = [], 0
+    for _ in range(BOOTSTRAP_REPLICATES):
+        steps = moving_blocks(n_steps, block, rng)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # a replicate's notes are the full map's, again
+                reps.append(refit(steps))
+        except (MappingError, ValueError):
+            failed += 1
+    if failed:
+        notes.append(f"uncertainty: {failed} of {BOOTSTRAP_REPLICATES} bootstrap replicates "
+                     "could not be mapped")
+    d = result.positions.shape[1]
+    if len(reps) < MIN_REPLICATES:
+        raise MappingError(f"uncertainty: only {len(reps)} of {BOOTSTRAP_REPLICATES} bootstrap "
+                           f"replicates could be mapped (at least {MIN_REPLICATES} needed)")
+    cov = (sample_covariances(np.stack(reps), MIN_REPLICATES)
+           * sample_size_factor(len(reps), d) * BOOTSTRAP_INFLATION)
+    few = [i for i in np.flatnonzero(np.isnan(cov[:, 0, 0])) if i not in result.unmapped]
+    if few:
+        notes.append(f"uncertainty: objects {few} were placed in fewer than {MIN_REPLICATES} "
+                     "bootstrap replicates: their covariance is NaN")
+    return cov
+
+
+def with_covariances(result: Map, uncertainty, *, est: Any, mapped: np.ndarray, X: Any,
+                     mask: Any, n_steps: int, refit: Callable[[np.ndarray], np.ndarray],
+                     random_state, timeline=None) -> Map:
+    """``result`` with its ``covariances`` (module docstring) for ``uncertainty`` (False: the map
+    as it is). ``est`` is the fitted estimator, ``mapped`` the rows it was fitted on, ``X`` and
+    ``mask`` what it was fitted on (all rows; a mapping per sensor for fused histories);
+    ``refit(steps)`` maps the history restricted to those steps (with repeats) and returns the
+    (M, d) positions; ``timeline`` the steps' (robot, tick), or None. ValueError for an unknown mode, or ``"model"`` for a method without one."""
+    mode = check_uncertainty(uncertainty)
+    if mode is False:
+        return result
+    if mode is True:
+        mode = "model" if has_model_covariances(est) else "bootstrap"
+    notes: list[str] = []
+    if mode == "model":
+        if not has_model_covariances(est):
+            raise ValueError(
+                f"uncertainty='model' needs a method that ends with a bundle adjustment "
+                f"(BEARING-BA, LOC-SMA refined), not {result.method!r}: use 'bootstrap' or True")
+        cov = _model(result, est, mapped, _rows(X, mapped), _rows(mask, mapped), timeline)
+    else:
+        cov = _bootstrap(result, n_steps, refit, random_state, notes)
+    return dataclasses.replace(result, covariances=_finish(result, cov),
+                               warnings=(*result.warnings, *notes))

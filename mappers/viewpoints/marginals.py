@@ -1,0 +1,207 @@
+"""Marginal covariances of the objects of a bundle adjustment, the viewpoints eliminated.
+
+At the adjustment's solution the Gauss-Newton normal equations of the poses (one (3, 3) block
+``U_t`` per step) and the free objects (``V``, and the coupling ``W``) are built once more,
+undamped, with the loss's IRLS weights at the final residuals; eliminating the poses (Schur
+complement) leaves the objects' information ``S = V - W^T U^-1 W``, and the (2, 2) diagonal blocks
+of ``S^-1``, times the residuals' variance, are the objects' marginal covariances (Triggs et al.,
+*Bundle Adjustment — A Modern Synthesis*, 2000, §9; Hartley & Zisserman, *Multiple View
+Geometry*, 2nd ed., §5.2.3). The variance is the weighted residuals' ``sum(w r²) / (K - p)``
+(``K`` residuals, ``p`` unknowns: 3 per used step, 2 per free object); with the robust weights it
+is the IRLS estimate of the inliers' noise, so a wrong reading does not inflate every ellipse.
+
+*Correlated readings*: the model above takes every reading's error as independent, and a
+robot's consecutive readings are not (a landmark seen from nearly the same place, the same
+misdetection, a sensor bias that drifts): on logged runs its ellipses are far too small. So a
+second, robust covariance is computed from the same linearisation: the cluster-robust
+("sandwich") covariance ``S^-1 (sum_b z_b z_b^T) S^-1 * B / (B - 1)``, with ``z_b`` the
+reduced gradient (objects' part, the poses' part eliminated) of the readings of block ``b`` of
+consecutive steps (``ceil(sqrt(N))`` steps of one robot; B blocks) — the estimate of
+Huber (1967) and White (1980) with clusters (Liang & Zeger 1986), which holds when the readings
+within a block are correlated and the loss is not the true likelihood. Each object gets the
+larger (by trace) of the two covariances: the model's where the readings are independent, the
+sandwich's where they are not.
+
+*Gauge*: the anchors are held fixed at their known positions (zero covariance), as in the
+adjustment itself; the uncertainty of the anchors' positions is not propagated (they are taken
+as exact, as ``build_map`` takes them). Objects the adjustment left at their start map (seen
+from too few steps, or along nearly parallel rays) are included as free objects of the same
+linearisation: their ellipses are then long (or unbounded, ``inf``), which is what the readings
+say about them. Steps the adjustment left out (no pose) contribute nothing.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mappers.core.uncertainty import block_marginals
+from mappers.viewpoints import range_bearing as rb
+from mappers.viewpoints.bearing import BearingAdjustment
+from mappers.viewpoints.engine import (
+    bearing_angles,
+    bearing_residuals,
+    normal_blocks,
+    pose_jacobian,
+    robust_weights,
+)
+from mappers.viewpoints.range_bearing import RangeBearingAdjustment
+
+__all__ = ["adjustment_covariances", "has_model_covariances", "schur_information", "step_blocks"]
+
+
+def schur_information(U: np.ndarray, V: np.ndarray, Wf: np.ndarray) -> np.ndarray:
+    """The free objects' (dF, dF) information with the poses eliminated:
+    ``blockdiag(V) - W^T U^-1 W`` for pose blocks ``U`` (N, 3, 3), object blocks ``V`` (F, d, d)
+    and couplings ``Wf`` (N, 3, dF)."""
+    f, d = V.shape[0], V.shape[1]
+    S = np.zeros((d * f, d * f))
+    idx = np.arange(f)[:, None] * d + np.arange(d)[None, :]
+    S[idx[:, :, None], idx[:, None, :]] = V
+    if len(U):
+        Ui = np.linalg.inv(U + 1e-12 * np.eye(U.shape[1]))
+        flat = Wf.reshape(-1, d * f)
+        S -= flat.T @ (Ui @ Wf).reshape(-1, d * f)
+    return S
+
+
+def _frame(est, anchor_ids):
+    """``(P, C, phi, used_steps, free, free_index)`` of a fitted adjustment."""
+    P = np.asarray(est.embedding_, dtype=float)
+    placed = np.all(np.isfinite(P), axis=1)
+    free = placed.copy()
+    free[np.asarray(anchor_ids, dtype=int)] = False
+    used = np.all(np.isfinite(est.poses_), axis=1)
+    C = np.where(used[:, None], est.poses_[:, :2], 0.0)
+    phi = np.where(used, est.poses_[:, 2], 0.0)
+    free_index = np.full(len(P), -1)
+    free_index[free] = np.arange(free.sum())
+    return np.where(placed[:, None], P, 0.0), C, phi, used, placed, free, free_index
+
+
+def step_blocks(n_steps: int, timeline=None) -> np.ndarray:
+    """The block of each step (N,) for the sandwich: runs of ``ceil(sqrt(N))`` consecutive
+    steps, each robot's steps apart when a ``timeline`` ((N, 2) robot, tick) is given."""
+    length = max(1, int(np.ceil(np.sqrt(n_steps))))
+    if timeline is None:
+        return np.arange(n_steps) // length
+    tl = np.asarray(timeline)
+    order = np.lexsort((tl[:, 1], tl[:, 0]))
+    robot = tl[order, 0]
+    start = np.r_[0, np.flatnonzero(np.diff(robot)) + 1]
+    rank = np.arange(n_steps) - np.repeat(start, np.diff(np.r_[start, n_steps]))
+    key = np.unique(np.column_stack([robot, rank // length]), axis=0, return_inverse=True)[1]
+    out = np.empty(n_steps, dtype=int)
+    out[order] = key.ravel()
+    return out
+
+
+def _sandwich(S, Sinv, U, Wf, t, f, g_pose, g_obj, blocks):
+    """The (F, 2, 2) cluster-robust covariances (module docstring): ``g_pose`` (K, 3) and
+    ``g_obj`` (K, 2) each reading's gradient, ``t`` its step, ``f`` its free object (-1: none)."""
+    n, nf2 = len(U), S.shape[0]
+    n_blocks = int(blocks.max()) + 1 if len(blocks) else 0
+    Z = np.zeros((n_blocks, nf2))
+    k = f >= 0
+    for c in range(2):
+        np.add.at(Z, (blocks[t[k]], 2 * f[k] + c), g_obj[k, c])
+    gp = np.zeros((n, 3))
+    np.add.at(gp, t, g_pose)
+    y = np.linalg.solve(U + 1e-12 * np.eye(3), gp[..., None])[..., 0]
+    np.add.at(Z, blocks, -np.einsum("nij,ni->nj", Wf, y))
+    A = (Z @ Sinv).reshape(n_blocks, -1, 2)
+    return np.einsum("bfi,bfj->fij", A, A) * n_blocks / max(n_blocks - 1, 1)
+
+
+def _covariances(S, U, Wf, sandwich_args, dof_resid, n_residuals, n_unknowns, P, free):
+    cov = np.full((len(P), 2, 2), np.nan)
+    placed = np.isfinite(P[:, 0])
+    cov[placed] = 0.0  # the anchors (and the free objects, overwritten below)
+    sigma2 = dof_resid / max(n_residuals - n_unknowns, 1)
+    model = sigma2 * block_marginals(S, 2)
+    if S.shape[0] and np.all(np.isfinite(model)):
+        Sinv = np.linalg.inv(0.5 * (S + S.T))
+        robust = _sandwich(S, Sinv, U, Wf, *sandwich_args)
+        wider = np.trace(robust, axis1=1, axis2=2) > np.trace(model, axis1=1, axis2=2)
+        model[wider] = robust[wider]
+    cov[free] = model
+    return cov
+
+
+def _bearing(est: BearingAdjustment, X, mask, anchor_ids, blocks) -> np.ndarray:
+    theta, seen = bearing_angles(X, mask)
+    P, C, phi, used, placed, free, free_index = _frame(est, anchor_ids)
+    seen = seen & used[:, None] & placed[None, :]
+    t, i = np.nonzero(seen)
+    obs = (t, i, theta[t, i])
+    res, _ = bearing_residuals(P, C, phi, obs)
+    w = robust_weights(res, est.scale_, est.loss)
+    U, V, Wf, _, _ = normal_blocks(P, C, phi, obs, w, free_index, int(free.sum()))
+    S = schur_information(U, V, Wf)
+    a = pose_jacobian(bearing_residuals(P, C, phi, obs)[1])
+    g = (w * res)[:, None] * a
+    return _covariances(S, U, Wf, (t, free_index[i], g, -g[:, :2], blocks),
+                        float(np.sum(w * res * res)), len(t),
+                        3 * int(used.sum()) + 2 * int(free.sum()), est.embedding_, free)
+
+
+def _range_bearing(est: RangeBearingAdjustment, X, masks, anchor_ids, blocks) -> np.ndarray:
+    masks = dict(masks or {})
+    theta, seen = bearing_angles(X["bearing"], masks.get("bearing"))
+    R = np.asarray(X["range"], dtype=float).T
+    if masks.get("range") is not None:
+        seen &= np.asarray(masks["range"], dtype=bool).T
+    seen &= np.isfinite(R) & (R > 0)
+    P, C, phi, used, placed, free, free_index = _frame(est, anchor_ids)
+    seen &= used[:, None] & placed[None, :]
+    t, i = np.nonzero(seen)
+    obs = (t, i, theta[t, i], R[t, i])
+    wb = np.ones(len(t))
+    # the adjustment's own blocks: scaled angle and range residuals, robust weights inside
+    U, V, Wf, _, _ = est._blocks(P, C, phi, obs, wb, est.scales_, free_index, int(free.sum()))
+    ra, rr, d = rb.bearing_residuals(P, C, phi, obs)
+    ua, ur = ra / est.scales_[0], rr / est.scales_[1]
+    wa = robust_weights(ua, est.robust_scale, est.loss)
+    wr = robust_weights(ur, est.robust_scale, est.loss)
+    S = schur_information(U, V, Wf)
+    # each reading's gradient, as the adjustment's blocks build it: J^T W u over both residuals
+    dist = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
+    ga = (wa * ua / est.scales_[0])[:, None] * pose_jacobian(d)
+    gr = (wr * ur / est.scales_[1])[:, None] * np.column_stack(
+        [-d[:, 0] / dist, -d[:, 1] / dist, np.zeros_like(dist)])
+    g = ga + gr
+    return _covariances(S, U, Wf, (t, free_index[i], g, -g[:, :2], blocks),
+                        float(np.sum(wa * ua * ua + wr * ur * ur)), 2 * len(t),
+                        3 * int(used.sum()) + 2 * int(free.sum()), est.embedding_, free)
+
+
+def _adjustment(est):
+    """The bundle adjustment inside a fitted estimator (itself, or a fused map's refinement)."""
+    if isinstance(est, BearingAdjustment | RangeBearingAdjustment):
+        return est
+    inner = getattr(est, "adjustment_", None)
+    return inner if isinstance(inner, BearingAdjustment | RangeBearingAdjustment) else None
+
+
+def has_model_covariances(est) -> bool:
+    """Whether the fitted estimator ``est`` is (or ends with) a bundle adjustment whose normal
+    equations give covariances: BEARING-BA, and LOC-SMA refined by an adjustment."""
+    return _adjustment(est) is not None
+
+
+def adjustment_covariances(est, X, mask, anchor_ids, timeline=None) -> np.ndarray:
+    """(M, 2, 2) marginal covariances of the objects of the fitted adjustment in ``est``, in its
+    output frame (module docstring): zero for the anchors, NaN for objects it did not place.
+
+    ``X`` and ``mask`` are what ``est`` was fitted on (a bearing history and mask, or fused
+    histories and their masks); ``anchor_ids`` the anchors' rows; ``timeline`` ((N, 2) robot and
+    tick of each step, or None) keeps each robot's steps apart in the sandwich's blocks.
+    ValueError when ``est`` holds no adjustment (:func:`has_model_covariances`)."""
+    adj = _adjustment(est)
+    if adj is None:
+        raise ValueError(f"{type(est).__name__} holds no bundle adjustment: no model covariances")
+    blocks = step_blocks(len(adj.poses_), timeline)
+    if isinstance(adj, RangeBearingAdjustment):
+        return _range_bearing(adj, X, mask, anchor_ids, blocks)
+    if isinstance(X, dict):  # a fused map refined by the bearing-only adjustment
+        X, mask = X["bearing"], (mask or {}).get("bearing")
+    return _bearing(adj, X, mask, anchor_ids, blocks)

@@ -1,0 +1,100 @@
+"""build_map(uncertainty=...): Map.covariances from the adjustments' normal equations and from a
+bootstrap over steps (mappers.covariances)."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from mappers import build_map
+from mappers.core.uncertainty import coverage
+from tests.synthetic_walk import ANCHORS, layout, sensed, walk
+
+
+def _bearing(seed, n_objects=16, n_steps=150, noise_deg=2.0):
+    P, poses = layout(n_objects, seed), walk(n_steps, seed=seed)
+    _, b, _ = sensed(P, poses)
+    b = b + np.random.default_rng(seed).normal(0.0, np.radians(noise_deg), b.shape)
+    return P, np.stack([np.cos(b), np.sin(b)], -1).reshape(len(P), -1)
+
+
+def _quiet(*args, **kwargs):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return build_map(*args, **kwargs)
+
+
+def _check_shape(m, n_objects):
+    cov = m.covariances
+    assert cov.shape == (n_objects, 2, 2)
+    np.testing.assert_array_equal(cov[ANCHORS], 0.0)
+    others = np.setdiff1d(np.arange(n_objects), [*ANCHORS, *m.unmapped])
+    np.testing.assert_allclose(cov[others], cov[others].transpose(0, 2, 1), atol=1e-15)
+    assert np.all(np.linalg.eigvalsh(cov[others]) > 0)
+
+
+def test_no_uncertainty_changes_nothing():
+    P, X = _bearing(0)
+    plain = _quiet(X, ANCHORS, P[ANCHORS])
+    with_cov = _quiet(X, ANCHORS, P[ANCHORS], uncertainty=True)
+    assert plain.covariances is None
+    np.testing.assert_array_equal(plain.positions, with_cov.positions)
+    assert plain.method == with_cov.method == "BEARING-BA"
+    _check_shape(with_cov, len(P))
+
+
+def test_unmapped_objects_get_nan():
+    P, X = _bearing(1)
+    X[7] = 0.0  # never sensed
+    m = _quiet(X, ANCHORS, P[ANCHORS], uncertainty="model")
+    assert 7 in m.unmapped and np.isnan(m.covariances[7]).all()
+    _check_shape(m, len(P))
+
+
+def test_model_needs_an_adjustment():
+    P, X = _bearing(2)
+    with pytest.raises(ValueError, match="bundle adjustment"):
+        _quiet(X, ANCHORS, P[ANCHORS], "CAL-SMA", uncertainty="model")
+    with pytest.raises(ValueError, match="uncertainty must be one of"):
+        _quiet(X, ANCHORS, P[ANCHORS], uncertainty="exact")
+
+
+def test_bearing_model_covers_the_truth():
+    """2-degree noise, 10 layouts: the 95 % regions hold most true positions, and are not
+    merely wide (RMS radius of the ellipses a few times the mean error)."""
+    inside, radius, error = [], [], []
+    for seed in range(10):
+        P, X = _bearing(seed)
+        m = _quiet(X, ANCHORS, P[ANCHORS], uncertainty="model")
+        objects = np.setdiff1d(np.arange(len(P)), ANCHORS)
+        inside.append(coverage(m.positions, m.covariances, P, objects))
+        radius.append(np.sqrt(np.trace(m.covariances[objects], axis1=1, axis2=2)).mean())
+        error.append(np.linalg.norm(m.positions[objects] - P[objects], axis=1).mean())
+    assert 0.8 <= np.mean(inside) <= 1.0
+    assert 0.5 < np.mean(radius) / np.mean(error) < 3.0
+
+
+def test_range_bearing_model():
+    P, poses = layout(16, 3), walk(150, seed=3)
+    dist, b, _ = sensed(P, poses)
+    rng = np.random.default_rng(3)
+    b = b + rng.normal(0.0, np.radians(2.0), b.shape)
+    H = {"range": np.abs(dist + rng.normal(0.0, 0.02, dist.shape)),
+         "bearing": np.stack([np.cos(b), np.sin(b)], -1).reshape(len(P), -1)}
+    m = _quiet(H, ANCHORS, P[ANCHORS], uncertainty=True)
+    assert m.method == "LOC-SMA"
+    _check_shape(m, len(P))
+    # about 1 cm of error: ellipses of millimetres to centimetres
+    assert 1e-4 < np.sqrt(np.trace(m.covariances[4:], axis1=1, axis2=2)).mean() < 0.05
+
+
+def test_bootstrap_of_a_visibility_map():
+    P, poses = layout(12, 4), walk(150, seed=4)
+    X = (sensed(P, poses)[0] < 0.4).astype(float)
+    m = _quiet(X, ANCHORS, P[ANCHORS], uncertainty=True)
+    assert m.method == "CAL-SMA"
+    _check_shape(m, len(P))
+    # centimetres of spread for centimetres of error, not metres or microns
+    radius = np.sqrt(np.trace(m.covariances[4:], axis1=1, axis2=2)).mean()
+    error = np.linalg.norm(m.positions[4:] - P[4:], axis=1).mean()
+    assert 0.2 < radius / error < 5.0
