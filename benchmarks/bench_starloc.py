@@ -41,7 +41,7 @@ from lfmdr_gym.experiments.starloc import map_starloc  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = ROOT.parent / "shared" / "data" / "starloc"
-FIELDS = ["sequence", "setup", "sensor", "method", "mpe", "mapped", "n_scored", "centroid_mpe",
+FIELDS = ["sequence", "setup", "sensor", "mapped_by", "mpe", "mapped", "n_scored", "centroid_mpe",
           "cpu_s"]
 
 
@@ -119,11 +119,11 @@ def main(argv: list[str] | None = None) -> int:
             except ValueError as exc:  # a sequence too short to map: a row that says so
                 print(f"{seq.name:18s} {sensor:14s} failed: {exc}", flush=True)
                 rows.append({"sequence": seq.name, "setup": seq.name.rsplit("_", 1)[-1],
-                             "sensor": sensor, "method": "failed", "mpe": "nan", "mapped": "0",
+                             "sensor": sensor, "mapped_by": "failed", "mpe": "nan", "mapped": "0",
                              "n_scored": "", "centroid_mpe": f"{base:.4f}", "cpu_s": ""})
                 continue
             rows.append({"sequence": r.sequence, "setup": r.sequence.rsplit("_", 1)[-1],
-                         "sensor": sensor, "method": r.method, "mpe": f"{r.mpe:.4f}",
+                         "sensor": sensor, "mapped_by": r.method, "mpe": f"{r.mpe:.4f}",
                          "mapped": f"{r.mapped:.3f}", "n_scored": r.n_scored,
                          "centroid_mpe": f"{base:.4f}", "cpu_s": f"{r.cpu_seconds:.2f}"})
             print(f"{r.sequence:18s} {sensor:14s} {r.mpe:8.3f} {r.mapped:7.0%} {r.n_scored:6d} "

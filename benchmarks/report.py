@@ -379,7 +379,7 @@ def starloc_section(root: Path) -> list[str]:
     def cell(r: dict[str, str] | None) -> str:
         if r is None:
             return "-"
-        if r["method"] == "failed":
+        if r["mapped_by"] == "failed":
             return "failed"
         return f"{number(r['mpe']):.3f} ({number(r['mapped']):.0%})"
 

@@ -1,4 +1,5 @@
-"""lfmdr mappers: observation histories -> 2-D maps by dimensionality reduction (paper §3).
+"""lfmdr mappers: observation histories -> 2-D maps by dimensionality reduction (paper §3), and
+3-D maps when the anchors are 3-D (:mod:`mappers.spatial`).
 
 Arrays in, maps out: this package never imports gymnasium or lfmdr_gym, so it serves logged
 data as well as the simulator. Every method is a :class:`MethodSpec` in :data:`METHODS`;
@@ -55,6 +56,12 @@ _LAZY: dict[str, str] = {
     "BearingAdjustment": "mappers.viewpoints",
     "VisibilityAdjustment": "mappers.viewpoints",
     "OnlineMapper": "mappers.online",
+    "fit_affine_3d": "mappers.core.align_3d",
+    "fit_similarity_3d": "mappers.core.align_3d",
+    "mean_position_error_3d": "mappers.core.scores_3d",
+    "tetrahedron_orientation_error": "mappers.core.scores_3d",
+    "SpatialAdjustment": "mappers.spatial",
+    "CoVisibility3D": "mappers.spatial",
 }
 
 __all__ = sorted(_LAZY)
