@@ -10,24 +10,35 @@ they were seen together, started from classical MDS), and a 3-D affine map onto 
 from __future__ import annotations
 
 import numpy as np
+from sklearn.base import BaseEstimator, TransformerMixin
 
 from mappers.core.align_3d import apply_affine_3d, check_anchors_3d, fit_affine_3d
+from mappers.core.validation import check_views
 from mappers.masked import covisibility_dissimilarity
 from mappers.smacof import classical_mds, weighted_smacof
 
 __all__ = ["CoVisibility3D"]
 
 
-class CoVisibility3D:
+class CoVisibility3D(TransformerMixin, BaseEstimator):
     """Visibility histories (M, N) of 0/1 -> (M, 3) world positions (see the module's
     docstring); ``max_iter`` SMACOF updates at most. Objects never seen with another are NaN."""
 
-    def __init__(self, max_iter: int = 300):
+    def __init__(self, *, max_iter: int = 300):
         self.max_iter = max_iter
 
-    def fit_transform(self, X, y=None, *, anchor_ids, anchor_positions, mask=None) -> np.ndarray:
-        X = np.asarray(X, dtype=float)
-        if X.ndim != 2 or not np.all((X == 0) | (X == 1)):
+    def fit_transform(self, X, y=None, *, anchor_ids=None, anchor_positions=None,
+                      mask=None) -> np.ndarray:
+        """Fit and return ``embedding_`` (M, 3)."""
+        return self.fit(X, y, anchor_ids=anchor_ids, anchor_positions=anchor_positions,
+                        mask=mask).embedding_
+
+    def fit(self, X, y=None, *, anchor_ids=None, anchor_positions=None, mask=None):
+        """Map the visibility history ``X`` (M, N) (``mask`` True where observed) in 3-D."""
+        X = check_views(self, X, mask)
+        if anchor_ids is None or anchor_positions is None:
+            raise ValueError("COVIS-3D needs anchors: anchor_ids and anchor_positions (A, 3)")
+        if not np.all((X == 0) | (X == 1) | (mask is not None and ~np.asarray(mask, bool))):
             raise ValueError("COVIS-3D maps visibility histories: an (M, N) array of 0/1")
         seen = X > 0 if mask is None else (X > 0) & np.asarray(mask, dtype=bool)
         ids, pos = check_anchors_3d(anchor_ids, anchor_positions, X.shape[0], fit="affine")
@@ -48,4 +59,4 @@ class CoVisibility3D:
         out = np.full((X.shape[0], 3), np.nan)
         out[sub] = apply_affine_3d(Y, T)
         self.embedding_ = out
-        return out
+        return self

@@ -14,9 +14,12 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
+from scipy.sparse import issparse
+from sklearn.base import BaseEstimator, TransformerMixin
 from threadpoolctl import threadpool_limits
 
 from mappers.core.align_3d import check_anchors_3d, umeyama
+from mappers.core.validation import check_views
 from mappers.spatial.adjustment import adjust_viewpoints
 from mappers.spatial.covisibility_3d import CoVisibility3D
 from mappers.spatial.rays import ray_observations
@@ -25,7 +28,7 @@ from mappers.spatial.registration import MIN_RAY_ANGLE, register_points, registe
 __all__ = ["SpatialAdjustment"]
 
 
-class SpatialAdjustment:
+class SpatialAdjustment(TransformerMixin, BaseEstimator):
     """The 6-DoF viewpoint bundle adjustment as an estimator (see the module's docstring).
 
     Args:
@@ -50,7 +53,7 @@ class SpatialAdjustment:
     used); ``range_scale_``; ``n_iter_``.
     """
 
-    def __init__(self, bearing_noise: float = float(np.deg2rad(1.0)), range_noise: float = 0.02,
+    def __init__(self, *, bearing_noise: float = float(np.deg2rad(1.0)), range_noise: float = 0.02,
                  range_growth: float = 0.0, loss: str | None = "cauchy", loss_scale: float = 3.0,
                  max_iter: int = 200, fit_range_scale: bool = False,
                  anchor_noise: float | None = None, max_ray_error: float = float(np.deg2rad(5.0))):
@@ -64,7 +67,7 @@ class SpatialAdjustment:
         self.anchor_noise = anchor_noise
         self.max_ray_error = max_ray_error
 
-    def fit(self, X, y=None, *, anchor_ids, anchor_positions, mask=None, masks=None):
+    def fit(self, X, y=None, *, anchor_ids=None, anchor_positions=None, mask=None, masks=None):
         """Fit to a 3-D bearing history ``X`` (M, 3N) or fused histories ``{"bearing": rays,
         "range": ranges (M, N)}`` (``masks`` keyed alike), with 3-D anchors (held fixed)."""
         # the matrices are small (6 x 6 poses, 3F x 3F objects): one BLAS thread is fastest
@@ -72,7 +75,7 @@ class SpatialAdjustment:
             return self._fit(X, mask, masks, anchor_ids, anchor_positions)
 
     def _fit(self, X, mask, masks, anchor_ids, anchor_positions):
-        if isinstance(X, Mapping):
+        if isinstance(X, Mapping) and not issparse(X):  # (a DOK sparse matrix is a dict)
             if "bearing" not in X:
                 raise ValueError(f"SPATIAL-BA maps rays: fused histories need a 'bearing' entry, "
                                  f"got {sorted(X)}")
@@ -80,7 +83,9 @@ class SpatialAdjustment:
             obs = ray_observations(X["bearing"], masks.get("bearing"), X.get("range"),
                                    masks.get("range"))
         else:
-            obs = ray_observations(X, mask)
+            obs = ray_observations(check_views(self, X, mask), mask)
+        if anchor_ids is None or anchor_positions is None:
+            raise ValueError("SPATIAL-BA needs anchors: anchor_ids and anchor_positions (A, 3)")
         ids, pos = check_anchors_3d(anchor_ids, anchor_positions, obs.n_objects)
         if np.isfinite(obs.range).any():
             start = register_rays(obs, ids, pos, start=register_points(obs, ids, pos))

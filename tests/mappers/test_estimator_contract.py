@@ -29,6 +29,7 @@ from mappers.masked import (
 )
 from mappers.paper import LaplacianEigenmap, LocallyLinear, MaximumVarianceUnfolding
 from mappers.smacof import WeightedSMACOF
+from mappers.spatial import CoVisibility3D, SpatialAdjustment
 from mappers.viewpoints import (
     BearingAdjustment,
     RangeBearingAdjustment,
@@ -61,6 +62,8 @@ ESTIMATORS = [
     RangeBearingAdjustment(),
     LawOfCosinesSMACOF(),
     VisibilityBearingSMACOF(),
+    SpatialAdjustment(),
+    CoVisibility3D(),
 ]
 
 _FITTED = (
@@ -101,6 +104,10 @@ _CANNOT_FIT = {
                           "viewpoints are estimated in); the checks give neither",
     ViewAdjustment: "maps masked visibility histories (the mask of a limited view) with anchors; "
                     "the checks give no mask and no anchors",
+    SpatialAdjustment: "maps 3-D ray histories (3 columns, a unit ray, per step) with 3-D anchors; "
+                       "the checks give neither",
+    CoVisibility3D: "maps visibility (0/1) histories with 3-D anchors (four not on one plane); "
+                    "the checks give real-valued data and no anchors",
 }
 _FUSED = {
     RangeBearingAdjustment: "maps fused range and bearing histories (a mapping sensor -> matrix, "
