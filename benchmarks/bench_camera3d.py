@@ -42,6 +42,7 @@ import lfmdr_gym  # noqa: F401  (registers the env ids)
 from lfmdr_gym import RandomWalkPolicy, collect
 from lfmdr_gym.atomic import atomic_write_text
 from mappers import build_map
+from mappers.spatial.pipeline_3d import default_method_3d
 
 ENV_ID = "LFMDR-Camera3D-v0"
 GOALS = {"range-bearing": 0.01, "bearing": 0.02, "visibility": 0.15}
@@ -96,7 +97,8 @@ def run_one(seed: int, sensor: str, steps: int, bearing_noise_deg: float,
     history = collect(ENV_ID, RandomWalkPolicy(), steps, seed=seed, make_kwargs=kwargs)
     row: dict[str, Any] = {"layout_seed": seed, "sensor": sensor, "n_objects": history.n_objects,
                            "n_steps": steps, "bearing_noise_deg": kwargs.get("bearing_noise_deg", 0.0),
-                           "range_noise": kwargs.get("range_noise", 0.0), "method": "",
+                           "range_noise": kwargs.get("range_noise", 0.0),
+                           "method": default_method_3d(sensor),
                            "env_kwargs": json.dumps(extra or {}, sort_keys=True),
                            "mpe": float("nan"), "mapped": 0.0, "cpu_seconds": float("nan"),
                            "error": ""}

@@ -55,6 +55,12 @@ def _unpack(histories, sensor, mask):
     return X, sensor, mask
 
 
+def default_method_3d(sensor: str) -> str:
+    """The 3-D default for a sensor: ``"COVIS-3D"`` for sightings, ``"SPATIAL-BA"`` for rays
+    (with or without ranges)."""
+    return "COVIS-3D" if sensor == "visibility" else "SPATIAL-BA"
+
+
 def build_map_3d(histories, anchor_ids, anchor_positions, method: str | None = None, *,
                  sensor: str | None = None, mask=None, **params) -> Map:
     """The 3-D map of the objects (see the module's docstring): a :class:`mappers.Map` whose
@@ -62,8 +68,7 @@ def build_map_3d(histories, anchor_ids, anchor_positions, method: str | None = N
     ``unmapped``. ``method``: ``"SPATIAL-BA"`` or ``"COVIS-3D"`` (None: by the sensor);
     ``params`` go to the method."""
     X, sensor, mask = _unpack(histories, sensor, mask)
-    label = method.upper() if isinstance(method, str) else (
-        "COVIS-3D" if sensor == "visibility" else "SPATIAL-BA")
+    label = method.upper() if isinstance(method, str) else default_method_3d(sensor)
     if label not in METHODS_3D:
         raise ValueError(f"method {method!r} does not map in 3-D; 3-D methods: {list(METHODS_3D)}")
     if (label == "COVIS-3D") != (sensor == "visibility"):
