@@ -99,6 +99,10 @@ KNOWN_FAILURES = {
     "start passes)",
     ("visibility-masked", "scale"): "VIEW-BA depends on the unit: not traced further; it stops "
     "when no object moves more than tol = 1e-4 m, an absolute length (a likely cause)",
+    ("visibility-complete", "permutation"): "CAL-SMA on a few scenes: the maps of the two orders "
+    "differ by about 1 cm; not traced (a likely cause: ties between equal distances of 0/1 "
+    "histories broken by object order in the neighbour graph). Seen in a full-suite run, not "
+    "with the file run alone",
 }
 """(default, symmetry) -> why the default breaks it (found by this suite; issue 35). Each is
 ``xfail(strict=True)`` in the default run (a fix makes the test pass, and the entry must then
@@ -107,6 +111,13 @@ go), except those in :data:`MISSED_BY_DEFAULT_CASES`."""
 MISSED_BY_DEFAULT_CASES = {("bearing-complete", "scale"), ("bearing+range-masked", "rigid-motion")}
 """Known failures that the default run's cases happen not to meet (``-m slow``'s and other
 draws do): not strict there, so that they pass as XPASS."""
+
+ROUNDING_DEPENDENT = {("bearing+range-masked", "permutation"), ("visibility-masked", "rigid-motion"),
+                      ("visibility-masked", "scale"), ("visibility-complete", "permutation")}
+"""Known failures whose default cases pass or fail with the process's floating-point rounding
+(BLAS threads, what ran before in the worker): each failed when this file ran alone and passed in
+a full-suite run, or the other way round. Not strict, so that the suite's outcome does not depend
+on the machine; the entries stay until the cause is fixed."""
 
 
 KEYS = sorted(DEFAULTS, key=_name)
@@ -243,7 +254,8 @@ def _cases(slow: bool):
             reason = KNOWN_FAILURES.get((_name(key), symmetry))
             # strict in the default run, whose cases are the same every run; not with -m slow,
             # whose fresh cases may all miss a rare failure
-            strict = not slow and (_name(key), symmetry) not in MISSED_BY_DEFAULT_CASES
+            strict = not slow and (_name(key), symmetry) not in (MISSED_BY_DEFAULT_CASES
+                                                                 | ROUNDING_DEPENDENT)
             xfail = [pytest.mark.xfail(strict=strict, reason=reason)] if reason else []
             # a default's symmetries on one worker: they share the cached original maps
             yield pytest.param(key, symmetry, id=f"{_name(key)}-{symmetry}",
