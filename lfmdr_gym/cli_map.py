@@ -144,9 +144,9 @@ def _cmd_map_log(args: argparse.Namespace) -> int:
 
 # ----------------------------------------------------------------------------- lfmdr convert
 def add_convert(sub: Any) -> None:
-    """``lfmdr convert {mrclam,rosbag} SRC --out obs.csv|obs.parquet``."""
+    """``lfmdr convert {mrclam,starloc,rosbag} SRC --out obs.csv|obs.parquet``."""
     p = add_command(
-        sub, "convert", "turn an MRCLAM run or a ROS bag into an observation table",
+        sub, "convert", "turn an MRCLAM run, a STAR-loc sequence or a ROS bag into an observation table",
         "Write the sightings of a dataset as an observation table (CSV or Parquet, by the "
         "suffix of --out), the log `lfmdr map LOG --anchors A.csv` maps; written atomically.",
     )
@@ -172,6 +172,24 @@ def add_convert(sub: Any) -> None:
         "AprilTag detections of one topic of a ROS 1 bag or a ROS 2 bag (sqlite3, MCAP), read "
         "with the rosbags library (pip install 'lfmdr[ros]'; no ROS install).",
     )
+    t = add_command(
+        kinds, "starloc", "a STAR-loc sequence folder (AprilTags seen by a stereo camera, 3-D)",
+        "The AprilTag detections of one STAR-loc sequence (data/<sequence>: "
+        "apriltag_cal_global.csv and calib.json; the pose columns, ground truth, are never "
+        "read): stereo gives a ray and a range per sighting, --sensor bearing the left camera's "
+        "rays, visibility the sightings alone. With --landmarks, the tags' surveyed positions "
+        "(landmark,x,y,z); with --anchors, the benchmark's six anchors (the lowest tag seen in "
+        ">= 3 image pairs, then farthest-point order).",
+    )
+    t.add_argument("src", metavar="SEQ_DIR", help="a STAR-loc sequence folder (data/<sequence>)")
+    t.add_argument("--sensor", choices=["range-bearing", "bearing", "visibility"],
+                   default="range-bearing", help="what each sighting keeps")
+    t.add_argument("--landmarks", default=None, metavar="L.csv",
+                   help="also write the tags' surveyed positions here (for --truth)")
+    t.add_argument("--anchors", default=None, metavar="A.csv",
+                   help="also write the six anchors of the STAR-loc benchmark here")
+    _add_table_out(t)
+    t.set_defaults(handler=_cmd_convert_starloc)
     from lfmdr_gym.datasets import rosbag  # (imports rosbags only when it reads a bag)
 
     rosbag.add_arguments(r)
@@ -205,6 +223,24 @@ def _cmd_convert_mrclam(args: argparse.Namespace) -> int:
         written.append(write_landmarks(mrclam_anchors(run), args.anchors, what="anchors"))
     print(f"{run.name}: {len(table)} sightings of {table['landmark'].nunique()} landmarks by "
           f"{table['robot'].nunique()} robots; wrote " + ", ".join(map(str, written)))
+    return 0
+
+
+def _cmd_convert_starloc(args: argparse.Namespace) -> int:
+    from lfmdr_gym.datasets.starloc import read_starloc, starloc_anchors, starloc_survey
+    from lfmdr_gym.histories.observation_table import write_landmarks, write_observations
+
+    table = read_starloc(args.src, args.sensor)
+    survey = starloc_survey(args.src) if (args.landmarks or args.anchors) else None
+    written = [write_observations(table, args.out)]
+    if args.landmarks is not None:
+        written.append(write_landmarks(survey, args.landmarks, what="truth"))
+    if args.anchors is not None:
+        ids = starloc_anchors(table, survey)
+        anchors = survey.set_index("landmark").loc[ids].reset_index()
+        written.append(write_landmarks(anchors, args.anchors, what="anchors"))
+    print(f"{table.attrs['sequence']}: {len(table)} sightings of {table['landmark'].nunique()} "
+          f"tags in {table['frame'].nunique()} image pairs; wrote " + ", ".join(map(str, written)))
     return 0
 
 

@@ -72,8 +72,10 @@ def _landmark_table(table: Any, what: str) -> pd.DataFrame:
     else:
         out = check_landmarks(table, what=what)
     if "z" in out.columns:
-        raise ValueError(f"the {what} have a z column (3-D): 3-D anchors and rays are issue 34; "
-                         "this lfmdr maps 2-D logs (landmark, x, y)")
+        raise ValueError(f"the {what} have a z column (3-D): a History is made of 2-D logs "
+                         "(landmark, x, y) here; map a 3-D log with "
+                         "lfmdr_gym.histories.ray_table.ray_histories and mappers.build_map with "
+                         "(A, 3) anchors (issue 34)")
     return out
 
 

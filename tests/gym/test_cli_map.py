@@ -191,3 +191,30 @@ def test_out_that_is_a_file_is_refused(tmp_path, capsys):
     assert main(["map", str(log), "--anchors", str(anchors), "--out", str(blocker)]) == 2
     assert "cannot write to output directory" in capsys.readouterr().err
     assert blocker.read_text() == "mine"
+
+
+STARLOC = SHARED_DATA / "starloc"
+
+
+@pytest.mark.skipif(not STARLOC.is_dir(), reason=f"the STAR-loc data folder {STARLOC} is absent")
+def test_convert_starloc_writes_the_table_survey_and_anchors(tmp_path, capsys):
+    from lfmdr_gym.datasets.starloc import read_starloc
+    from lfmdr_gym.histories.observation_table import read_landmarks, read_observations
+
+    seq = STARLOC / "data" / "eight_s3"
+    out, truth, anchors = tmp_path / "obs.parquet", tmp_path / "t.csv", tmp_path / "a.csv"
+    assert main(["convert", "starloc", str(seq), "--sensor", "bearing", "--out", str(out),
+                 "--landmarks", str(truth), "--anchors", str(anchors)]) == 0
+    table = read_observations(out)
+    expected = read_starloc(seq, "bearing")
+    assert list(table.columns) == ["time", "landmark", "frame", "ray_x", "ray_y", "ray_z"]
+    np.testing.assert_array_equal(table[["ray_x", "ray_y", "ray_z"]].to_numpy(),
+                                  expected[["ray_x", "ray_y", "ray_z"]].to_numpy())
+    a, t = read_landmarks(anchors), read_landmarks(truth)
+    assert len(a) == 6 and set(a["landmark"]) <= set(table["landmark"]) <= set(t["landmark"])
+    assert list(a.columns) == ["landmark", "x", "y", "z"]
+    assert "eight_s3" in capsys.readouterr().out
+    # a 3-D log is refused by the 2-D History it would become, saying how to map it
+    assert main(["map", str(out), "--anchors", str(anchors), "--out", str(tmp_path / "m")]) != 0
+    assert "ray_histories" in capsys.readouterr().err
+    assert not (tmp_path / "m").exists()
