@@ -15,7 +15,7 @@ import numpy as np
 from lfmdr_gym.atomic import atomic_write
 from lfmdr_gym.checks import check_int
 from lfmdr_gym.experiments.episodes import collect_history
-from lfmdr_gym.experiments.params import method_label, param_label, user_params
+from lfmdr_gym.experiments.params import method_label, param_label, parse_params, user_params
 from lfmdr_gym.experiments.protocol import DEFAULT_EVERY
 from lfmdr_gym.experiments.scoring import evaluate, map_history, score_map
 from lfmdr_gym.experiments.store import ensure_writable_dir
@@ -51,12 +51,33 @@ def method_and_params(method: str | None, history: History, params) -> tuple[str
     from mappers import default_method, resolve_method
     from mappers.catalog import implied_params
 
+    if history.dimension == 3:  # the 3-D methods are chosen by the anchors' shape, not catalogued
+        return _method_and_params_3d(method, history, params)
     if method is None:
         label, implied = default_method(history, return_params=True)
     else:
         spec = resolve_method(method, history.sensor, masked=history.mask is not None)
         label, implied = spec.label, implied_params(spec)
     return label, {**implied, **user_params(label, params)}
+
+
+def _method_and_params_3d(method: str | None, history: History, params) -> tuple[str, dict[str, Any]]:
+    """:func:`method_and_params` of a 3-D history: ``SPATIAL-BA`` or ``COVIS-3D`` and the
+    parameters given (checked against the estimator's constructor)."""
+    import inspect
+
+    from mappers.spatial.pipeline_3d import METHODS_3D, default_method_3d
+
+    label = default_method_3d(history.sensor) if method is None else method.strip().upper()
+    if label not in METHODS_3D:
+        raise ValueError(f"method {method!r} does not map in 3-D; 3-D methods: {list(METHODS_3D)}")
+    given = dict(params) if isinstance(params, Mapping) else parse_params(params)
+    accepted = set(inspect.signature(METHODS_3D[label]).parameters)
+    unknown = sorted(set(given) - accepted)
+    if unknown:
+        raise ValueError(f"unknown parameter(s) {unknown} for method {label!r}; it accepts "
+                         f"{sorted(accepted)}")
+    return label, given
 
 
 def _sensor_of(env_id: str) -> str:

@@ -27,7 +27,8 @@ Table -> History:
   anchors' positions where there is no truth); the landmarks ``truth`` lacks are listed in
   ``meta["truth_missing"]``, those it has beyond the log in ``meta["truth_unused"]``.
 
-3-D anchors (with ``z``) are issue 34: a ValueError for now.
+3-D anchors (with ``z``): a 3-D History of the table's rays and ranges, one step per frame
+(:func:`lfmdr_gym.histories.ray_table.ray_table_to_history`).
 """
 
 from __future__ import annotations
@@ -51,6 +52,7 @@ from lfmdr_gym.histories.observation_table import (
     normalise_ids,
     read_landmarks,
 )
+from lfmdr_gym.histories.ray_table import ray_table_to_history
 from mappers.core.align import check_not_collinear
 from mappers.core.sensors import COLUMNS_PER_STEP, sensors_of
 
@@ -71,11 +73,6 @@ def _landmark_table(table: Any, what: str) -> pd.DataFrame:
         out = read_landmarks(table, what=what)
     else:
         out = check_landmarks(table, what=what)
-    if "z" in out.columns:
-        raise ValueError(f"the {what} have a z column (3-D): a History is made of 2-D logs "
-                         "(landmark, x, y) here; map a 3-D log with "
-                         "lfmdr_gym.histories.ray_table.ray_histories and mappers.build_map with "
-                         "(A, 3) anchors (issue 34)")
     return out
 
 
@@ -244,6 +241,10 @@ def observations_to_history(
         raise ValueError("the observation table has no rows: nothing was sighted")
     anchors = _landmark_table(anchors, "anchors")
     truth = None if truth is None else _landmark_table(truth, "truth")
+    if "z" in anchors.columns:  # 3-D: rays (and ranges) of one camera
+        if bin_width is not None:
+            raise ValueError("a 3-D log maps one step per frame: bin_width is for 2-D logs")
+        return ray_table_to_history(table, anchors, truth, sensor)  # (checked above)
     name = _sensor(table, sensor)
     parts = sensors_of(name)
     attrs = dict(table.attrs)

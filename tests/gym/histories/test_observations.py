@@ -183,7 +183,9 @@ def test_bad_anchors_and_sensors_are_refused():
         observations_to_history(_sightings(), ANCHORS.iloc[:2])
     with pytest.raises(ValueError, match="collinear"):
         observations_to_history(_sightings(), ANCHORS.assign(y=[0.0, 0.0, 0.0]))
-    with pytest.raises(ValueError, match="issue 34"):
+    with pytest.raises(ValueError, match="no rays"):  # 3-D anchors, a log of 2-D bearings
+        observations_to_history(_sightings().iloc[:5].drop(columns="robot"), ANCHORS.assign(z=1.0))
+    with pytest.raises(ValueError, match="one robot"):  # (3-D logs: one camera)
         observations_to_history(_sightings(), ANCHORS.assign(z=1.0))
     with pytest.raises(ValueError, match="must all be integers or all strings"):
         observations_to_history(_sightings(), ANCHORS.assign(landmark=[1, 2, 4]))
