@@ -12,7 +12,7 @@ from gymnasium import spaces
 from lfmdr_gym.checks import check_int, check_real
 from lfmdr_gym.render import HumanViewer, available_render_modes, draw_frame, human_rendering_error
 from lfmdr_gym.sim import sensors, tags3d, view3d
-from lfmdr_gym.sim.world import Layout, World
+from lfmdr_gym.sim.world import Layout, World, action_turn
 from mappers.core.sensors import sensors_of
 
 __all__ = ["CAMERA3D_SENSORS", "Camera3DEnv"]
@@ -256,13 +256,7 @@ class Camera3DEnv(gym.Env):
     def step(self, action: Any) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         if not self.world.built:
             raise gym.error.ResetNeeded("call reset() before step()")
-        try:
-            turn = float(action[0])
-        except (TypeError, IndexError):
-            turn = float(action)
-        if turn != turn:
-            raise ValueError(f"action must be a number, got {action!r}")
-        turn = min(max(turn, -self.max_turn), self.max_turn)
+        turn = action_turn(action, self.max_turn)
         blocked = self.world.move(turn, self.step_length)
         obs = self._observe()
         if self.render_mode == "human":

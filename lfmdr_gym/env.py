@@ -14,7 +14,7 @@ from lfmdr_gym.render import HumanViewer, available_render_modes, draw_frame, hu
 from lfmdr_gym.sim import sensors
 from lfmdr_gym.sim.grid import CellGrid
 from lfmdr_gym.sim.sensing_limits import SensingLimits
-from lfmdr_gym.sim.world import World
+from lfmdr_gym.sim.world import World, action_turn
 from mappers.core.sensors import SENSORS, check_sensor, sensors_of
 
 __all__ = ["LFMDREnv", "OBSERVATION_TYPES", "observation_factory"]
@@ -342,14 +342,7 @@ class LFMDREnv(gym.Env):
     def step(self, action: Any) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         if not self.world.built:
             raise gym.error.ResetNeeded("call reset() before step()")
-        try:
-            turn = float(action[0])
-        except (TypeError, IndexError):
-            turn = float(action)
-        if turn != turn:
-            raise ValueError(f"action must be a number, got {action!r}")
-        mt = self.max_turn
-        turn = mt if turn > mt else (-mt if turn < -mt else turn)
+        turn = action_turn(action, self.max_turn)
         blocked = self.world.move(turn, self.step_length)
         obs = self._observe()
         if self.render_mode == "human":

@@ -30,7 +30,7 @@ import pymunk
 from lfmdr_gym.checks import check_int, check_real
 from lfmdr_gym.sim.grid import sample_separated
 
-__all__ = ["ANCHOR_CHOICES", "Layout", "World", "wrap_angle"]
+__all__ = ["ANCHOR_CHOICES", "Layout", "World", "action_turn", "wrap_angle"]
 
 ANCHOR_CHOICES = ("corners", "random", "grid")
 LAYOUT_OPTIONS = ("object_positions", "anchor_ids", "robot_pose")
@@ -74,6 +74,18 @@ def wrap_angle(angle: float) -> float:
     """``angle`` wrapped into (-pi, pi]."""
     a = math.pi - ((math.pi - angle) % (2.0 * math.pi))
     return a + 2.0 * math.pi if a <= -math.pi else a
+
+
+def action_turn(action: Any, max_turn: float) -> float:
+    """The turn [rad] an env's action asks for (a number, or a 1-element array), limited to
+    [-max_turn, max_turn]; ValueError for NaN."""
+    try:
+        turn = float(action[0])
+    except (TypeError, IndexError):
+        turn = float(action)
+    if turn != turn:
+        raise ValueError(f"action must be a number, got {action!r}")
+    return max_turn if turn > max_turn else (-max_turn if turn < -max_turn else turn)
 
 
 def collinear(points: np.ndarray, rtol: float = 1e-6) -> bool:
