@@ -97,6 +97,9 @@ def build_map(
         itself fails (e.g. Hessian LLE's eigenproblem), naming the method and the cause.
     """
     if anchor_dimension(anchor_positions) == 3:
+        if uncertainty is not False:
+            raise ValueError("uncertainty= is not available for 3-D maps yet: Map.covariances is "
+                             "computed for 2-D maps only (leave uncertainty=False)")
         result = build_map_3d(histories, anchor_ids, anchor_positions, method, sensor=sensor,
                               mask=mask, **params)
         for note in result.warnings:

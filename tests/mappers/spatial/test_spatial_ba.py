@@ -84,3 +84,9 @@ def test_coplanar_anchors_refused_for_sightings():
     flat = P[ANCHORS] * [1, 1, 0]
     with pytest.raises(ValueError, match="one plane"):
         build_map(vis, ANCHORS, flat)
+
+
+def test_uncertainty_of_a_3d_map_is_refused_not_dropped():
+    P, X, Rg = camera_world()
+    with pytest.raises(ValueError, match="3-D maps"):
+        build_map({"bearing": X, "range": Rg}, ANCHORS, P[ANCHORS], uncertainty=True)
