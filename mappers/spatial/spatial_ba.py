@@ -24,8 +24,14 @@ from mappers.spatial.adjustment import adjust_viewpoints
 from mappers.spatial.covisibility_3d import CoVisibility3D
 from mappers.spatial.rays import ray_observations
 from mappers.spatial.registration import MIN_RAY_ANGLE, register_points, register_rays
+from mappers.spatial.regrow import intersect_by_consensus, step_ray_errors
 
 __all__ = ["SpatialAdjustment"]
+
+REGROW_ROUNDS = 4
+"""Rays alone: rounds of adjusting and growing the start at most (:meth:`SpatialAdjustment._regrow`)."""
+REGROW_ITER = 20
+"""Levenberg-Marquardt iterations of each round's short adjustment."""
 
 
 class SpatialAdjustment(TransformerMixin, BaseEstimator):
@@ -102,6 +108,8 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
                              "objects (anchors, or objects placed from them) not on one line")
         fixed = np.zeros(obs.n_objects, dtype=bool)
         fixed[ids] = True
+        if not np.isfinite(obs.range).any():
+            start = self._regrow(obs, ids, pos, fixed, start)
         res = adjust_viewpoints(obs, *start, fixed, bearing_noise=self.bearing_noise,
                                 range_noise=self.range_noise, range_growth=self.range_growth,
                                 loss=self.loss, loss_scale=self.loss_scale,
@@ -141,6 +149,32 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
                                 max_rms=np.deg2rad(30.0), rounds=1)
         fresh = np.full_like(rough, np.nan)
         return register_rays(obs, ids, pos, start=(fresh, R, C))
+
+    def _regrow(self, obs, ids, pos, fixed, start):
+        """Rays alone: up to ``REGROW_ROUNDS`` rounds of a short adjustment, the steps whose rays
+        miss the adjusted map by a median angle above ``max_ray_error`` unposed, the objects
+        left out intersected by consensus within that angle, the steps resected again
+        (:mod:`mappers.spatial.regrow`); until a round places nothing new."""
+        P, R, C = start
+        for _ in range(REGROW_ROUNDS):
+            placed, posed = np.isfinite(P[:, 0]).sum(), np.isfinite(C[:, 0]).sum()
+            if placed == obs.n_objects and posed == obs.n_steps:
+                break
+            res = adjust_viewpoints(obs, P, R, C, fixed, bearing_noise=self.bearing_noise,
+                                    loss=self.loss, loss_scale=self.loss_scale,
+                                    max_iter=REGROW_ITER, tol=1e-4,
+                                    anchor_noise=self.anchor_noise)
+            P, R, C = res.points, res.rotations.copy(), res.positions.copy()
+            if self.anchor_noise is not None:
+                P = P.copy()
+                P[ids] = pos
+            off = step_ray_errors(obs, P, R, C) > self.max_ray_error
+            R[off], C[off] = np.nan, np.nan
+            P = intersect_by_consensus(obs, P, R, C, self.max_ray_error)
+            P, R, C = register_rays(obs, ids, pos, start=(P, R, C))
+            if np.isfinite(P[:, 0]).sum() <= placed and np.isfinite(C[:, 0]).sum() <= posed:
+                break
+        return P, R, C
 
     def fit_transform(self, X, y=None, **inputs) -> np.ndarray:
         """Fit and return ``embedding_`` (M, 3)."""
