@@ -12,9 +12,20 @@ online bundle use these pieces.
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
+
+from mappers.viewpoints.sparse_schur import (
+    DENSE_COUPLING_MAX_BYTES,
+    Coupling,
+    sparse_schur_step,
+    use_sparse_coupling,
+)
 
 __all__ = [
+    "DENSE_COUPLING_MAX_BYTES",
+    "Coupling",
     "bearing_angles",
+    "bearing_observations",
     "bearing_residuals",
     "initial_poses",
     "intersect",
@@ -27,6 +38,8 @@ __all__ = [
     "robust_weights",
     "scatter_sum",
     "schur_step",
+    "sparse_schur_step",
+    "use_sparse_coupling",
     "wrap_angles",
 ]
 
@@ -65,6 +78,37 @@ def bearing_angles(X, mask=None) -> tuple[np.ndarray, np.ndarray]:
             "pass normalize=False)"
         )
     return np.arctan2(s, c), seen
+
+
+def bearing_observations(X, mask=None) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], int, int]:
+    """``((t, i, theta), N, M)``: the step, object and bearing [rad] of each observation (as
+    :func:`bearing_angles` sees them), ordered by step then object, from a dense history or a
+    ``scipy.sparse`` one (with a sparse or dense mask; the (N, M) arrays of
+    :func:`bearing_angles` are never built for it). ValueError as :func:`bearing_angles`."""
+    if not sp.issparse(X):
+        theta, seen = bearing_angles(X, mask)
+        t, i = np.nonzero(seen)
+        return (t, i, theta[t, i]), theta.shape[0], theta.shape[1]
+    X = sp.csr_array(X, dtype=float)
+    if X.ndim != 2 or X.shape[1] % 2 or X.shape[1] == 0:
+        raise ValueError(f"a bearing history has 2 columns (cos, sin) per step, got shape {X.shape}")
+    c, s = X[:, 0::2], X[:, 1::2]
+    seen = sp.csr_array((c != 0) + (s != 0), dtype=bool)
+    if mask is not None:
+        mask = sp.csr_array(mask, dtype=bool)
+        if mask.shape != X.shape:
+            raise ValueError(f"mask must have the shape of the history {X.shape}, got {mask.shape}")
+        seen = sp.csr_array(seen.multiply(mask[:, 0::2]).multiply(mask[:, 1::2]), dtype=bool)
+    seen.eliminate_zeros()
+    i, t = seen.nonzero()
+    order = np.lexsort((i, t))
+    t, i = t[order], i[order]
+    cv, sv = np.asarray(c[i, t]).ravel(), np.asarray(s[i, t]).ravel()
+    norm = np.hypot(cv, sv)
+    if not np.all(np.isfinite(norm)) or np.any(np.abs(norm - 1.0) > _UNIT_TOL):
+        raise ValueError("a bearing history holds unit (cos, sin) pairs; found observed pairs of "
+                         f"norm {norm[np.abs(norm - 1.0) > _UNIT_TOL][:3].round(3).tolist()}")
+    return (t, i, np.arctan2(sv, cv)), X.shape[1] // 2, X.shape[0]
 
 
 def robust_weights(res: np.ndarray, scale: float, loss: str | None) -> np.ndarray:
@@ -188,10 +232,11 @@ def ray_spread(phi, obs, used, m):
     return np.where(tr > 0, (tr / 2 - disc) / np.maximum(tr / 2 + disc, 1e-300), 0.0)
 
 
-def normal_blocks(P, C, phi, obs, w, free_index, n_free):
+def normal_blocks(P, C, phi, obs, w, free_index, n_free, sparse: bool = False):
     """The blocks of the Gauss-Newton normal equations of the joint problem (poses and free
     objects): ``U`` (N, 3, 3), ``V`` (F, 2, 2), ``Wf`` (N, 3, 2F), gradients ``g`` (N, 3) and
-    ``h`` (F, 2), for weighted residuals ``w * res**2 / 2``."""
+    ``h`` (F, 2), for weighted residuals ``w * res**2 / 2``. ``sparse``: the coupling ``Wf`` as a
+    :class:`Coupling` (one block per observation) instead of the dense array."""
     t, i, _ = obs
     n = len(C)
     res, d = bearing_residuals(P, C, phi, obs)
@@ -203,25 +248,32 @@ def normal_blocks(P, C, phi, obs, w, free_index, n_free):
     tf, ff, wf, af, bf = t[k], f[k], w[k], a[k], -a[k, :2]
     V = scatter_sum(ff, wf[:, None, None] * bf[:, :, None] * bf[:, None, :], n_free)
     h = scatter_sum(ff, (wf * res[k])[:, None] * bf, n_free)
+    if sparse:
+        blocks = wf[:, None, None] * af[:, :, None] * bf[:, None, :]
+        return U, V, Coupling(blocks, tf, ff, n, n_free), g, h
     Wf = np.zeros((n, 3, n_free, 2))
     Wf[tf, :, ff, :] = wf[:, None, None] * af[:, :, None] * bf[:, None, :]
     return U, V, Wf.reshape(n, 3, 2 * n_free), g, h
 
 
-def joint_step(U, V, Wf, g, h, lam):
+def joint_step(U, V, Wf, g, h, lam, solver: str = "lu"):
     """The damped Gauss-Newton step (Levenberg-Marquardt, ``diag *= 1 + lam``) of the poses and
     the free objects, the poses eliminated per step (Schur complement on the objects): the planar
     case of :func:`schur_step` (3 pose and 2 object parameters)."""
-    return schur_step(U, V, Wf, g, h, lam)
+    return schur_step(U, V, Wf, g, h, lam, solver)
 
 
-def schur_step(U, V, Wf, g, h, lam):
+def schur_step(U, V, Wf, g, h, lam, solver: str = "lu"):
     """The damped Gauss-Newton step (Levenberg-Marquardt, ``diag *= 1 + lam``) of the poses and
     the free objects, each pose's block eliminated (Schur complement on the objects), for any
     number of pose parameters ``p`` and object coordinates ``d``: ``U`` (N, p, p), ``V`` (F, d, d),
     ``Wf`` (N, p, d F), ``g`` (N, p), ``h`` (F, d). Returns the pose steps (N, p) and the object
     steps (F, d). The planar adjustments use p = 3, d = 2; the 3-D ones
-    (:mod:`mappers.spatial`) p = 6, d = 3."""
+    (:mod:`mappers.spatial`) p = 6, d = 3. ``Wf`` a :class:`Coupling`: the sparse step
+    (:func:`sparse_schur_step`, with ``solver``), for problems whose dense coupling would not
+    fit (:func:`use_sparse_coupling`)."""
+    if isinstance(Wf, Coupling):
+        return sparse_schur_step(U, V, Wf, g, h, lam, solver)
     n, p = U.shape[:2]
     f, d = V.shape[:2]
     diag = np.arange(p)
