@@ -25,6 +25,8 @@ from mappers.spatial.rays import RayObservations
 from mappers.viewpoints import (
     DENSE_COUPLING_MAX_BYTES,
     Coupling,
+    Damping,
+    damped_step,
     robust_cost,
     robust_weights,
     scatter_sum,
@@ -32,7 +34,11 @@ from mappers.viewpoints import (
     use_sparse_coupling,
 )
 
-__all__ = ["AdjustmentResult", "adjust_viewpoints"]
+__all__ = ["DAMPING", "AdjustmentResult", "adjust_viewpoints"]
+
+DAMPING = Damping(up=10.0, down=10.0, floor=1e-9, tries=None, ceiling=1e8, accept_equal=False)
+"""The 6-DoF adjustment's Levenberg-Marquardt damping rule (:class:`mappers.viewpoints.Damping`):
+raised until a step lowers the cost or the damping reaches 1e8."""
 
 
 class AdjustmentResult(NamedTuple):
@@ -192,19 +198,18 @@ def _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, lo
         if soft.size:  # the anchors' prior: (p - anchor) / anchor_noise, Jacobian I / noise
             step_blocks[1][free_index[soft]] += np.eye(3) / anchor_noise**2
             step_blocks[4][free_index[soft]] += (P[soft] - target) / anchor_noise**2
-        improved = False
-        while lam < 1e8:
+
+        def trial(lam, step_blocks=step_blocks, P=P, R=R, C=C):
             dc, dp = schur_step(*step_blocks, lam)
             Pn, Rn, Cn = P.copy(), R.copy(), C.copy()
             Pn[free] += dp
             Rn[steps] = R[steps] @ Rotation.from_rotvec(dc[:, :3]).as_matrix()
             Cn[steps] += dc[:, 3:]
-            new = cost_of(Pn, Rn, Cn)
-            if new < cost:
-                P, R, C, improved = Pn, Rn, Cn, True
-                lam = max(lam / 10.0, 1e-9)
-                break
-            lam *= 10.0
+            return (Pn, Rn, Cn), cost_of(Pn, Rn, Cn)
+
+        state, new, lam, improved = damped_step(trial, cost, lam, DAMPING)
+        if improved:
+            P, R, C = state
         if not improved or cost - new <= tol * cost:
             cost = new if improved else cost
             break

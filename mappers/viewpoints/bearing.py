@@ -56,8 +56,10 @@ from mappers.core.validation import check_views
 from mappers.defaults import localisation_free
 from mappers.viewpoints.engine import (
     DENSE_COUPLING_MAX_BYTES,
+    Damping,
     bearing_observations,
     bearing_residuals,
+    damped_step,
     initial_poses,
     intersect,
     joint_step,
@@ -73,6 +75,10 @@ from mappers.viewpoints.engine import (
 from mappers.viewpoints.start_map import anchored_start, fit_start, keep_if_better
 
 __all__ = ["BearingAdjustment", "BearingAdjustmentWarning"]
+
+DAMPING = Damping(up=10.0, down=10.0, floor=1e-9, tries=12, accept_equal=True)
+"""BEARING-BA's Levenberg-Marquardt damping rule (:class:`mappers.viewpoints.engine.Damping`)."""
+
 
 class BearingAdjustmentWarning(UserWarning):
     """The refinement kept (part of) the start map: too few views, parallel rays, no gain."""
@@ -268,18 +274,18 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
             res, _ = bearing_residuals(P, C, phi, obs)
             blocks = normal_blocks(P, C, phi, obs, wb * robust_weights(res, scale, self.loss),
                                     free_index, int(free.sum()), sparse=sparse)
-            for _ in range(12):
+
+            def trial(lam, blocks=blocks, P=P, C=C, phi=phi, cost=cost):
                 dc, dp = joint_step(*blocks, lam, solver=self.schur_solver)
                 P2 = P.copy()
                 P2[free] += dp
                 C2, phi2 = C + dc[:, :2], wrap_angles(phi + dc[:, 2])
-                new = cost(P2, C2, phi2)
-                if np.isfinite(new) and new <= current:
-                    break
-                lam *= 10.0
-            else:
+                return (P2, C2, phi2, dp), cost(P2, C2, phi2)
+
+            state, new, lam, accepted = damped_step(trial, current, lam, DAMPING)
+            if not accepted:
                 break  # no step lowers the cost: converged (or stuck)
-            P, C, phi, lam = P2, C2, phi2, max(lam / 10.0, 1e-9)
+            P, C, phi, dp = state
             done = current - new <= 1e-6 * current or not dp.size or np.abs(dp).max() <= self.tol
             current = new
             out = ~self._inside(C)

@@ -11,6 +11,10 @@ online bundle use these pieces.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -24,9 +28,11 @@ from mappers.viewpoints.sparse_schur import (
 __all__ = [
     "DENSE_COUPLING_MAX_BYTES",
     "Coupling",
+    "Damping",
     "bearing_angles",
     "bearing_observations",
     "bearing_residuals",
+    "damped_step",
     "initial_poses",
     "intersect",
     "joint_step",
@@ -293,3 +299,45 @@ def schur_step(U, V, Wf, g, h, lam, solver: str = "lu"):
     dp = np.linalg.solve(S + 1e-12 * np.eye(d * f), rhs)
     dc = -Uig - Y @ dp
     return dc, dp.reshape(f, d)
+
+
+@dataclass(frozen=True)
+class Damping:
+    """A Levenberg-Marquardt damping rule (Marquardt 1963; Nocedal & Wright, *Numerical
+    Optimization*, 2006, section 10.3): a step that does not lower the cost is retried with the
+    damping ``lam`` multiplied by ``up``, at most ``tries`` times (None: no limit) and while
+    ``lam`` is below ``ceiling`` (None: no ceiling); an accepted step divides it by ``down``, no
+    lower than ``floor``. ``accept_equal``: a step that leaves the cost equal is accepted (else
+    it must fall). Each adjustment keeps the rule it was tuned with."""
+
+    up: float = 10.0
+    down: float = 10.0
+    floor: float = 1e-9
+    tries: int | None = 12
+    ceiling: float | None = None
+    accept_equal: bool = True
+
+    def __post_init__(self) -> None:
+        if not (self.up > 1.0 and self.down >= 1.0 and self.floor >= 0.0):
+            raise ValueError(f"a damping rule needs up > 1, down >= 1, floor >= 0, got {self}")
+        if self.tries is not None and self.tries < 1:
+            raise ValueError(f"a damping rule needs tries >= 1 or None, got {self.tries}")
+
+
+def damped_step(try_step: Callable[[float], tuple[Any, float]], current: float, lam: float,
+                rule: Damping) -> tuple[Any, float, float, bool]:
+    """One Levenberg-Marquardt step under the damping ``rule``, the one driver of the
+    viewpoint adjustments' loops: ``try_step(lam)`` returns a trial state and its cost; it is
+    called with ``lam`` raised by the rule until the cost is finite and falls below ``current``
+    (or equals it, ``rule.accept_equal``). Returns ``(trial, cost, lam, accepted)``: the
+    accepted trial, its cost and the lowered damping; or, when no try was accepted,
+    ``(None, current, lam, False)`` with the raised damping."""
+    tries = 0
+    while ((rule.tries is None or tries < rule.tries)
+           and (rule.ceiling is None or lam < rule.ceiling)):
+        trial, new = try_step(lam)
+        if np.isfinite(new) and (new <= current if rule.accept_equal else new < current):
+            return trial, new, max(lam / rule.down, rule.floor), True
+        lam *= rule.up
+        tries += 1
+    return None, current, lam, False
