@@ -4,8 +4,11 @@ Angles and their residuals, the robust loss (Huber or Cauchy weights and costs),
 and iterative resection of each step's pose from a map, the intersection of rays, and the
 Levenberg-Marquardt step with the viewpoints eliminated by the Schur complement (each pose's
 3x3 block is solved away, leaving the free objects' normal equations), as bundle adjusters do
-(Triggs et al., *Bundle Adjustment — A Modern Synthesis*, 2000). BEARING-BA
-(:mod:`mappers.viewpoints.bearing`), the view-cone and range-bearing adjustments and the
+(Triggs et al., *Bundle Adjustment — A Modern Synthesis*, 2000), dense or, for problems whose
+dense pose-object coupling would not fit, sparse (:mod:`mappers.viewpoints.sparse_schur`), and
+the one Levenberg-Marquardt driver (:func:`damped_step`) under each adjustment's damping rule
+(:class:`Damping`). BEARING-BA (:mod:`mappers.viewpoints.bearing`), the view-cone and
+range-bearing adjustments, the 6-DoF adjustment (:mod:`mappers.spatial.adjustment`) and the
 online bundle use these pieces.
 """
 
