@@ -160,8 +160,7 @@ class Camera3DEnv(WorldEnv):
         self.tag_heights = tags3d.check_heights(tag_heights)
         if self.world.arena_half <= WALL_TAG_CORNER_MARGIN and self.n_wall_tags:
             raise ValueError(f"arena_size={arena_size} leaves no wall away from the corners for tags")
-        self.step_length = check_real("step_length", step_length, low=0.0, low_open=True)
-        self.max_turn = check_real("max_turn", max_turn, low=0.0, low_open=True, high=math.pi)
+        self._set_motion(step_length, max_turn)
         self.camera = view3d.CameraModel(height=check_real("camera_height", camera_height),
                                          pitch_deg=pitch_deg, hfov_deg=hfov_deg, vfov_deg=vfov_deg,
                                          max_range=max_range, occlusion=occlusion)
@@ -173,8 +172,7 @@ class Camera3DEnv(WorldEnv):
                                    ("range_noise", range_noise, "range")):
             if value and needs not in self.sensors:
                 raise ValueError(f"{name} applies to the {needs} sensor, not to {sensor!r}")
-        self.n_proximity_rays = check_int("n_proximity_rays", n_proximity_rays, low=1)
-        self.proximity_range = check_real("proximity_range", proximity_range, low=0.0, low_open=True)
+        self._set_proximity(n_proximity_rays, proximity_range)
         self._set_render_mode(render_mode)
 
         a = self.world.arena_half
@@ -196,8 +194,6 @@ class Camera3DEnv(WorldEnv):
         if self._masked:
             entries["observed"] = spaces.MultiBinary(m)
         self.observation_space = spaces.Dict(entries)
-        self.action_space = spaces.Box(-self.max_turn, self.max_turn, (1,), np.float32)
-        self._dirs = sensors.ray_directions(self.n_proximity_rays)
         self._tags = np.zeros((0, 3))
         self._hosts = np.zeros(0, dtype=np.int64)
         self._anchor_ids = np.zeros(0, dtype=np.int64)

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from lfmdr_gym.checks import check_int, check_real
+from lfmdr_gym.checks import check_real
 from lfmdr_gym.render import draw_frame
 from lfmdr_gym.sim import sensors
 from lfmdr_gym.sim.grid import CellGrid
@@ -248,16 +248,14 @@ class LFMDREnv(WorldEnv):
             n_anchors=n_anchors,
         )
         self.sensor = sensor
-        self.step_length = check_real("step_length", step_length, low=0.0, low_open=True)
-        self.max_turn = check_real("max_turn", max_turn, low=0.0, low_open=True, high=math.pi)
+        self._set_motion(step_length, max_turn)
         self.visual_angle_deg = check_real(
             "visual_angle_deg", visual_angle_deg, low=0.0, low_open=True, high=180.0, high_open=True
         )
         if not isinstance(occlusion, bool | np.bool_):
             raise ValueError(f"occlusion must be True or False, got {occlusion!r}")
         self.occlusion = bool(occlusion)
-        self.n_proximity_rays = check_int("n_proximity_rays", n_proximity_rays, low=1)
-        self.proximity_range = check_real("proximity_range", proximity_range, low=0.0, low_open=True)
+        self._set_proximity(n_proximity_rays, proximity_range)
         self.max_range = (
             None if max_range is None else check_real("max_range", max_range, low=0.0, low_open=True)
         )
@@ -288,14 +286,12 @@ class LFMDREnv(WorldEnv):
                                       range_high=getattr(range_type or self._obs_type, "high", 1.0),
                                       **limits)
                         if SensingLimits.active(limits) else None)
-        self._dirs = sensors.ray_directions(self.n_proximity_rays)
         # One candidate prefilter serves the proximity ring and a nearby-only sensor.
         self._reach = max(self.proximity_range + self.world.object_radius,
                           *(t.reach for t in self._obs_types.values()))
         self._reach2 = self._reach * self._reach
         self._r2 = self.world.object_radius * self.world.object_radius
         self._xy = np.zeros(2)  # the robot's (x, y), reused every step
-        self.action_space = spaces.Box(-self.max_turn, self.max_turn, (1,), np.float32)
         self.observation_space = spaces.Dict(
             {
                 **{key: t.space for key, t in self._obs_types.items()},

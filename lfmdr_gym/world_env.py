@@ -9,12 +9,16 @@ they subclass :class:`WorldEnv` and give ``_observe``, ``_info`` and ``_frame``.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium import spaces
 
+from lfmdr_gym.checks import check_int, check_real
 from lfmdr_gym.render import HumanViewer, available_render_modes, human_rendering_error
+from lfmdr_gym.sim import sensors
 from lfmdr_gym.sim.world import World, action_turn
 
 __all__ = ["WorldEnv"]
@@ -25,8 +29,8 @@ class WorldEnv(gym.Env):
     turns by the action (at most ``max_turn``, :func:`~lfmdr_gym.sim.world.action_turn`) and
     advances ``step_length``, stopping short of any contact; there is no reward and no end.
 
-    A subclass sets ``world``, ``max_turn``, ``step_length`` and calls :meth:`_set_render_mode`
-    in its ``__init__``, and gives ``_observe()`` (the observation at the current pose),
+    A subclass sets ``world`` and calls :meth:`_set_motion`, :meth:`_set_proximity` and
+    :meth:`_set_render_mode` in its ``__init__``, and gives ``_observe()`` (the observation at the current pose),
     ``_info(blocked)`` and ``_frame()`` (the RGB frame of the current state).
     """
 
@@ -37,6 +41,20 @@ class WorldEnv(gym.Env):
     world: World
     max_turn: float
     step_length: float
+
+    def _set_motion(self, step_length: float, max_turn: float) -> None:
+        """Check and keep the move of a step: ``step_length`` > 0 [m], ``0 < max_turn <= pi``
+        [rad] (the action space is ``Box(-max_turn, max_turn, (1,))``)."""
+        self.step_length = check_real("step_length", step_length, low=0.0, low_open=True)
+        self.max_turn = check_real("max_turn", max_turn, low=0.0, low_open=True, high=math.pi)
+        self.action_space = spaces.Box(-self.max_turn, self.max_turn, (1,), np.float32)
+
+    def _set_proximity(self, n_proximity_rays: int, proximity_range: float) -> None:
+        """Check and keep the proximity ring: ``n_proximity_rays`` >= 1 rays (their directions
+        in ``_dirs``), each reading up to ``proximity_range`` > 0 [m]."""
+        self.n_proximity_rays = check_int("n_proximity_rays", n_proximity_rays, low=1)
+        self.proximity_range = check_real("proximity_range", proximity_range, low=0.0, low_open=True)
+        self._dirs = sensors.ray_directions(self.n_proximity_rays)
 
     def _set_render_mode(self, render_mode: str | None) -> None:
         """Check ``render_mode`` (``None`` or one of ``metadata["render_modes"]``; ``"human"``
