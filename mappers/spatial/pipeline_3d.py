@@ -78,7 +78,8 @@ def build_map_3d(histories, anchor_ids, anchor_positions, method: str | None = N
     Y = est.fit_transform(X, anchor_ids=anchor_ids, anchor_positions=anchor_positions, **inputs)
     placed = np.all(np.isfinite(Y), axis=1)
     unmapped = tuple(int(i) for i in np.flatnonzero(~placed))
-    notes = (f"{len(unmapped)} object(s) could not be placed: {list(unmapped)[:20]}",) \
+    # worded as the 2-D notes (mappers.fitting): the object ids (rows of the history), all of them
+    notes = (f"objects {list(unmapped)} could not be placed from their histories",) \
         if unmapped else ()
     return Map(positions=Y, unmapped=unmapped, embedding=Y.copy(), method=label,
                params={k: getattr(est, k) for k in inspect.signature(type(est)).parameters},

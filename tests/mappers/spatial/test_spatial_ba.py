@@ -40,6 +40,16 @@ def test_rays_and_ranges_map_exactly():
     assert mean_position_error_3d(m.positions, P, [*m.unmapped, *ANCHORS]) < 1e-6
 
 
+def test_an_unplaced_object_is_named_by_its_id_as_in_2d():
+    """Map.warnings names the unmapped objects by id, in the 2-D notes' words ("objects [...]
+    could not be placed"), so a caller that renames object ids (MRCLAM's subjects) reads both."""
+    P, X, Rg = camera_world()
+    X[[7, 12]], Rg[[7, 12]] = 0.0, 0.0  # never seen
+    m = build_map({"bearing": X, "range": Rg}, ANCHORS, P[ANCHORS])
+    assert {7, 12} <= set(m.unmapped)
+    assert f"objects {list(m.unmapped)} could not be placed from their histories" in m.warnings
+
+
 def test_rays_alone_map_closely():
     # exact rays: the adjustment from the resection-and-intersection start comes within a
     # centimetre (it stalls there: bearing-only converges slowly; 60 iterations as 200)
