@@ -24,6 +24,7 @@ from mappers.spatial.adjustment import adjust_viewpoints
 from mappers.spatial.covisibility_3d import CoVisibility3D
 from mappers.spatial.rays import ray_observations
 from mappers.spatial.registration import MIN_RAY_ANGLE, register_points, register_rays
+from mappers.viewpoints import DENSE_COUPLING_MAX_BYTES
 
 __all__ = ["SpatialAdjustment"]
 
@@ -47,6 +48,8 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
             rays diverge by less than 10 degrees (its depth along them is not fixed) was not
             placed consistently: it is left unmapped (NaN, listed in ``inconsistent_``) rather than
             reported where the adjustment left it.
+        dense_coupling_bytes: the adjustment's pose-point coupling is dense up to this many
+            bytes, sparse above (:func:`mappers.spatial.adjustment.adjust_viewpoints`).
 
     Attributes (after fit): ``embedding_`` (M, 3) world positions, NaN for objects it could not
     place or placed inconsistently (``inconsistent_``, see ``max_ray_error``); ``rotations_`` (N, 3, 3) and ``positions_`` (N, 3) the steps' poses (NaN: step not
@@ -56,7 +59,8 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
     def __init__(self, *, bearing_noise: float = float(np.deg2rad(1.0)), range_noise: float = 0.02,
                  range_growth: float = 0.0, loss: str | None = "cauchy", loss_scale: float = 3.0,
                  max_iter: int = 200, fit_range_scale: bool = False,
-                 anchor_noise: float | None = None, max_ray_error: float = float(np.deg2rad(5.0))):
+                 anchor_noise: float | None = None, max_ray_error: float = float(np.deg2rad(5.0)),
+                 dense_coupling_bytes: float = DENSE_COUPLING_MAX_BYTES):
         self.bearing_noise = bearing_noise
         self.range_noise = range_noise
         self.range_growth = range_growth
@@ -66,6 +70,7 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
         self.fit_range_scale = fit_range_scale
         self.anchor_noise = anchor_noise
         self.max_ray_error = max_ray_error
+        self.dense_coupling_bytes = dense_coupling_bytes
 
     def fit(self, X, y=None, *, anchor_ids=None, anchor_positions=None, mask=None, masks=None):
         """Fit to a 3-D bearing history ``X`` (M, 3N) or fused histories ``{"bearing": rays,
@@ -100,7 +105,8 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
                                 range_noise=self.range_noise, range_growth=self.range_growth,
                                 loss=self.loss, loss_scale=self.loss_scale,
                                 max_iter=self.max_iter, fit_range_scale=self.fit_range_scale,
-                                anchor_noise=self.anchor_noise)
+                                anchor_noise=self.anchor_noise,
+                                dense_coupling_bytes=self.dense_coupling_bytes)
         if self.anchor_noise is not None:  # the map's own shape, placed on the anchors
             Rs, scale, t = umeyama(res.points[ids], pos, True)
             res = res._replace(points=scale * res.points @ Rs.T + t,

@@ -100,3 +100,15 @@ def test_uncertainty_of_a_3d_map_is_refused_not_dropped():
     P, X, Rg = camera_world()
     with pytest.raises(ValueError, match="3-D maps"):
         build_map({"bearing": X, "range": Rg}, ANCHORS, P[ANCHORS], uncertainty=True)
+
+
+def test_the_sparse_engine_maps_as_the_dense_one():
+    """Issue 34: the 6-DoF adjustment through the sparse Schur step (forced) gives the dense
+    step's map, to rounding."""
+    P, X, Rg = camera_world(noise_deg=1.0, range_noise=0.02)
+    dense = build_map({"bearing": X, "range": Rg}, ANCHORS, P[ANCHORS], method="SPATIAL-BA")
+    sparse = build_map({"bearing": X, "range": Rg}, ANCHORS, P[ANCHORS], method="SPATIAL-BA",
+                       dense_coupling_bytes=0)
+    assert mean_position_error_3d(dense.positions, P, [*dense.unmapped, *ANCHORS]) < 0.05
+    assert dense.unmapped == sparse.unmapped
+    np.testing.assert_allclose(sparse.positions, dense.positions, rtol=0, atol=1e-7)
