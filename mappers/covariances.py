@@ -3,9 +3,10 @@
 Two sources, chosen by ``uncertainty``:
 
 * ``"model"`` — from the normal equations of a bundle adjustment, where the method ends with one
-  (``BEARING-BA``, ``LOC-SMA`` refined by its range-bearing or bearing adjustment): the objects'
-  marginal covariances with the viewpoints eliminated and the anchors fixed, scaled by the
-  robustly weighted residuals' variance (:mod:`mappers.viewpoints.marginals`);
+  (``BEARING-BA``, ``LOC-SMA`` refined by its range-bearing or bearing adjustment, and in 3-D
+  ``SPATIAL-BA``): the objects' marginal covariances with the viewpoints eliminated and the
+  anchors fixed, scaled by the robustly weighted residuals' variance
+  (:mod:`mappers.viewpoints.marginals`, :mod:`mappers.spatial.marginals`);
 * ``"bootstrap"`` — for every method: a moving-block bootstrap over the history's steps
   (Künsch 1989; blocks of ``ceil(sqrt(N))`` consecutive steps, since consecutive steps of a walk
   see nearly the same scene), :data:`BOOTSTRAP_REPLICATES` replicate histories each mapped by
@@ -39,9 +40,13 @@ from mappers.core.uncertainty import (
     transform_covariances,
 )
 from mappers.fitting import Map
-from mappers.viewpoints import adjustment_covariances, has_model_covariances
+from mappers.spatial.marginals import spatial_covariances
+from mappers.spatial.spatial_ba import SpatialAdjustment
+from mappers.viewpoints import adjustment_covariances
+from mappers.viewpoints import has_model_covariances as _has_planar_model
 
-__all__ = ["BOOTSTRAP_INFLATION", "BOOTSTRAP_REPLICATES", "MIN_REPLICATES", "with_covariances"]
+__all__ = ["BOOTSTRAP_INFLATION", "BOOTSTRAP_REPLICATES", "MIN_REPLICATES", "has_model_covariances",
+           "with_covariances"]
 
 BOOTSTRAP_REPLICATES = 20
 """Replicate maps of a bootstrap."""
@@ -55,6 +60,12 @@ layouts of the project's world (``--sets visibility``; docs/guide/uncertainty.md
 
 MIN_REPLICATES = 10
 """An object placed in fewer replicates gets a NaN covariance (and a note)."""
+
+
+def has_model_covariances(est) -> bool:
+    """Whether the fitted estimator ``est`` ends with a bundle adjustment whose normal equations
+    give covariances: BEARING-BA, LOC-SMA refined by an adjustment, SPATIAL-BA (3-D)."""
+    return isinstance(est, SpatialAdjustment) or _has_planar_model(est)
 
 
 def _finish(result: Map, cov: np.ndarray) -> np.ndarray:
@@ -72,6 +83,8 @@ def _rows(a, rows):
 
 
 def _model(result: Map, est, mapped: np.ndarray, X, mask, timeline) -> np.ndarray:
+    if isinstance(est, SpatialAdjustment):  # 3-D: every row fitted, in the output frame
+        return spatial_covariances(est)
     local = np.searchsorted(mapped, np.asarray(result.anchor_ids, dtype=int))
     cov_local = adjustment_covariances(est, X, mask, local, timeline)
     d = result.positions.shape[1]
@@ -127,7 +140,7 @@ def with_covariances(result: Map, uncertainty, *, est: Any, mapped: np.ndarray, 
         if not has_model_covariances(est):
             raise ValueError(
                 f"uncertainty='model' needs a method that ends with a bundle adjustment "
-                f"(BEARING-BA, LOC-SMA refined), not {result.method!r}: use 'bootstrap' or True")
+                f"(BEARING-BA, LOC-SMA refined, SPATIAL-BA), not {result.method!r}: use 'bootstrap' or True")
         cov = _model(result, est, mapped, _rows(X, mapped), _rows(mask, mapped), timeline)
     else:
         cov = _bootstrap(result, n_steps, refit, random_state, notes)

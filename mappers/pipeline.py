@@ -22,7 +22,12 @@ from mappers.core.uncertainty import check_uncertainty
 from mappers.covariances import with_covariances
 from mappers.defaults import choose_for_history
 from mappers.fitting import Map, check_inputs, fit_checked, fit_fused_method
-from mappers.spatial.pipeline_3d import anchor_dimension, build_map_3d
+from mappers.spatial.pipeline_3d import (
+    anchor_dimension,
+    build_map_3d,
+    fit_map_3d,
+    step_columns_3d,
+)
 
 __all__ = ["Map", "MapWarning", "build_map", "default_method"]
 
@@ -97,11 +102,12 @@ def build_map(
         itself fails (e.g. Hessian LLE's eigenproblem), naming the method and the cause.
     """
     if anchor_dimension(anchor_positions) == 3:
+        uncertainty = check_uncertainty(uncertainty)
+        result, est, X3, mask3, sensor3 = fit_map_3d(histories, anchor_ids, anchor_positions,
+                                                     method, sensor=sensor, mask=mask, **params)
         if uncertainty is not False:
-            raise ValueError("uncertainty= is not available for 3-D maps yet: Map.covariances is "
-                             "computed for 2-D maps only (leave uncertainty=False)")
-        result = build_map_3d(histories, anchor_ids, anchor_positions, method, sensor=sensor,
-                              mask=mask, **params)
+            result = _with_covariances_3d(result, uncertainty, est, X3, mask3, sensor3,
+                                          anchor_ids, anchor_positions, random_state)
         for note in result.warnings:
             warnings.warn(note, MapWarning, stacklevel=2)
         return result
@@ -242,3 +248,34 @@ def _with_covariances(result, uncertainty, est, mapped, histories, anchor_ids, a
     return with_covariances(result, uncertainty, est=est, mapped=mapped, X=X, mask=M,
                             n_steps=n_steps, refit=refit, random_state=random_state,
                             timeline=timeline)
+
+
+def _with_covariances_3d(result, uncertainty, est, X, mask, sensor, anchor_ids, anchor_positions,
+                         random_state) -> Map:
+    """``result`` (a 3-D map) with ``Map.covariances``: the model's for SPATIAL-BA, a bootstrap's
+    for COVIS-3D (each replicate the same method on the chosen steps' columns)."""
+    per_step = step_columns_3d(X, sensor)
+    if isinstance(X, Mapping):
+        n_steps = X["bearing"].shape[1] // per_step["bearing"]
+
+        def cut(steps):
+            masks = dict(mask or {})
+            return ({k: v[:, _step_columns(steps, per_step[k])] for k, v in X.items()},
+                    {k: None if masks.get(k) is None else
+                     np.asarray(masks[k])[:, _step_columns(steps, per_step[k])] for k in X})
+    else:
+        n_steps = X.shape[1] // per_step
+
+        def cut(steps):
+            cols = _step_columns(steps, per_step)
+            return X[:, cols], None if mask is None else np.asarray(mask)[:, cols]
+
+    def refit(steps):
+        Xr, Mr = cut(steps)
+        return build_map_3d(Xr, anchor_ids, anchor_positions, result.method, sensor=sensor,
+                            mask=Mr, **result.params).positions
+
+    return with_covariances(result, uncertainty, est=est, mapped=np.arange(len(result.positions)),
+                            X=X, mask=mask, n_steps=n_steps, refit=refit,
+                            random_state=random_state)
+
