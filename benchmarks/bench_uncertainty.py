@@ -66,7 +66,8 @@ from mappers import build_map
 from mappers.core.uncertainty import chi2_quantile, mahalanobis_squared, rms_radius
 
 SETS = ("visibility", "bearing", "range-bearing", "bearing-view90", "visibility-other-sim",
-        "mrclam")
+        "mrclam", "mrclam-anchors", "starloc", "starloc-anchors")
+REAL = {"mrclam", "mrclam-anchors", "starloc", "starloc-anchors"}
 FIELDS = ("set", "layout", "method", "n_scored", "inside", "rms_radius", "mpe", "cpu_map",
           "cpu_uncertainty", "wall_map", "wall_uncertainty")
 
@@ -87,7 +88,8 @@ def score(positions, cov, truth, objects) -> tuple[int, int, float, float]:
     q = mahalanobis_squared(truth[objects] - positions[objects], cov[objects])
     radius = rms_radius(cov[objects])
     err = np.linalg.norm(positions[objects] - truth[objects], axis=1)
-    return (len(objects), int(np.sum(q <= chi2_quantile(2))), float(np.mean(radius)),
+    return (len(objects), int(np.sum(q <= chi2_quantile(positions.shape[1]))),
+            float(np.mean(radius)),
             float(np.mean(err)))
 
 
@@ -109,7 +111,7 @@ def map_row(name, layout, histories, anchors, truth, **kwargs) -> dict:
 
 def simulated_rows(seed: int, steps: int, sets) -> list[dict]:
     rows = []
-    if not set(sets) - {"visibility-other-sim", "mrclam"}:
+    if not set(sets) - REAL - {"visibility-other-sim"}:
         P, X, _ = other_sim(seed, n=steps, fov=360.0)
         return [map_row("visibility-other-sim", seed, X, np.arange(4), P, sensor="visibility")]
     env = gym.make("LFMDR-Bearing-v0")
@@ -139,27 +141,56 @@ def simulated_rows(seed: int, steps: int, sets) -> list[dict]:
     return rows
 
 
-def mrclam_rows(data: Path) -> list[dict]:
+def starloc_rows(data: Path, name: str) -> list[dict]:
+    """Every s3 sequence under ``data`` mapped from stereo (rays and ranges, SPATIAL-BA with
+    :data:`lfmdr_gym.experiments.starloc.STARLOC_PARAMS`), its scored tags scored in 3-D;
+    ``name`` "starloc": ``uncertainty=True``, "starloc-anchors": ``uncertainty="anchors"``."""
+    from lfmdr_gym.datasets.starloc import read_starloc, scored_tags, starloc_survey
+    from lfmdr_gym.experiments.starloc import map_starloc
+
+    mode = "anchors" if name.endswith("-anchors") else True
+    rows = []
+    for seq in sorted(p for p in (data / "data").glob("*_s3") if p.is_dir()):
+        plain, cpu0, wall0 = _timed(lambda s=seq: map_starloc(s))
+        r, cpu1, wall1 = _timed(lambda s=seq: map_starloc(s, uncertainty=mode))
+        xyz = starloc_survey(seq).set_index("landmark")[["x", "y", "z"]]
+        tags = scored_tags(read_starloc(seq, "range-bearing"), starloc_survey(seq), r.anchors)
+        tags = [t for t in tags if t in r.positions]
+        if not tags:
+            continue
+        pos = np.array([r.positions[t] for t in tags])
+        cov = np.array([r.covariances[t] for t in tags])
+        truth = xyz.loc[tags].to_numpy(dtype=float)
+        n, inside, radius, mpe = score(pos, cov, truth, np.arange(len(tags)))
+        rows.append({"_q": mahalanobis_squared(truth - pos, cov), "set": name,
+                     "layout": seq.name, "method": r.method, "n_scored": n, "inside": inside,
+                     "rms_radius": radius, "mpe": mpe, "cpu_map": cpu0, "cpu_uncertainty": cpu1,
+                     "wall_map": wall0, "wall_uncertainty": wall1})
+    return rows
+
+
+def mrclam_rows(data: Path, name: str = "mrclam") -> list[dict]:
     from lfmdr_gym.experiments.mrclam import map_mrclam_run
 
+    mode = "anchors" if name.endswith("-anchors") else True
     rows, q_runs = [], {}
     for run_dir in sorted(p for p in data.glob("MRCLAM_Dataset*") if p.is_dir()):
         plain, cpu0, wall0 = _timed(lambda d=run_dir: map_mrclam_run(d, "range-bearing",
                                                                       plot=False))
         r, cpu1, wall1 = _timed(lambda d=run_dir: map_mrclam_run(d, "range-bearing", plot=False,
-                                                                 uncertainty=True))
+                                                                 uncertainty=mode))
         anchors = np.flatnonzero(np.isin(r.subjects, r.anchor_subjects))
         objects = np.setdiff1d(np.arange(len(r.subjects)), anchors)
         n, inside, radius, mpe = score(r.positions, r.covariances, r.truth, objects)
         rows.append({"_q": mahalanobis_squared(r.truth[objects] - r.positions[objects],
                                                r.covariances[objects]),
-                     "set": "mrclam", "layout": run_dir.name, "method": r.method, "n_scored": n,
+                     "set": name, "layout": run_dir.name, "method": r.method, "n_scored": n,
                      "inside": inside, "rms_radius": radius, "mpe": mpe, "cpu_map": cpu0,
                      "cpu_uncertainty": cpu1, "wall_map": wall0, "wall_uncertainty": wall1})
         ok = objects[np.all(np.isfinite(r.positions[objects]), axis=1)]
         q_runs[run_dir.name] = mahalanobis_squared(r.truth[ok] - r.positions[ok],
                                                    r.covariances[ok])
-    for row in list(rows):  # leave-one-run-out inflation (module docstring)
+    for row in list(rows) if mode is True else []:  # leave-one-run-out (module docstring)
         others = np.concatenate([q for name, q in q_runs.items() if name != row["layout"]])
         if not others.size:
             continue
@@ -205,6 +236,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seed0", type=int, default=12000)
     ap.add_argument("--sets", default=",".join(SETS))
     ap.add_argument("--data", type=Path, default=Path("/work/shared/data/mrclam"))
+    ap.add_argument("--starloc", type=Path, default=Path("/work/shared/data/starloc"))
     ap.add_argument("--csv", type=Path, default=None)
     args = ap.parse_args(argv)
     sets = [s for s in args.sets.split(",") if s]
@@ -212,13 +244,14 @@ def main(argv=None) -> int:
     if unknown:
         ap.error(f"unknown sets {sorted(unknown)}; choose from {list(SETS)}")
     rows: list[dict] = []
-    if "mrclam" in sets:
-        if not args.data.is_dir():
-            ap.error(f"no MRCLAM data at {args.data}")
-        rows += mrclam_rows(args.data)
+    for name in [s for s in sets if s in REAL]:
+        data = args.starloc if name.startswith("starloc") else args.data
+        if not data.is_dir():
+            ap.error(f"no {name.split('-')[0]} data at {data}")
+        rows += (starloc_rows if name.startswith("starloc") else mrclam_rows)(data, name)
         if args.csv:
             write_csv(args.csv, rows)
-    for k in range(args.layouts if set(sets) - {"mrclam"} else 0):
+    for k in range(args.layouts if set(sets) - REAL else 0):
         rows += simulated_rows(args.seed0 + k, args.steps, sets)
         if args.csv:
             write_csv(args.csv, rows)  # after every layout: a partial run keeps its rows
@@ -230,7 +263,8 @@ def main(argv=None) -> int:
               f"{s['mpe']:>10.4f}{s['time_ratio']:>8.2f}  {s['method']}")
     for name in dict.fromkeys(r["set"] for r in rows):
         q = np.concatenate([r["_q"] for r in rows if r["set"] == name])
-        print(f"{name}: inflation for 0.95 = {np.nanquantile(q, 0.95) / chi2_quantile(2):.3f}")
+        d = 3 if name.startswith("starloc") else 2
+        print(f"{name}: inflation for 0.95 = {np.nanquantile(q, 0.95) / chi2_quantile(d):.3f}")
     return 0
 
 

@@ -32,8 +32,10 @@ from typing import Any
 import numpy as np
 
 from mappers.core.errors import MappingError
+from mappers.core.held_out_anchors import held_out_factor
 from mappers.core.uncertainty import (
     check_uncertainty,
+    mahalanobis_squared,
     moving_blocks,
     sample_covariances,
     sample_size_factor,
@@ -46,7 +48,7 @@ from mappers.viewpoints import adjustment_covariances
 from mappers.viewpoints import has_model_covariances as _has_planar_model
 
 __all__ = ["BOOTSTRAP_INFLATION", "BOOTSTRAP_REPLICATES", "MIN_REPLICATES", "has_model_covariances",
-           "with_covariances"]
+           "with_covariances", "with_held_out_check"]
 
 BOOTSTRAP_REPLICATES = 20
 """Replicate maps of a bootstrap."""
@@ -133,7 +135,7 @@ def with_covariances(result: Map, uncertainty, *, est: Any, mapped: np.ndarray, 
     mode = check_uncertainty(uncertainty)
     if mode is False:
         return result
-    if mode is True:
+    if mode in (True, "anchors"):  # ("anchors": build_map scales these afterwards)
         mode = "model" if has_model_covariances(est) else "bootstrap"
     notes: list[str] = []
     if mode == "model":
@@ -146,3 +148,42 @@ def with_covariances(result: Map, uncertainty, *, est: Any, mapped: np.ndarray, 
         cov = _bootstrap(result, n_steps, refit, random_state, notes)
     return dataclasses.replace(result, covariances=_finish(result, cov),
                                warnings=(*result.warnings, *notes))
+
+
+def with_held_out_check(result: Map, held_out: Callable[[int], tuple[np.ndarray, np.ndarray]],
+                        anchor_positions: np.ndarray) -> Map:
+    """``result`` (a map with its covariances) with the covariances of its non-anchor objects
+    scaled by what its anchors say of them (:mod:`mappers.core.held_out_anchors`):
+    ``held_out(j)`` maps again without the ``j``-th anchor and returns that anchor's position and
+    covariance there (a MappingError or ValueError: it cannot be mapped without it). The anchors'
+    squared Mahalanobis distances give the factor (1 when they pass the test); a note in
+    ``Map.warnings`` says what was found. With fewer than two anchors checked the covariances are
+    kept as they are, with a note saying they could not be checked."""
+    positions = np.asarray(anchor_positions, dtype=float)
+    q = []
+    for j in range(len(positions)):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # the held-out maps' notes are the map's, again
+                p, c = held_out(j)
+        except (MappingError, ValueError):
+            continue
+        # an anchor not placed, or with a singular covariance it lies off: no check from it
+        qj = float(mahalanobis_squared((np.asarray(p) - positions[j])[None], np.asarray(c)[None])[0])
+        if np.isfinite(qj):
+            q.append(qj)
+    d = positions.shape[1]
+    if len(q) < 2:
+        note = (f"uncertainty: only {len(q)} of {len(positions)} anchors could be mapped without "
+                "themselves: the covariances are not checked (they may be too small on logged "
+                "data)")
+        return dataclasses.replace(result, warnings=(*result.warnings, note))
+    factor, k = held_out_factor(np.array(q), d)
+    cov = np.array(result.covariances, dtype=float)
+    free = np.ones(len(cov), dtype=bool)
+    free[list(result.anchor_ids)] = False
+    cov[free] *= factor
+    note = (f"uncertainty: {len(q)} held-out anchors give the variance factor {k:.3g}; "
+            + ("the covariances pass the test (kept)" if factor == 1.0 else
+               f"the covariances are multiplied by {factor:.3g}"))
+    return dataclasses.replace(result, covariances=cov, warnings=(*result.warnings, note))

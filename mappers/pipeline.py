@@ -19,7 +19,7 @@ from mappers.catalog import implied_params, resolve_method
 from mappers.core.fused_histories import check_fused
 from mappers.core.sensors import COLUMNS_PER_STEP, check_sensor_set
 from mappers.core.uncertainty import check_uncertainty
-from mappers.covariances import with_covariances
+from mappers.covariances import with_covariances, with_held_out_check
 from mappers.defaults import choose_for_history
 from mappers.fitting import Map, check_inputs, fit_checked, fit_fused_method
 from mappers.spatial.pipeline_3d import (
@@ -101,6 +101,10 @@ def build_map(
         ValueError: bad input, naming the problem. MappingError (a ValueError) when the method
         itself fails (e.g. Hessian LLE's eigenproblem), naming the method and the cause.
     """
+    if check_uncertainty(uncertainty) == "anchors":
+        return _held_out_checked(histories, anchor_ids, anchor_positions, method, sensor=sensor,
+                                 mask=mask, timeline=timeline, normalize=normalize,
+                                 random_state=random_state, **params)
     if anchor_dimension(anchor_positions) == 3:
         uncertainty = check_uncertainty(uncertainty)
         result, est, X3, mask3, sensor3 = fit_map_3d(histories, anchor_ids, anchor_positions,
@@ -278,4 +282,24 @@ def _with_covariances_3d(result, uncertainty, est, X, mask, sensor, anchor_ids, 
     return with_covariances(result, uncertainty, est=est, mapped=np.arange(len(result.positions)),
                             X=X, mask=mask, n_steps=n_steps, refit=refit,
                             random_state=random_state)
+
+
+def _held_out_checked(histories, anchor_ids, anchor_positions, method, **kwargs) -> Map:
+    """``build_map(..., uncertainty="anchors")``: the map with its own covariances (``True``),
+    scaled by its held-out anchors (:func:`mappers.covariances.with_held_out_check`): each
+    anchor in turn mapped by the same method from the other anchors."""
+    result = build_map(histories, anchor_ids, anchor_positions, method, uncertainty=True,
+                       **kwargs)
+    ids = np.asarray(anchor_ids, dtype=int)
+    pos = np.asarray(anchor_positions, dtype=float)
+
+    def held_out(j):
+        keep = np.arange(len(ids)) != j
+        m = build_map(histories, ids[keep], pos[keep], method, uncertainty=True, **kwargs)
+        return m.positions[ids[j]], m.covariances[ids[j]]
+
+    checked = with_held_out_check(result, held_out, pos)
+    for note in checked.warnings[len(result.warnings):]:
+        warnings.warn(note, MapWarning, stacklevel=3)
+    return checked
 
