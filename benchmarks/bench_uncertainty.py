@@ -1,8 +1,8 @@
 """Per-landmark uncertainty (``build_map(uncertainty=True)``): is it calibrated, sharp and cheap?
 
     python benchmarks/bench_uncertainty.py [--layouts 25] [--steps 1000] [--seed0 12000]
-        [--sets visibility,bearing,range-bearing,bearing-view90,mrclam]
-        [--csv docs/results/uncertainty/uncertainty.csv]
+        [--sets visibility,bearing,range-bearing,bearing-view90,mrclam,starloc,...]
+        [--uncertainty true|anchors] [--csv docs/results/uncertainty/uncertainty.csv]
 
 Simulated sets: each layout is one random walk of ``LFMDR-Bearing-v0`` (50 objects, 4 corner
 anchors), seeds ``seed0, seed0 + 1, ...`` (fresh: never used to choose a setting), and from its
@@ -31,6 +31,13 @@ inflation would give: for each run, the factor on the covariances that puts 95 %
 runs' landmarks inside their regions (leave-one-run-out: the run's figure does not come from a
 factor chosen on it), applied to that run (not a default of the library: the figures say
 whether one factor carries from run to run).
+
+``mrclam-anchors``: the same runs with ``uncertainty="anchors"`` (the covariances checked and
+scaled by the held-out anchors, :mod:`mappers.core.held_out_anchors`). ``starloc`` and
+``starloc-anchors``: every STAR-loc s3 sequence under ``--starloc`` mapped from stereo rays and
+ranges (SPATIAL-BA, :func:`lfmdr_gym.experiments.starloc.map_starloc`), its scored tags scored
+in 3-D (chi-squared(3)), with ``uncertainty=True`` and ``"anchors"``. ``--uncertainty anchors``
+asks the simulated sets for ``"anchors"`` instead of True.
 
 Per map: the share of non-anchor landmarks whose truth lies inside their 95 % region (squared
 Mahalanobis distance at most the chi-squared(2) 0.95 quantile), the mean RMS radius of their
@@ -68,6 +75,8 @@ from mappers.core.uncertainty import chi2_quantile, mahalanobis_squared, rms_rad
 SETS = ("visibility", "bearing", "range-bearing", "bearing-view90", "visibility-other-sim",
         "mrclam", "mrclam-anchors", "starloc", "starloc-anchors")
 REAL = {"mrclam", "mrclam-anchors", "starloc", "starloc-anchors"}
+UNCERTAINTY: bool | str = True
+"""What the simulated sets ask ``build_map`` for (``--uncertainty``)."""
 FIELDS = ("set", "layout", "method", "n_scored", "inside", "rms_radius", "mpe", "cpu_map",
           "cpu_uncertainty", "wall_map", "wall_uncertainty")
 
@@ -97,7 +106,7 @@ def map_row(name, layout, histories, anchors, truth, **kwargs) -> dict:
     """One map without and with uncertainty, scored."""
     plain, cpu0, wall0 = _timed(lambda: build_map(histories, anchors, truth[anchors], **kwargs))
     m, cpu1, wall1 = _timed(lambda: build_map(histories, anchors, truth[anchors],
-                                              uncertainty=True, **kwargs))
+                                              uncertainty=UNCERTAINTY, **kwargs))
     if not np.array_equal(plain.positions, m.positions, equal_nan=True):
         raise AssertionError(f"{name} {layout}: uncertainty=True changed the map")
     objects = np.setdiff1d(np.arange(len(truth)), anchors)
@@ -238,7 +247,11 @@ def main(argv=None) -> int:
     ap.add_argument("--data", type=Path, default=Path("/work/shared/data/mrclam"))
     ap.add_argument("--starloc", type=Path, default=Path("/work/shared/data/starloc"))
     ap.add_argument("--csv", type=Path, default=None)
+    ap.add_argument("--uncertainty", choices=("true", "anchors"), default="true",
+                    help="the simulated sets' mode: True, or 'anchors' (held-out anchors' check)")
     args = ap.parse_args(argv)
+    global UNCERTAINTY
+    UNCERTAINTY = True if args.uncertainty == "true" else "anchors"
     sets = [s for s in args.sets.split(",") if s]
     unknown = set(sets) - set(SETS)
     if unknown:
