@@ -46,7 +46,11 @@ CPU and wall time of the map alone and of the map with its uncertainty (both bui
 this process). The summary per set pools the landmarks of all maps: coverage (goal 0.88-0.99
 simulated, >= 0.80 real), sharpness = mean RMS radius / mean error (goal <= 3; a calibrated
 Gaussian gives about 1.95), and the ratio of the median CPU times with and without uncertainty
-(goal <= 1.5).
+(goal <= 1.5). ``wide`` counts the landmarks whose 95 % region is wider than the anchors'
+extent (its RMS radius above the largest distance between two anchors: "anywhere on the map",
+e.g. a STAR-loc tag seen along one ray only), and ``sharp. rest`` is the sharpness of the
+others (CSV: ``n_wide``, ``rms_radius_informative``, ``mpe_informative``): one such region
+can make the mean RMS radius, and so the sharpness, meaningless.
 """
 
 from __future__ import annotations
@@ -78,7 +82,8 @@ REAL = {"mrclam", "mrclam-anchors", "starloc", "starloc-anchors"}
 UNCERTAINTY: bool | str = True
 """What the simulated sets ask ``build_map`` for (``--uncertainty``)."""
 FIELDS = ("set", "layout", "method", "n_scored", "inside", "rms_radius", "mpe", "cpu_map",
-          "cpu_uncertainty", "wall_map", "wall_uncertainty")
+          "cpu_uncertainty", "wall_map", "wall_uncertainty", "n_wide", "rms_radius_informative",
+          "mpe_informative")
 
 
 def _timed(fn):
@@ -102,6 +107,23 @@ def score(positions, cov, truth, objects) -> tuple[int, int, float, float]:
             float(np.mean(err)))
 
 
+def informative(positions, cov, truth, objects, anchors_xyz) -> dict:
+    """The landmarks whose 95 % region is wider than the anchors' extent (RMS radius above the
+    largest distance between two anchors: the region says "anywhere on the map", e.g. a tag
+    seen along one ray) counted, and the mean RMS radius and position error of the others."""
+    objects = np.asarray(objects)
+    objects = objects[np.all(np.isfinite(positions[objects]), axis=1)]
+    a = np.asarray(anchors_xyz, dtype=float)
+    extent = float(np.max(np.linalg.norm(a[:, None] - a[None], axis=2)))
+    radius = rms_radius(cov[objects])
+    wide = ~(radius <= extent)
+    err = np.linalg.norm(positions[objects] - truth[objects], axis=1)
+    keep = ~wide
+    return {"n_wide": int(wide.sum()),
+            "rms_radius_informative": float(np.mean(radius[keep])) if keep.any() else math.nan,
+            "mpe_informative": float(np.mean(err[keep])) if keep.any() else math.nan}
+
+
 def map_row(name, layout, histories, anchors, truth, **kwargs) -> dict:
     """One map without and with uncertainty, scored."""
     plain, cpu0, wall0 = _timed(lambda: build_map(histories, anchors, truth[anchors], **kwargs))
@@ -115,7 +137,8 @@ def map_row(name, layout, histories, anchors, truth, **kwargs) -> dict:
     q = mahalanobis_squared(truth[ok] - m.positions[ok], m.covariances[ok])
     return {"_q": q, "set": name, "layout": layout, "method": m.method, "n_scored": n, "inside": inside,
             "rms_radius": radius, "mpe": mpe, "cpu_map": cpu0, "cpu_uncertainty": cpu1,
-            "wall_map": wall0, "wall_uncertainty": wall1}
+            "wall_map": wall0, "wall_uncertainty": wall1,
+            **informative(m.positions, m.covariances, truth, objects, truth[anchors])}
 
 
 def simulated_rows(seed: int, steps: int, sets) -> list[dict]:
@@ -174,7 +197,9 @@ def starloc_rows(data: Path, name: str) -> list[dict]:
         rows.append({"_q": mahalanobis_squared(truth - pos, cov), "set": name,
                      "layout": seq.name, "method": r.method, "n_scored": n, "inside": inside,
                      "rms_radius": radius, "mpe": mpe, "cpu_map": cpu0, "cpu_uncertainty": cpu1,
-                     "wall_map": wall0, "wall_uncertainty": wall1})
+                     "wall_map": wall0, "wall_uncertainty": wall1,
+                     **informative(pos, cov, truth, np.arange(len(tags)),
+                                   [r.positions[a] for a in r.anchors])})
     return rows
 
 
@@ -195,7 +220,9 @@ def mrclam_rows(data: Path, name: str = "mrclam") -> list[dict]:
                                                r.covariances[objects]),
                      "set": name, "layout": run_dir.name, "method": r.method, "n_scored": n,
                      "inside": inside, "rms_radius": radius, "mpe": mpe, "cpu_map": cpu0,
-                     "cpu_uncertainty": cpu1, "wall_map": wall0, "wall_uncertainty": wall1})
+                     "cpu_uncertainty": cpu1, "wall_map": wall0, "wall_uncertainty": wall1,
+                     **informative(r.positions, r.covariances, r.truth, objects,
+                                   r.truth[anchors])})
         ok = objects[np.all(np.isfinite(r.positions[objects]), axis=1)]
         q_runs[run_dir.name] = mahalanobis_squared(r.truth[ok] - r.positions[ok],
                                                    r.covariances[ok])
@@ -206,7 +233,9 @@ def mrclam_rows(data: Path, name: str = "mrclam") -> list[dict]:
         factor = float(np.quantile(others, 0.95)) / chi2_quantile(2)
         rows.append({**row, "set": "mrclam-inflated", "_q": q_runs[row["layout"]] / factor,
                      "inside": int(np.sum(q_runs[row["layout"]] <= factor * chi2_quantile(2))),
-                     "rms_radius": row["rms_radius"] * math.sqrt(factor)})
+                     "rms_radius": row["rms_radius"] * math.sqrt(factor),
+                     "rms_radius_informative": (row["rms_radius_informative"]
+                                                * math.sqrt(factor))})
     return rows
 
 
@@ -218,10 +247,17 @@ def summary(rows: list[dict]) -> list[dict]:
         n = sum(int(r["n_scored"]) for r in rs)
         radius = sum(float(r["rms_radius"]) * int(r["n_scored"]) for r in rs) / n
         err = sum(float(r["mpe"]) * int(r["n_scored"]) for r in rs) / n
+        kept = [(int(r["n_scored"]) - int(r["n_wide"]), float(r["rms_radius_informative"]),
+                 float(r["mpe_informative"])) for r in rs if r.get("n_wide", "") != ""]
+        kept = [k for k in kept if k[0] > 0]
+        m = sum(k[0] for k in kept)
         out.append({
             "set": name, "layouts": len(rs), "method": rs[0]["method"],
             "coverage": sum(int(r["inside"]) for r in rs) / n,
             "sharpness": radius / err, "mpe": err,
+            "wide": sum(int(r["n_wide"]) for r in rs if r.get("n_wide", "") != ""),
+            "sharpness_informative": (sum(k[0] * k[1] for k in kept)
+                                      / sum(k[0] * k[2] for k in kept)) if m else math.nan,
             "time_ratio": (statistics.median(float(r["cpu_uncertainty"]) for r in rs)
                            / statistics.median(float(r["cpu_map"]) for r in rs)),
         })
@@ -270,10 +306,11 @@ def main(argv=None) -> int:
             write_csv(args.csv, rows)  # after every layout: a partial run keeps its rows
         print(f"layout {k + 1}/{args.layouts} done", flush=True)
     print(f"{'set':<16}{'layouts':>8}{'coverage':>10}{'sharpness':>11}{'MPE [m]':>10}"
-          f"{'time x':>8}  method")
+          f"{'time x':>8}{'wide':>6}{'sharp. rest':>12}  method")
     for s in summary(rows):
         print(f"{s['set']:<16}{s['layouts']:>8}{s['coverage']:>10.3f}{s['sharpness']:>11.2f}"
-              f"{s['mpe']:>10.4f}{s['time_ratio']:>8.2f}  {s['method']}")
+              f"{s['mpe']:>10.4f}{s['time_ratio']:>8.2f}{s['wide']:>6}"
+              f"{s['sharpness_informative']:>12.2f}  {s['method']}")
     for name in dict.fromkeys(r["set"] for r in rows):
         q = np.concatenate([r["_q"] for r in rows if r["set"] == name])
         d = 3 if name.startswith("starloc") else 2

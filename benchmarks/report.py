@@ -341,6 +341,18 @@ UNCERTAINTY_GOALS = {"mrclam": "≥ 0.80", "mrclam-inflated": "≥ 0.80", "mrcla
                      "starloc": "≥ 0.80", "starloc-anchors": "≥ 0.80"}
 
 
+def _informative(rs: list[dict[str, str]]) -> list[str]:
+    """The landmarks whose region is wider than the anchors' extent and the sharpness of the
+    others (``bench_uncertainty.informative``), or dashes for a CSV without those columns."""
+    if any(not r.get("n_wide") for r in rs):
+        return ["—", "—"]
+    kept = [(int(r["n_scored"]) - int(r["n_wide"]), number(r["rms_radius_informative"]),
+             number(r["mpe_informative"])) for r in rs]
+    kept = [k for k in kept if k[0] > 0]
+    sharp = (sum(k[0] * k[1] for k in kept) / sum(k[0] * k[2] for k in kept)) if kept else math.nan
+    return [str(sum(int(r["n_wide"]) for r in rs)), f"{sharp:.2f}"]
+
+
 def uncertainty_section(root: Path) -> list[str]:
     """Coverage, sharpness and cost of ``build_map(uncertainty=True)`` per set."""
     out = [
@@ -349,7 +361,9 @@ def uncertainty_section(root: Path) -> list[str]:
         "Coverage: the share of non-anchor landmarks, pooled over the maps, whose true position "
         "lies inside their 95 % region (goal 0.88-0.99 simulated, ≥ 0.80 real). Sharpness: the "
         "mean RMS radius of the 95 % ellipses over the mean position error (goal ≤ 3; a "
-        "calibrated Gaussian gives about 1.95). Time: median CPU time of the map with its "
+        "calibrated Gaussian gives about 1.95). Wide: landmarks whose 95 % region is wider "
+        "than the anchors' extent (\"anywhere on the map\"; one can make the mean meaningless), "
+        "and the sharpness of the rest. Time: median CPU time of the map with its "
         "uncertainty over that of the map alone (goal ≤ 1.5). How each is computed: "
         "[the guide](guide/uncertainty.md).",
         "",
@@ -367,10 +381,10 @@ def uncertainty_section(root: Path) -> list[str]:
             body.append([name, rs[0]["method"], str(len(rs)),
                          f"{sum(int(r['inside']) for r in rs) / n:.3f}",
                          UNCERTAINTY_GOALS.get(name, "0.88-0.99"), f"{radius / err:.2f}",
-                         f"{err:.4f}", f"{ratio:.2f}"])
+                         *_informative(rs), f"{err:.4f}", f"{ratio:.2f}"])
         out += [UNCERTAINTY_NOTES[source.path], "", *command(source), "",
                 *table(["set", "method", "maps", "coverage", "goal", "sharpness",
-                        "MPE [m]", "time ×"], body), ""]
+                        "wide", "sharpness of the rest", "MPE [m]", "time ×"], body), ""]
     return out
 
 
