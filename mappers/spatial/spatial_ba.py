@@ -53,7 +53,11 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
 
     Attributes (after fit): ``embedding_`` (M, 3) world positions, NaN for objects it could not
     place or placed inconsistently (``inconsistent_``, see ``max_ray_error``); ``rotations_`` (N, 3, 3) and ``positions_`` (N, 3) the steps' poses (NaN: step not
-    used); ``range_scale_``; ``n_iter_``.
+    used); ``range_scale_``; ``n_iter_``; ``observations_``, ``adjusted_`` (the
+    :class:`~mappers.spatial.adjustment.AdjustmentResult` before the similarity onto the
+    anchors), ``anchor_ids_`` and ``similarity_`` (rotation, scale, translation taking
+    ``adjusted_`` to the output; the identity without ``anchor_noise``): what the model
+    covariances need (:mod:`mappers.spatial.marginals`).
     """
 
     def __init__(self, *, bearing_noise: float = float(np.deg2rad(1.0)), range_noise: float = 0.02,
@@ -107,12 +111,18 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
                                 max_iter=self.max_iter, fit_range_scale=self.fit_range_scale,
                                 anchor_noise=self.anchor_noise,
                                 dense_coupling_bytes=self.dense_coupling_bytes)
+        # what the model covariances re-linearise (mappers.spatial.marginals): the sightings
+        # with the ranges as finally scaled, the adjustment before any similarity, the anchors
+        self.observations_ = obs._replace(range=obs.range * res.range_scale)
+        self.adjusted_, self.anchor_ids_ = res, ids
+        self.similarity_ = (np.eye(3), 1.0, np.zeros(3))
         if self.anchor_noise is not None:  # the map's own shape, placed on the anchors
             Rs, scale, t = umeyama(res.points[ids], pos, True)
             res = res._replace(points=scale * res.points @ Rs.T + t,
                                rotations=Rs @ res.rotations,
                                positions=scale * res.positions @ Rs.T + t)
             self.similarity_scale_ = scale
+            self.similarity_ = (Rs, scale, t)
         self.inconsistent_ = _inconsistent(obs, res, self.max_ray_error, ids)
         points = res.points.copy()
         points[self.inconsistent_] = np.nan
