@@ -88,7 +88,10 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
             raise ValueError("SPATIAL-BA needs anchors: anchor_ids and anchor_positions (A, 3)")
         ids, pos = check_anchors_3d(anchor_ids, anchor_positions, obs.n_objects)
         if np.isfinite(obs.range).any():
-            start = register_rays(obs, ids, pos, start=register_points(obs, ids, pos))
+            refine = {"bearing_noise": self.bearing_noise, "range_noise": self.range_noise,
+                      "range_growth": self.range_growth, "loss": self.loss,
+                      "loss_scale": self.loss_scale, "max_iter": self.max_iter}
+            start = register_rays(obs, ids, pos, start=register_points(obs, ids, pos, refine))
         else:
             start = self._rays_start(obs, ids, pos)
         if not np.isfinite(start[2][:, 0]).any():
