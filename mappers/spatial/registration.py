@@ -254,6 +254,17 @@ _PIECE_STARTS = Rotation.create_group("O")
 so that every local minimum of the fit is within 45 degrees of a start."""
 
 
+def _rodrigues(w: np.ndarray) -> np.ndarray:
+    """The rotation matrix of the rotation vector ``w`` (Rodrigues' formula; by hand because
+    SciPy's Rotation objects cost more than the small fit that calls this thousands of times)."""
+    a = float(np.linalg.norm(w))
+    if a < 1e-12:
+        return np.eye(3)
+    k = w / a
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(a) * K + (1.0 - np.cos(a)) * K @ K
+
+
 def _fit_piece(local, P, common, movers, others, pairs, scale):
     """``(R, s, t)`` placing a piece by its placed points (fewer than three, or on a line) and the
     pose-free distances from its other points (``movers``) to placed ones (``others``): the rigid
@@ -277,7 +288,7 @@ def _fit_piece(local, P, common, movers, others, pairs, scale):
     target = P[common].mean(axis=0) if common.size else P[uj].mean(axis=0)
 
     def moved(x, idx):
-        return scale * (local[idx] - centre) @ Rotation.from_rotvec(x[:3]).as_matrix().T + x[3:]
+        return scale * (local[idx] - centre) @ _rodrigues(x[:3]).T + x[3:]
 
     def residuals(x):
         e_common = (moved(x, common) - P[common]).ravel()
@@ -289,7 +300,7 @@ def _fit_piece(local, P, common, movers, others, pairs, scale):
         x0 = np.concatenate([r0.as_rotvec(), target])
         if common.size:  # the start's turn, then the shift that puts the common points on theirs
             x0[3:] += (P[common] - moved(x0, common)).mean(axis=0)
-        sol = least_squares(residuals, x0, loss="soft_l1", f_scale=2.0, max_nfev=200)
+        sol = least_squares(residuals, x0, loss="soft_l1", f_scale=2.0, max_nfev=60)
         rms = _PIECE_NOISE * float(np.sqrt(np.mean(sol.fun**2)))
         fits.append((rms, sol.x))
     fits.sort(key=lambda f: f[0])
@@ -301,7 +312,7 @@ def _fit_piece(local, P, common, movers, others, pairs, scale):
         apart = np.sqrt(np.mean(np.sum((moved(x, here) - spot) ** 2, axis=1)))
         if apart > 0.1 and rms <= max(3.0 * best_rms, best_rms + 0.01):
             return None
-    Rs = Rotation.from_rotvec(best[:3]).as_matrix()
+    Rs = _rodrigues(best[:3])
     return Rs, scale, best[3:] - scale * Rs @ centre
 
 
