@@ -269,16 +269,18 @@ def _fit_piece(local, P, common, movers, others, pairs, scale):
     """``(R, s, t)`` placing a piece by its placed points (fewer than three, or on a line) and the
     pose-free distances from its other points (``movers``) to placed ones (``others``): the rigid
     pose (at ``scale``) that fits both in least squares (a soft-L1 loss; SciPy's least_squares),
-    from the 24 turns of the cube. None unless the fit is unique: at least seven constraints, a
-    misfit of at most 10 cm, and no other local minimum that moves the piece's points by more
-    than 10 cm fitting within twice the misfit (two common points and one distance leave two
-    mirror turns about their line, which fit alike: such a piece is left unplaced, not guessed).
+    from the 24 turns of the cube. None unless the fit is unique: at least eight constraints (two
+    more than the pose's six unknowns, so that a wrong pose shows as a misfit: two common points
+    and one distance leave the turn about their line at two mirror places, or at one place that
+    a small error moves far), a misfit of at most 10 cm, and no other local minimum that moves
+    the piece's points by more than 10 cm fitting within three times the misfit (or 1 cm more):
+    such a piece is left unplaced, not guessed.
 
     Written by hand: a piece's pose from a mix of point matches and distances is no library's
     registration (Umeyama's needs three matched points)."""
     use = [(i, j, d) for (i, j), d in pairs.items()
            for i, j in ((i, j), (j, i)) if movers[i] and others[j]]
-    if 3 * common.size + len(use) < 7:
+    if 3 * common.size + len(use) < 8:
         return None
     ui, uj, ud = (np.array(v, dtype=float if k == 2 else np.int64)
                   for k, v in enumerate(zip(*use, strict=True))) if use else (
