@@ -70,6 +70,8 @@ class Choice:
 _RB = frozenset({"range", "bearing"})
 _VB = frozenset({"visibility", "bearing"})
 _SPARSE: Mapping[str, Any] = MappingProxyType({"sparse": True})
+_LARGE_BEARING_BA: Mapping[str, Any] = MappingProxyType(
+    {"start": "COVIS-SPARSE", "schur_solver": "cg", "max_rounds": 3})
 
 DEFAULTS: Mapping[tuple[str | frozenset[str], bool], Choice] = MappingProxyType({
     ("visibility", False): Choice("CAL-SMA", "CAL-SMA", large="CAL-SMA", large_params=_SPARSE,
@@ -82,8 +84,11 @@ DEFAULTS: Mapping[tuple[str | frozenset[str], bool], Choice] = MappingProxyType(
     # them (docs/bearing-on-real-data.md).
     ("visibility", True): Choice("VIEW-BA", "DROPOUT-BLEND", large="DROPOUT-BLEND",
                                  logged="COVIS-ENSEMBLE"),
-    ("bearing", True): Choice("BEARING-BA", "COVIS-AUTO", large="COVIS-SPARSE",
-                              logged="COVIS-ENSEMBLE"),
+    # Above the size threshold masked bearing is BEARING-BA started from COVIS-SPARSE, its joint
+    # step on the sparse Schur engine (conjugate gradients), three rounds (issue 34's goal:
+    # M = 1,000, N = 20,000 in <= 10 s, docs/guide/scale.md).
+    ("bearing", True): Choice("BEARING-BA", "COVIS-AUTO", large="BEARING-BA",
+                              large_params=_LARGE_BEARING_BA, logged="COVIS-ENSEMBLE"),
     ("range", True): Choice("RANGE-QUANTILE", "RANGE-QUANTILE"),
     (_RB, False): Choice("LOC-SMA", "LOC-SMA", {"refine": None}),
     (_RB, True): Choice("LOC-SMA", "LOC-SMA", {"refine": None}),

@@ -54,7 +54,8 @@ sequence."""
 class StarlocResult:
     """One sequence mapped: its name, the sensor, the method, the mean position error [m] of the
     scored tags that were mapped, the share of scored tags mapped, how many were scored, the
-    anchors, the CPU seconds, and the map's positions by tag id."""
+    anchors, the CPU seconds, the map's positions by tag id, and (``uncertainty=``) each
+    placed tag's (3, 3) covariance by tag id (zero for the anchors)."""
 
     sequence: str
     sensor: str
@@ -65,19 +66,25 @@ class StarlocResult:
     anchors: tuple[int, ...]
     cpu_seconds: float
     positions: dict[int, tuple[float, float, float]]
+    covariances: dict[int, np.ndarray] | None = None
 
 
 def map_starloc(seq_dir: str | Path, sensor: str = "range-bearing",
-                params: dict | None = None,
+                params: dict | None = None, *, anchors=None,
+                uncertainty: bool | str = False,
                 disparity_offset: float | None = None) -> StarlocResult:
     """Map one STAR-loc sequence folder from its detections with ``sensor`` ("range-bearing",
     "bearing" or "visibility") and score it (see the module's docstring); ``params`` (default
-    :data:`STARLOC_PARAMS`) go to the 3-D method."""
+    :data:`STARLOC_PARAMS`) go to the 3-D method; ``anchors``: tag ids to use as anchors (None:
+    :func:`~lfmdr_gym.datasets.starloc.starloc_anchors`' choice); ``uncertainty`` goes to
+    ``build_map`` (the covariances are kept in ``StarlocResult.covariances``);
+    ``disparity_offset`` goes to :func:`~lfmdr_gym.datasets.starloc.read_starloc` (None:
+    :data:`STARLOC_DISPARITY_OFFSET`)."""
     seq = Path(seq_dir)
     table = read_starloc(seq, sensor, STARLOC_DISPARITY_OFFSET if disparity_offset is None
                          else disparity_offset)
     survey = starloc_survey(seq)
-    anchors = starloc_anchors(table, survey)
+    anchors = starloc_anchors(table, survey) if anchors is None else [int(a) for a in anchors]
     scored = scored_tags(table, survey, anchors)
     h = ray_histories(table)
     row = {int(t): k for k, t in enumerate(h.ids)}
@@ -87,7 +94,7 @@ def map_starloc(seq_dir: str | Path, sensor: str = "range-bearing",
     histories = {"visibility": h.visibility, "bearing": h.rays,
                  "range-bearing": {"bearing": h.rays, "range": h.ranges}}[sensor]
     start = time.process_time()
-    m = build_map(histories, anchor_rows, anchor_xyz,
+    m = build_map(histories, anchor_rows, anchor_xyz, uncertainty=uncertainty,
                   **(STARLOC_PARAMS[sensor] if params is None else params))
     cpu = time.process_time() - start
     placed = [t for t in scored if np.all(np.isfinite(m.positions[row[t]]))]
@@ -96,4 +103,7 @@ def map_starloc(seq_dir: str | Path, sensor: str = "range-bearing",
                          len(placed) / len(scored) if scored else np.nan, len(scored),
                          tuple(anchors), cpu,
                          {int(t): tuple(float(v) for v in m.positions[row[int(t)]])
-                          for t in h.ids if np.all(np.isfinite(m.positions[row[int(t)]]))})
+                          for t in h.ids if np.all(np.isfinite(m.positions[row[int(t)]]))},
+                         None if m.covariances is None else
+                         {int(t): m.covariances[row[int(t)]] for t in h.ids
+                          if np.all(np.isfinite(m.positions[row[int(t)]]))})
