@@ -36,16 +36,19 @@ say about them. Steps the adjustment left out (no pose) contribute nothing.
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from mappers.core.uncertainty import block_marginals
 from mappers.viewpoints import range_bearing as rb
 from mappers.viewpoints.bearing import BearingAdjustment
 from mappers.viewpoints.engine import (
+    DENSE_COUPLING_MAX_BYTES,
     bearing_angles,
     bearing_residuals,
     normal_blocks,
     pose_jacobian,
     robust_weights,
+    use_sparse_coupling,
 )
 from mappers.viewpoints.range_bearing import RangeBearingAdjustment
 
@@ -142,8 +145,17 @@ def model_covariances(S, U, Wf, sandwich_args, dof_resid, n_residuals, n_unknown
 
 
 def _bearing(est: BearingAdjustment, X, mask, anchor_ids, blocks) -> np.ndarray:
-    theta, seen = bearing_angles(X, mask)
     P, C, phi, used, placed, free, free_index = _frame(est, anchor_ids)
+    limit = getattr(est, "dense_coupling_bytes", DENSE_COUPLING_MAX_BYTES)
+    if use_sparse_coupling(len(C), 3, 2, int(free.sum()), limit):
+        raise ValueError(
+            f"model covariances of BEARING-BA hold the dense (N, 3, 2F) coupling, "
+            f"{8 * 6 * len(C) * int(free.sum()) / 2**30:.1f} GiB for N = {len(C)} steps and "
+            f"F = {int(free.sum())} free objects (above its dense_coupling_bytes, {limit:.3g}); "
+            "use uncertainty='bootstrap' or fewer steps")
+    if sp.issparse(X):  # a compact history of a size the dense coupling fits
+        X, mask = X.toarray(), (mask.toarray() if sp.issparse(mask) else mask)
+    theta, seen = bearing_angles(X, mask)
     seen = seen & used[:, None] & placed[None, :]
     t, i = np.nonzero(seen)
     obs = (t, i, theta[t, i])

@@ -59,6 +59,24 @@ def test_model_needs_an_adjustment():
         _quiet(X, ANCHORS, P[ANCHORS], uncertainty="exact")
 
 
+def test_model_covariances_beyond_the_dense_coupling_are_refused():
+    """Issue 34: an adjustment on the sparse engine has no dense normal equations to invert."""
+    P, X = _bearing(3)
+    with pytest.raises(ValueError, match="dense_coupling_bytes.*bootstrap"):
+        _quiet(X, ANCHORS, P[ANCHORS], "BEARING-BA", uncertainty="model", dense_coupling_bytes=0)
+
+
+def test_a_compact_history_gets_the_dense_historys_model_covariances():
+    import scipy.sparse as sp
+
+    P, X = _bearing(4)
+    dense = _quiet(X, ANCHORS, P[ANCHORS], "BEARING-BA", uncertainty="model")
+    compact = _quiet(sp.csr_array(X), ANCHORS, P[ANCHORS], "BEARING-BA", sensor="bearing",
+                     uncertainty="model")
+    np.testing.assert_array_equal(compact.positions, dense.positions)
+    np.testing.assert_allclose(compact.covariances, dense.covariances, rtol=1e-12, atol=0)
+
+
 def test_bearing_model_covers_the_truth():
     """2-degree noise, 10 layouts: the 95 % regions hold most true positions, and are not
     merely wide (RMS radius of the ellipses a few times the mean error)."""

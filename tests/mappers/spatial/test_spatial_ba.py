@@ -40,6 +40,16 @@ def test_rays_and_ranges_map_exactly():
     assert mean_position_error_3d(m.positions, P, [*m.unmapped, *ANCHORS]) < 1e-6
 
 
+def test_an_unplaced_object_is_named_by_its_id_as_in_2d():
+    """Map.warnings names the unmapped objects by id, in the 2-D notes' words ("objects [...]
+    could not be placed"), so a caller that renames object ids (MRCLAM's subjects) reads both."""
+    P, X, Rg = camera_world()
+    X[[7, 12]], Rg[[7, 12]] = 0.0, 0.0  # never seen
+    m = build_map({"bearing": X, "range": Rg}, ANCHORS, P[ANCHORS])
+    assert {7, 12} <= set(m.unmapped)
+    assert f"objects {list(m.unmapped)} could not be placed from their histories" in m.warnings
+
+
 def test_rays_alone_map_closely():
     # exact rays: the adjustment from the resection-and-intersection start comes within a
     # centimetre (it stalls there: bearing-only converges slowly; 60 iterations as 200)
@@ -84,6 +94,18 @@ def test_coplanar_anchors_refused_for_sightings():
     flat = P[ANCHORS] * [1, 1, 0]
     with pytest.raises(ValueError, match="one plane"):
         build_map(vis, ANCHORS, flat)
+
+
+def test_the_sparse_engine_maps_as_the_dense_one():
+    """Issue 34: the 6-DoF adjustment through the sparse Schur step (forced) gives the dense
+    step's map, to rounding."""
+    P, X, Rg = camera_world(noise_deg=1.0, range_noise=0.02)
+    dense = build_map({"bearing": X, "range": Rg}, ANCHORS, P[ANCHORS], method="SPATIAL-BA")
+    sparse = build_map({"bearing": X, "range": Rg}, ANCHORS, P[ANCHORS], method="SPATIAL-BA",
+                       dense_coupling_bytes=0)
+    assert mean_position_error_3d(dense.positions, P, [*dense.unmapped, *ANCHORS]) < 0.05
+    assert dense.unmapped == sparse.unmapped
+    np.testing.assert_allclose(sparse.positions, dense.positions, rtol=0, atol=1e-7)
 
 
 def test_spatial_ba_model_covariances_shapes_anchors_and_coverage():
