@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
+import numpy as np
 import scipy.sparse as sp
 
 from mappers.core.flicker import FLICKER_THRESHOLD, MIN_PERSISTENCE, flicker_rate, persistence
@@ -44,6 +45,7 @@ __all__ = [
     "Choice",
     "choose_for_history",
     "choose_method",
+    "is_sightings_log",
     "localisation_free",
 ]
 
@@ -146,6 +148,23 @@ def localisation_free(sensor, masked: bool = False) -> tuple[str, dict[str, Any]
     return row.localisation_free, dict(row.localisation_free_params)
 
 
+def is_sightings_log(X, mask) -> bool:
+    """Whether a masked visibility history (``X`` and ``mask`` (M, N), dense or scipy sparse)
+    is a log of sightings: every observed entry reads 1, so the mask says what was seen, not what
+    was in view (a table of detections: ``lfmdr_gym.histories.observations``). VIEW-BA reads the
+    mask as the view cone, which such a log is not: through a 90-degree view of both simulators
+    its map of the sightings alone is worse than its start map, and on MRCLAM it keeps it
+    (``benchmarks/bench_defaults_carry.py``). False for a complete history (``mask`` None)."""
+    if mask is None:
+        return False
+    if sp.issparse(mask) or sp.issparse(X):
+        observed = sp.csr_array(mask, dtype=bool)
+        seen = observed.multiply(sp.csr_array(X) > 0.5)
+        return observed.nnz > 0 and seen.nnz == observed.nnz
+    observed = np.asarray(mask, dtype=bool)
+    return bool(observed.any() and np.all(np.asarray(X)[observed] > 0.5))
+
+
 def choose_for_history(X, mask, sensor: str, timeline=None,
                        notes: list[str] | None = None) -> tuple[str, dict[str, Any]] | None:
     """:func:`choose_method` for a single sensor's histories as ``build_map`` checked them
@@ -154,9 +173,18 @@ def choose_for_history(X, mask, sensor: str, timeline=None,
     walk's — :func:`mappers.core.flicker.persistence` at least :data:`MIN_PERSISTENCE` — and
     that flickers like a sensor with dropouts, :func:`mappers.core.flicker.flicker_rate` above
     :data:`FLICKER_THRESHOLD`), a note says so. Perfect histories never flicker so much: their
-    rate is a few percent."""
+    rate is a few percent. A masked visibility history that is a log of sightings
+    (:func:`is_sightings_log`) gets the localisation-free map instead of ``VIEW-BA``, with a
+    note."""
     n = X.shape[0]
     plain = choose_method(sensor, masked=mask is not None, n_objects=n)
+    if plain is not None and plain[0] == "VIEW-BA" and is_sightings_log(X, mask):
+        label, params = localisation_free(sensor, masked=True)
+        if notes is not None:
+            notes.append(f"every observed entry of the masked visibility history is a sighting: a "
+                         f"log of what was seen, not of what was in view, so the mask is not a "
+                         f"view cone and it is mapped with {label!r}, not 'VIEW-BA'")
+        return label, params
     if (mask is not None or sp.issparse(X) or n > SCALABLE_ABOVE_OBJECTS
             or choose_method(sensor, dropouts=True, n_objects=n) == plain):
         return plain
