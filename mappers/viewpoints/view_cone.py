@@ -274,8 +274,8 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         passes: adjustments in a row, each from the map of the one before with the view's
             width (unless given), the radius and the viewpoints found afresh on it; a pass that
             does not lower its start's loss ends them and the map before it stands. A second
-            pass corrects a width misread on a poor start map: chosen on a second simulator and
-            confirmed on the project's world (``docs/dead-ends.md``, "Defaults that carry").
+            pass corrects a width misread on a poor start map (measured on two simulators, not
+            yet the default: ``docs/dead-ends.md``, "Defaults that carry").
         random_state: handed to the start methods.
 
     Attributes:
@@ -303,7 +303,7 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
     def __init__(self, *, start: str | None = None, fov_deg: float | None = None,
                  rounds: int = 6, softness: float = 0.05, range_softness: float = 0.02,
                  miss_rate: float = 0.1, grid: int = 10, headings: int = 24,
-                 pose_iters: int = 3, max_start_loss: float = 0.35, passes: int = 2,
+                 pose_iters: int = 3, max_start_loss: float = 0.35, passes: int = 1,
                  random_state=0) -> None:
         self.start = start
         self.fov_deg = fov_deg
