@@ -1,12 +1,15 @@
-"""Placing a rigid piece of the stereo start by its placed points and pose-free distances
-(:func:`mappers.spatial.registration._fit_piece`): unique fits are placed, ambiguous ones refused."""
+"""The rigid pieces of the stereo start (:mod:`mappers.spatial.registration`): placed by their
+placed points and pose-free distances when the fit is unique, refused when ambiguous, and adjusted
+in their own frame before that."""
 
 from __future__ import annotations
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mappers.spatial.registration import _fit_piece
+from mappers.core.align_3d import umeyama
+from mappers.spatial.rays import RayObservations
+from mappers.spatial.registration import _fit_piece, _groups, _grow_piece, _refine_piece
 
 
 def _world_and_piece(seed=0):
@@ -64,10 +67,6 @@ def test_distances_that_do_not_fit_are_refused():
 def test_a_chained_piece_is_refined_to_its_sightings_shape():
     """Steps chained one after another along a strip drift; the adjustment of the piece in its
     own frame brings it closer to the true shape."""
-    from mappers.core.align_3d import umeyama
-    from mappers.spatial.rays import RayObservations
-    from mappers.spatial.registration import _grow_piece, _groups, _refine_piece
-
     rng = np.random.default_rng(7)
     world = np.column_stack([np.linspace(0.0, 12.0, 40), rng.uniform(-1, 1, 40),
                              rng.uniform(0, 2, 40)])  # a long strip: a chain runs along it
