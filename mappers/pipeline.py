@@ -25,6 +25,7 @@ from mappers.fitting import Map, check_inputs, fit_checked, fit_fused_method
 from mappers.spatial.pipeline_3d import (
     anchor_dimension,
     build_map_3d,
+    default_for_histories_3d,
     fit_map_3d,
     step_columns_3d,
 )
@@ -175,14 +176,19 @@ def _fused_spec(histories, mask, timeline, sensor):
 
 
 def default_method(histories: Any, *, sensor: str | None = None, mask: np.ndarray | None = None,
-                   timeline: np.ndarray | None = None, return_params: bool = False
-                   ) -> str | tuple[str, dict[str, Any]]:
+                   timeline: np.ndarray | None = None, return_params: bool = False,
+                   anchor_positions: Any = None) -> str | tuple[str, dict[str, Any]]:
     """The label ``build_map(histories, ...)`` uses when no method is given, for every input
     ``build_map`` takes (single-sensor or fused histories, complete or masked): the default of
     :func:`mappers.defaults.choose_method` for the sensor, complete or masked, the number of
     objects and, for a complete history, whether it flickers like a sensor with dropouts.
     ``return_params=True``: ``(label, params)``, with the parameters the default is chosen with
-    (``("CAL-SMA", {"sparse": True})`` above 500 objects)."""
+    (``("CAL-SMA", {"sparse": True})`` above 500 objects). ``anchor_positions`` of shape
+    (A, 3): the 3-D default ``build_map`` uses with such anchors (the table's ``spatial``
+    column: ``COVIS-3D`` for sightings, ``SPATIAL-BA`` for 3-D rays, with or without ranges)."""
+    if anchor_dimension(anchor_positions) == 3:
+        label = default_for_histories_3d(histories, sensor, mask)
+        return (label, {}) if return_params else label
     parts = getattr(histories, "parts", None)
     if isinstance(parts, Mapping) and not isinstance(histories, Mapping):
         timeline = timeline if timeline is not None else getattr(histories, "timeline", None)
