@@ -5,8 +5,10 @@ objects, without odometry and without a motion model.
   sensor's frame (range times ray), so the angle between two rays and the two ranges fix their
   distance whatever the pose (the law of cosines). Steps that share three objects not on a line
   are registered rigidly (Kabsch/Umeyama, no scale) one after another from a seed step; each
-  chain of registered steps is a rigid piece, which the anchors it holds (three or more, not on
-  a line) place in the world by a similarity.
+  chain of registered steps is a rigid piece, adjusted in its own frame (with ``refine``: the
+  6-DoF adjustment spreads the chain's accumulated error), which three or more placed objects
+  it holds (anchors first, not on a line) place in the world by a similarity, or fewer placed
+  objects together with pose-free distances to placed ones, when they fix its pose uniquely.
 * Rays alone (:func:`register_rays`): the anchors are the first known points; a step that sees
   three or more known objects is resected by orthogonal iteration (Lu, Hager & Mjolsness, *Fast
   and globally convergent pose estimation from video images*, IEEE TPAMI 22(6), 2000), and an
@@ -62,7 +64,9 @@ def register_points(obs: RayObservations, anchor_ids: np.ndarray, anchor_positio
     from the steps' 3-D points (rays times ranges; sightings without a range are not used),
     each rigid piece placed by its anchors (see the module's docstring), then every step that
     sees three placed objects registered to them in the world, until none is left; NaN where not
-    placed."""
+    placed. ``refine``: keywords of :func:`mappers.spatial.adjustment.adjust_viewpoints` (the
+    noise and loss) to adjust each piece of two or more steps with before it is placed; None:
+    the pieces as chained."""
     m, n = obs.n_objects, obs.n_steps
     pts = obs.ray * obs.range[:, None]
     groups = [g[np.isfinite(obs.range[g])] for g in _groups(obs)]
