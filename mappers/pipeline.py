@@ -19,10 +19,16 @@ from mappers.catalog import implied_params, resolve_method
 from mappers.core.fused_histories import check_fused
 from mappers.core.sensors import COLUMNS_PER_STEP, check_sensor_set
 from mappers.core.uncertainty import check_uncertainty
-from mappers.covariances import with_covariances
+from mappers.covariances import with_covariances, with_held_out_check
 from mappers.defaults import choose_for_history
 from mappers.fitting import Map, check_inputs, fit_checked, fit_fused_method
-from mappers.spatial.pipeline_3d import anchor_dimension, build_map_3d
+from mappers.spatial.pipeline_3d import (
+    anchor_dimension,
+    build_map_3d,
+    default_for_histories_3d,
+    fit_map_3d,
+    step_columns_3d,
+)
 
 __all__ = ["Map", "MapWarning", "build_map", "default_method"]
 
@@ -81,10 +87,13 @@ def build_map(
         random_state: seed handed to methods that take one (and to the bootstrap's draws).
         uncertainty: False (the default): no covariances, ``Map.covariances`` is None and nothing
             else changes; ``"model"``: from the normal equations of the method's bundle
-            adjustment (``BEARING-BA``, ``LOC-SMA`` refined); ``"bootstrap"``: from replicate maps
+            adjustment (``BEARING-BA``, ``LOC-SMA`` refined, ``SPATIAL-BA``); ``"bootstrap"``: from replicate maps
             of a moving-block bootstrap over the steps (any method; about 20 maps' time);
             True: ``"model"`` where the method has one, else ``"bootstrap"``
-            (:mod:`mappers.covariances`).
+            (:mod:`mappers.covariances`); ``"anchors"``: True's covariances checked by the
+            anchors, each mapped in turn from the others, and scaled when they miss them
+            (:mod:`mappers.core.held_out_anchors`; about one map more per anchor). 3-D maps:
+            the model for SPATIAL-BA, the bootstrap for COVIS-3D.
         **params: method parameters (``n_neighbors`` = K, ``sigma2``, ``degree``, ...).
 
     Returns:
@@ -96,12 +105,17 @@ def build_map(
         ValueError: bad input, naming the problem. MappingError (a ValueError) when the method
         itself fails (e.g. Hessian LLE's eigenproblem), naming the method and the cause.
     """
+    if check_uncertainty(uncertainty) == "anchors":
+        return _held_out_checked(histories, anchor_ids, anchor_positions, method, sensor=sensor,
+                                 mask=mask, timeline=timeline, normalize=normalize,
+                                 random_state=random_state, **params)
     if anchor_dimension(anchor_positions) == 3:
+        uncertainty = check_uncertainty(uncertainty)
+        result, est, X3, mask3, sensor3 = fit_map_3d(histories, anchor_ids, anchor_positions,
+                                                     method, sensor=sensor, mask=mask, **params)
         if uncertainty is not False:
-            raise ValueError("uncertainty= is not available for 3-D maps yet: Map.covariances is "
-                             "computed for 2-D maps only (leave uncertainty=False)")
-        result = build_map_3d(histories, anchor_ids, anchor_positions, method, sensor=sensor,
-                              mask=mask, **params)
+            result = _with_covariances_3d(result, uncertainty, est, X3, mask3, sensor3,
+                                          anchor_ids, anchor_positions, random_state)
         for note in result.warnings:
             warnings.warn(note, MapWarning, stacklevel=2)
         return result
@@ -162,14 +176,19 @@ def _fused_spec(histories, mask, timeline, sensor):
 
 
 def default_method(histories: Any, *, sensor: str | None = None, mask: np.ndarray | None = None,
-                   timeline: np.ndarray | None = None, return_params: bool = False
-                   ) -> str | tuple[str, dict[str, Any]]:
+                   timeline: np.ndarray | None = None, return_params: bool = False,
+                   anchor_positions: Any = None) -> str | tuple[str, dict[str, Any]]:
     """The label ``build_map(histories, ...)`` uses when no method is given, for every input
     ``build_map`` takes (single-sensor or fused histories, complete or masked): the default of
     :func:`mappers.defaults.choose_method` for the sensor, complete or masked, the number of
     objects and, for a complete history, whether it flickers like a sensor with dropouts.
     ``return_params=True``: ``(label, params)``, with the parameters the default is chosen with
-    (``("CAL-SMA", {"sparse": True})`` above 500 objects)."""
+    (``("CAL-SMA", {"sparse": True})`` above 500 objects). ``anchor_positions`` of shape
+    (A, 3): the 3-D default ``build_map`` uses with such anchors (the table's ``spatial``
+    column: ``COVIS-3D`` for sightings, ``SPATIAL-BA`` for 3-D rays, with or without ranges)."""
+    if anchor_dimension(anchor_positions) == 3:
+        label = default_for_histories_3d(histories, sensor, mask)
+        return (label, {}) if return_params else label
     parts = getattr(histories, "parts", None)
     if isinstance(parts, Mapping) and not isinstance(histories, Mapping):
         timeline = timeline if timeline is not None else getattr(histories, "timeline", None)
@@ -242,3 +261,54 @@ def _with_covariances(result, uncertainty, est, mapped, histories, anchor_ids, a
     return with_covariances(result, uncertainty, est=est, mapped=mapped, X=X, mask=M,
                             n_steps=n_steps, refit=refit, random_state=random_state,
                             timeline=timeline)
+
+
+def _with_covariances_3d(result, uncertainty, est, X, mask, sensor, anchor_ids, anchor_positions,
+                         random_state) -> Map:
+    """``result`` (a 3-D map) with ``Map.covariances``: the model's for SPATIAL-BA, a bootstrap's
+    for COVIS-3D (each replicate the same method on the chosen steps' columns)."""
+    per_step = step_columns_3d(X, sensor)
+    if isinstance(X, Mapping):
+        n_steps = X["bearing"].shape[1] // per_step["bearing"]
+
+        def cut(steps):
+            masks = dict(mask or {})
+            return ({k: v[:, _step_columns(steps, per_step[k])] for k, v in X.items()},
+                    {k: None if masks.get(k) is None else
+                     np.asarray(masks[k])[:, _step_columns(steps, per_step[k])] for k in X})
+    else:
+        n_steps = X.shape[1] // per_step
+
+        def cut(steps):
+            cols = _step_columns(steps, per_step)
+            return X[:, cols], None if mask is None else np.asarray(mask)[:, cols]
+
+    def refit(steps):
+        Xr, Mr = cut(steps)
+        return build_map_3d(Xr, anchor_ids, anchor_positions, result.method, sensor=sensor,
+                            mask=Mr, **result.params).positions
+
+    return with_covariances(result, uncertainty, est=est, mapped=np.arange(len(result.positions)),
+                            X=X, mask=mask, n_steps=n_steps, refit=refit,
+                            random_state=random_state)
+
+
+def _held_out_checked(histories, anchor_ids, anchor_positions, method, **kwargs) -> Map:
+    """``build_map(..., uncertainty="anchors")``: the map with its own covariances (``True``),
+    scaled by its held-out anchors (:func:`mappers.covariances.with_held_out_check`): each
+    anchor in turn mapped by the same method from the other anchors."""
+    result = build_map(histories, anchor_ids, anchor_positions, method, uncertainty=True,
+                       **kwargs)
+    ids = np.asarray(anchor_ids, dtype=int)
+    pos = np.asarray(anchor_positions, dtype=float)
+
+    def held_out(j):
+        keep = np.arange(len(ids)) != j
+        m = build_map(histories, ids[keep], pos[keep], method, uncertainty=True, **kwargs)
+        return m.positions[ids[j]], m.covariances[ids[j]]
+
+    checked = with_held_out_check(result, held_out, pos)
+    for note in checked.warnings[len(result.warnings):]:
+        warnings.warn(note, MapWarning, stacklevel=3)
+    return checked
+

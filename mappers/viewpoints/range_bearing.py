@@ -40,7 +40,9 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from mappers.core.validation import check_fused_input
 from mappers.viewpoints.bearing import BearingAdjustmentWarning
 from mappers.viewpoints.engine import (
+    Damping,
     bearing_angles,
+    damped_step,
     joint_step,
     pose_jacobian,
     robust_cost,
@@ -50,7 +52,10 @@ from mappers.viewpoints.engine import (
 )
 from mappers.viewpoints.start_map import anchored_start, keep_if_better
 
-__all__ = ["RangeBearingAdjustment"]
+__all__ = ["DAMPING", "RangeBearingAdjustment"]
+
+DAMPING = Damping(up=10.0, down=10.0, floor=1e-9, tries=12, accept_equal=True)
+"""The range-bearing adjustment's Levenberg-Marquardt damping rule (BEARING-BA's)."""
 
 
 def _procrustes_poses(P, obs, n):
@@ -235,18 +240,18 @@ class RangeBearingAdjustment(TransformerMixin, BaseEstimator):
         while rounds < self.max_rounds:
             rounds += 1
             blocks = self._blocks(P, C, phi, obs, wb, scales, free_index, n_free)
-            for _ in range(12):
+
+            def trial(lam, blocks=blocks, P=P, C=C, phi=phi, wb=wb):
                 dc, dp = joint_step(*blocks, lam)
                 P2 = P.copy()
                 P2[free] += dp
                 C2, phi2 = C + dc[:, :2], wrap_angles(phi + dc[:, 2])
-                new = self._cost(P2, C2, phi2, obs, wb, scales)
-                if np.isfinite(new) and new <= current:
-                    break
-                lam *= 10.0
-            else:
+                return (P2, C2, phi2, dp), self._cost(P2, C2, phi2, obs, wb, scales)
+
+            state, new, lam, accepted = damped_step(trial, current, lam, DAMPING)
+            if not accepted:
                 break
-            P, C, phi, lam = P2, C2, phi2, max(lam / 10.0, 1e-9)
+            P, C, phi, dp = state
             done = current - new <= 1e-6 * current or not dp.size or np.abs(dp).max() <= self.tol
             current = new
             out = ~np.all((C >= box[0]) & (C <= box[1]), axis=1)

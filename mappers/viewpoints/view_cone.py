@@ -63,11 +63,15 @@ from mappers.catalog import METHODS
 from mappers.core.validation import check_views
 from mappers.defaults import localisation_free
 from mappers.viewpoints import view_cone_kernels as view_kernels
-from mappers.viewpoints.engine import joint_step
+from mappers.viewpoints.engine import Damping, damped_step, joint_step
 from mappers.viewpoints.start_map import anchored_start, fit_start, keep_if_better
 
 __all__ = ["MAX_FOV_DEG", "MAX_FREE_OBJECTS", "ConeProblem", "ViewAdjustment", "ViewAdjustmentWarning",
            "estimate_fov", "view_cone_score"]
+
+DAMPING = Damping(up=5.0, down=3.0, floor=1e-6, tries=8, accept_equal=False)
+"""VIEW-BA's Levenberg-Marquardt damping rule (:class:`mappers.viewpoints.engine.Damping`): a
+rejected step raises the damping 5x, at most 8 times; an accepted one lowers it 3x."""
 
 MAX_FOV_DEG = 150.0
 """Widest view [deg] the adjustment reads: a wider cone says little about the heading (with a
@@ -235,15 +239,15 @@ class ConeProblem:
         free objects (BEARING-BA's Schur step), the damping raised until the loss falls (at
         most 8 tries; ``moved`` False: none did, nothing changed)."""
         _, U, V, W, g, h = self.blocks(P, C, R)
-        for _ in range(8):
+
+        def trial(lam):
             dc, dp = joint_step(U, V, W, g, h, lam)
             C2, P2 = C + dc, P.copy()
             P2[self.free_index >= 0] += dp
-            trial = self.cost(P2, C2, R)
-            if trial < loss:
-                return P2, C2, trial, max(lam / 3.0, 1e-6), True
-            lam *= 5.0
-        return P, C, loss, lam, False
+            return (P2, C2), self.cost(P2, C2, R)
+
+        state, loss, lam, moved = damped_step(trial, loss, lam, DAMPING)
+        return (*(state if moved else (P, C)), loss, lam, moved)
 
 
 class ViewAdjustment(TransformerMixin, BaseEstimator):
