@@ -28,10 +28,12 @@ import numpy as np
 
 from mappers.spatial.adjustment import _normal_blocks, _Problem
 from mappers.viewpoints import (
+    DENSE_COUPLING_MAX_BYTES,
     model_covariances,
     robust_weights,
     schur_information,
     step_blocks,
+    use_sparse_coupling,
 )
 
 __all__ = ["spatial_covariances"]
@@ -61,6 +63,13 @@ def spatial_covariances(est) -> np.ndarray:
     w = robust_weights(np.linalg.norm(e, axis=1), est.loss_scale, est.loss)
     Jc, Jp = prob.jacobians(R, v, nv, vh)
     t = step_index[prob.t]
+    limit = getattr(est, "dense_coupling_bytes", DENSE_COUPLING_MAX_BYTES)
+    if use_sparse_coupling(steps.size, 6, 3, int(free.sum()), limit):
+        raise ValueError(
+            f"model covariances of SPATIAL-BA hold the dense (N, 6, 3F) coupling, "
+            f"{8 * 18 * steps.size * int(free.sum()) / 2**30:.2f} GiB for N = {steps.size} steps "
+            f"and F = {int(free.sum())} free objects (above its dense_coupling_bytes, "
+            f"{limit:.3g}); use fewer steps")
     U, V, Wf, _, _ = _normal_blocks(prob, e, w, Jc, Jp, t, free_index, steps.size,
                                     int(free.sum()))
     S = schur_information(U, V, Wf)

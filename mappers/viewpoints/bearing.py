@@ -153,6 +153,11 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         self.dense_coupling_bytes = dense_coupling_bytes
         self.schur_solver = schur_solver
 
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.input_tags.sparse = True  # compact (scipy.sparse) histories are read as they are
+        return tags
+
     def _start_map(self, X, mask, ids, pos) -> np.ndarray:
         masked = mask is not None and (mask.nnz < np.prod(mask.shape) if sp.issparse(mask)
                                        else not np.all(mask))

@@ -162,3 +162,10 @@ def test_covis_3d_bootstrap_covariances():
         build_map(vis, ANCHORS, P[ANCHORS], uncertainty="model")
 
 
+
+
+def test_model_covariances_beyond_the_dense_coupling_are_refused():
+    P, X, Rg = camera_world()
+    with pytest.raises(ValueError, match="dense_coupling_bytes"):
+        build_map({"bearing": X, "range": Rg}, ANCHORS, P[ANCHORS], uncertainty="model",
+                  dense_coupling_bytes=0)
