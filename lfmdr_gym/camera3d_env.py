@@ -270,19 +270,12 @@ class Camera3DEnv(WorldEnv):
         ).astype(np.float32)
         if self._masked:
             obs["observed"] = seen.astype(np.int8)
-        self._last_obs = obs
         return obs
 
     def _info(self, blocked: bool) -> dict[str, Any]:
-        w = self.world
-        return {
-            "robot_pose": w.pose,
-            "object_positions": self._tags.copy(),
-            "anchor_ids": self._anchor_ids.copy(),
-            "anchor_positions": self._tags[self._anchor_ids].copy(),
-            "post_positions": w.object_positions.copy(),
-            "blocked": bool(blocked),
-        }
+        return self._world_info(bool(blocked), self._tags, self._anchor_ids,
+                                self._tags[self._anchor_ids],
+                                post_positions=self.world.object_positions)
 
     # ------------------------------------------------------------------ rendering
     def _frame(self) -> np.ndarray:

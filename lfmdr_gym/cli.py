@@ -69,7 +69,8 @@ def _method_list(values: Sequence[str] | None) -> list[str] | None:
 
 _ENV_ID_HELP = ("environment id, one of lfmdr_gym.ENV_IDS (LFMDR-Visibility-v0, LFMDR-Bearing-v0, "
                 "LFMDR-Range-v0, LFMDR-RangeBearing-v0, LFMDR-VisibilityBearing-v0, "
-                "LFMDR-Camera-v0)")
+                "LFMDR-Camera-v0) or lfmdr_gym.ENV_IDS_3D (LFMDR-Camera3D-v0: tags at heights, "
+                "a 3-D history; --env-kw sensor=bearing|visibility)")
 
 
 def _version() -> str:

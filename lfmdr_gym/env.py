@@ -351,19 +351,11 @@ class LFMDREnv(WorldEnv):
         if self._limits is not None:
             limited, obs["observed"] = self._limits.apply(readings, rel, d2, h)
             obs.update(limited)
-        self._last_obs = obs
         return obs
 
     def _info(self, blocked: bool) -> dict[str, Any]:
-        # Fresh arrays every call: a caller may keep or modify them (and check_env insists).
         w = self.world
-        return {
-            "robot_pose": w.pose,
-            "object_positions": w.object_positions.copy(),
-            "anchor_ids": w.anchor_ids.copy(),
-            "anchor_positions": self._anchor_positions.copy(),
-            "blocked": blocked,
-        }
+        return self._world_info(blocked, w.object_positions, w.anchor_ids, self._anchor_positions)
 
     # ------------------------------------------------------------------ rendering
     def _frame(self) -> np.ndarray:

@@ -68,10 +68,29 @@ class WorldEnv(gym.Env):
         self._last_obs: dict[str, np.ndarray] | None = None
         self._viewer: HumanViewer | None = None
 
+    def _sense(self) -> dict[str, np.ndarray]:
+        """The observation at the current pose, kept for :meth:`render`."""
+        self._last_obs = self._observe()
+        return self._last_obs
+
+    def _world_info(self, blocked: bool, object_positions: np.ndarray, anchor_ids: np.ndarray,
+                    anchor_positions: np.ndarray, **extra: Any) -> dict[str, Any]:
+        """``info``: the robot's pose, the objects' and anchors' ground truth (``extra`` entries
+        after them) and whether the move was ``blocked``. Fresh arrays every call: a caller may
+        keep or modify them (and check_env insists)."""
+        return {
+            "robot_pose": self.world.pose,
+            "object_positions": object_positions.copy(),
+            "anchor_ids": anchor_ids.copy(),
+            "anchor_positions": anchor_positions.copy(),
+            **{key: value.copy() for key, value in extra.items()},
+            "blocked": blocked,
+        }
+
     def _first_observation(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """The end of ``reset`` once the world is built: ``(observation, info)``, with the
         window updated in ``"human"`` mode."""
-        obs = self._observe()
+        obs = self._sense()
         if self.render_mode == "human":
             self.render()
         return obs, self._info(False)
@@ -81,7 +100,7 @@ class WorldEnv(gym.Env):
             raise gym.error.ResetNeeded("call reset() before step()")
         turn = action_turn(action, self.max_turn)
         blocked = self.world.move(turn, self.step_length)
-        obs = self._observe()
+        obs = self._sense()
         if self.render_mode == "human":
             self.render()
         return obs, 0.0, False, False, self._info(blocked)

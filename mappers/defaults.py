@@ -14,7 +14,11 @@ fused history's sensors) and whether the history is masked, and says
 - ``logged``: the default for a real robot's logged run (the UTIAS MRCLAM dataset,
   ``lfmdr mrclam``), where a landmark is in view in a few percent of the steps and the sensor's
   model is not known (None: ``method``), chosen leave-one-run-out on the logs
-  (``benchmarks/bench_mrclam.py``).
+  (``benchmarks/bench_mrclam.py``);
+- ``spatial``: the default when the anchors are 3-D, (A, 3) positions (a label of
+  :data:`mappers.spatial.METHODS_3D`; None: no 3-D path for such histories): ``COVIS-3D`` for
+  sightings, ``SPATIAL-BA`` for 3-D rays with or without ranges (issue 34). A 3-D history's
+  unseen entries are zeros or masked alike, so both rows of a sensor name the same method.
 
 Each choice is a label with its parameters, ``(label, params)``. The figures behind each choice are
 on the documentation's benchmarks page.
@@ -27,6 +31,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
+import numpy as np
 import scipy.sparse as sp
 
 from mappers.core.flicker import FLICKER_THRESHOLD, MIN_PERSISTENCE, flicker_rate, persistence
@@ -40,6 +45,7 @@ __all__ = [
     "Choice",
     "choose_for_history",
     "choose_method",
+    "is_sightings_log",
     "localisation_free",
 ]
 
@@ -65,6 +71,7 @@ class Choice:
     dropouts_params: Mapping[str, Any] = field(default_factory=dict)
     logged: str | None = None
     logged_params: Mapping[str, Any] = field(default_factory=dict)
+    spatial: str | None = None
 
 
 _RB = frozenset({"range", "bearing"})
@@ -72,26 +79,28 @@ _VB = frozenset({"visibility", "bearing"})
 _SPARSE: Mapping[str, Any] = MappingProxyType({"sparse": True})
 _LARGE_BEARING_BA: Mapping[str, Any] = MappingProxyType(
     {"start": "COVIS-SPARSE", "schur_solver": "cg", "max_rounds": 3})
+_COVIS_3D, _SPATIAL_BA = "COVIS-3D", "SPATIAL-BA"
 
 DEFAULTS: Mapping[tuple[str | frozenset[str], bool], Choice] = MappingProxyType({
     ("visibility", False): Choice("CAL-SMA", "CAL-SMA", large="CAL-SMA", large_params=_SPARSE,
-                                  dropouts="VIS-BA-WALK"),
-    ("bearing", False): Choice("BEARING-BA", "CAL-SMA", large="CAL-SMA", large_params=_SPARSE),
+                                  dropouts="VIS-BA-WALK", spatial=_COVIS_3D),
+    ("bearing", False): Choice("BEARING-BA", "CAL-SMA", large="CAL-SMA", large_params=_SPARSE,
+                               spatial=_SPATIAL_BA),
     ("range", False): Choice("UNFOLD", "UNFOLD"),
     # VIEW-BA's joint step solves a (2F, 2F) system of the F free objects: above the size
     # threshold masked visibility keeps VIEW-BA's start. On logged runs (MRCLAM) the pattern of
     # what was seen is mapped, for bearing too: no bearing-only statistic measured better on
     # them (docs/bearing-on-real-data.md).
     ("visibility", True): Choice("VIEW-BA", "DROPOUT-BLEND", large="DROPOUT-BLEND",
-                                 logged="COVIS-ENSEMBLE"),
+                                 logged="COVIS-ENSEMBLE", spatial=_COVIS_3D),
     # Above the size threshold masked bearing is BEARING-BA started from COVIS-SPARSE, its joint
     # step on the sparse Schur engine (conjugate gradients), three rounds (issue 34's goal:
     # M = 1,000, N = 20,000 in <= 10 s, docs/guide/scale.md).
     ("bearing", True): Choice("BEARING-BA", "COVIS-AUTO", large="BEARING-BA",
-                              large_params=_LARGE_BEARING_BA, logged="COVIS-ENSEMBLE"),
+                              large_params=_LARGE_BEARING_BA, logged="COVIS-ENSEMBLE", spatial=_SPATIAL_BA),
     ("range", True): Choice("RANGE-QUANTILE", "RANGE-QUANTILE"),
-    (_RB, False): Choice("LOC-SMA", "LOC-SMA", {"refine": None}),
-    (_RB, True): Choice("LOC-SMA", "LOC-SMA", {"refine": None}),
+    (_RB, False): Choice("LOC-SMA", "LOC-SMA", {"refine": None}, spatial=_SPATIAL_BA),
+    (_RB, True): Choice("LOC-SMA", "LOC-SMA", {"refine": None}, spatial=_SPATIAL_BA),
     (_VB, False): Choice("VB-SMA", "VB-SMA", {"refine": False}),
 })
 """(sensor or frozenset of sensors, masked) -> :class:`Choice`: the one table of defaults."""
@@ -106,14 +115,20 @@ def _row(sensor, masked: bool) -> Choice | None:
 
 
 def choose_method(sensor, *, masked: bool = False, n_objects: int | None = None,
-                  dropouts: bool = False, logged: bool = False) -> tuple[str, dict[str, Any]] | None:
+                  dropouts: bool = False, logged: bool = False,
+                  dimension: int = 2) -> tuple[str, dict[str, Any]] | None:
     """``(label, params)`` of the default for histories of ``sensor`` (a sensor or a set of fused
     sensors), complete or ``masked``, of ``n_objects`` objects (None: not known), that flicker
     like a sensor with ``dropouts`` (complete histories only), or ``logged`` by real robots (a
-    run of the MRCLAM dataset; it outranks the others); None when the table has no row."""
+    run of the MRCLAM dataset; it outranks the others); with 3-D anchors (``dimension=3``) the
+    row's ``spatial`` column. None when the table has no row (or no 3-D method)."""
+    if dimension not in (2, 3):
+        raise ValueError(f"dimension must be 2 or 3 (the anchors' columns), got {dimension!r}")
     row = _row(sensor, masked)
     if row is None:
         return None
+    if dimension == 3:
+        return (row.spatial, {}) if row.spatial else None
     if logged and row.logged:
         return row.logged, dict(row.logged_params)
     if n_objects is not None and n_objects > SCALABLE_ABOVE_OBJECTS and row.large:
@@ -133,6 +148,23 @@ def localisation_free(sensor, masked: bool = False) -> tuple[str, dict[str, Any]
     return row.localisation_free, dict(row.localisation_free_params)
 
 
+def is_sightings_log(X, mask) -> bool:
+    """Whether a masked visibility history (``X`` and ``mask`` (M, N), dense or scipy sparse)
+    is a log of sightings: every observed entry reads 1, so the mask says what was seen, not what
+    was in view (a table of detections: ``lfmdr_gym.histories.observations``). VIEW-BA reads the
+    mask as the view cone, which such a log is not: through a 90-degree view of both simulators
+    its map of the sightings alone is worse than its start map, and on MRCLAM it keeps it
+    (``benchmarks/bench_defaults_carry.py``). False for a complete history (``mask`` None)."""
+    if mask is None:
+        return False
+    if sp.issparse(mask) or sp.issparse(X):
+        observed = sp.csr_array(mask, dtype=bool)
+        seen = observed.multiply(sp.csr_array(X) > 0.5)
+        return observed.nnz > 0 and seen.nnz == observed.nnz
+    observed = np.asarray(mask, dtype=bool)
+    return bool(observed.any() and np.all(np.asarray(X)[observed] > 0.5))
+
+
 def choose_for_history(X, mask, sensor: str, timeline=None,
                        notes: list[str] | None = None) -> tuple[str, dict[str, Any]] | None:
     """:func:`choose_method` for a single sensor's histories as ``build_map`` checked them
@@ -141,9 +173,18 @@ def choose_for_history(X, mask, sensor: str, timeline=None,
     walk's — :func:`mappers.core.flicker.persistence` at least :data:`MIN_PERSISTENCE` — and
     that flickers like a sensor with dropouts, :func:`mappers.core.flicker.flicker_rate` above
     :data:`FLICKER_THRESHOLD`), a note says so. Perfect histories never flicker so much: their
-    rate is a few percent."""
+    rate is a few percent. A masked visibility history that is a log of sightings
+    (:func:`is_sightings_log`) gets the localisation-free map instead of ``VIEW-BA``, with a
+    note."""
     n = X.shape[0]
     plain = choose_method(sensor, masked=mask is not None, n_objects=n)
+    if plain is not None and plain[0] == "VIEW-BA" and is_sightings_log(X, mask):
+        label, params = localisation_free(sensor, masked=True)
+        if notes is not None:
+            notes.append(f"every observed entry of the masked visibility history is a sighting: a "
+                         f"log of what was seen, not of what was in view, so the mask is not a "
+                         f"view cone and it is mapped with {label!r}, not 'VIEW-BA'")
+        return label, params
     if (mask is not None or sp.issparse(X) or n > SCALABLE_ABOVE_OBJECTS
             or choose_method(sensor, dropouts=True, n_objects=n) == plain):
         return plain

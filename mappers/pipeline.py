@@ -16,18 +16,21 @@ import numpy as np
 import scipy.sparse as sp
 
 from mappers.catalog import implied_params, resolve_method
+from mappers.core.errors import MappingError
 from mappers.core.fused_histories import check_fused
 from mappers.core.sensors import COLUMNS_PER_STEP, check_sensor_set
 from mappers.core.uncertainty import check_uncertainty
-from mappers.covariances import with_covariances, with_held_out_check
+from mappers.covariances import has_model_covariances, with_covariances, with_held_out_check
 from mappers.defaults import choose_for_history
 from mappers.fitting import Map, check_inputs, fit_checked, fit_fused_method
 from mappers.spatial.pipeline_3d import (
     anchor_dimension,
     build_map_3d,
+    default_for_histories_3d,
     fit_map_3d,
     step_columns_3d,
 )
+from mappers.viewpoints import released_anchor
 
 __all__ = ["Map", "MapWarning", "build_map", "default_method"]
 
@@ -118,12 +121,22 @@ def build_map(
         for note in result.warnings:
             warnings.warn(note, MapWarning, stacklevel=2)
         return result
+    result = _build_2d(histories, anchor_ids, anchor_positions, method, sensor, mask, timeline,
+                       normalize, random_state, check_uncertainty(uncertainty), params)[0]
+    for note in result.warnings:
+        warnings.warn(note, MapWarning, stacklevel=2)
+    return result
+
+
+def _build_2d(histories, anchor_ids, anchor_positions, method, sensor, mask, timeline, normalize,
+              random_state, uncertainty, params):
+    """``build_map``'s 2-D map (with its covariances unless ``uncertainty`` is False), the fitted
+    estimator and the rows it was fitted on: ``(Map, est, mapped)``."""
     parts = getattr(histories, "parts", None)
     if isinstance(parts, Mapping) and not isinstance(histories, Mapping):
         # a fused History (lfmdr_gym): its single-sensor parts, each with its own mask
         timeline = timeline if timeline is not None else getattr(histories, "timeline", None)
         histories = dict(parts)
-    uncertainty = check_uncertainty(uncertainty)
     if isinstance(histories, Mapping):
         result, est, mapped = _build_fused_map(histories, anchor_ids, anchor_positions, method,
                                                sensor, mask, timeline, normalize, random_state,
@@ -135,9 +148,7 @@ def build_map(
         result = _with_covariances(result, uncertainty, est, mapped, histories, anchor_ids,
                                    anchor_positions, sensor, mask, timeline, normalize,
                                    random_state, params)
-    for note in result.warnings:
-        warnings.warn(note, MapWarning, stacklevel=2)
-    return result
+    return result, est, mapped
 
 
 
@@ -175,14 +186,19 @@ def _fused_spec(histories, mask, timeline, sensor):
 
 
 def default_method(histories: Any, *, sensor: str | None = None, mask: np.ndarray | None = None,
-                   timeline: np.ndarray | None = None, return_params: bool = False
-                   ) -> str | tuple[str, dict[str, Any]]:
+                   timeline: np.ndarray | None = None, return_params: bool = False,
+                   anchor_positions: Any = None) -> str | tuple[str, dict[str, Any]]:
     """The label ``build_map(histories, ...)`` uses when no method is given, for every input
     ``build_map`` takes (single-sensor or fused histories, complete or masked): the default of
     :func:`mappers.defaults.choose_method` for the sensor, complete or masked, the number of
     objects and, for a complete history, whether it flickers like a sensor with dropouts.
     ``return_params=True``: ``(label, params)``, with the parameters the default is chosen with
-    (``("CAL-SMA", {"sparse": True})`` above 500 objects)."""
+    (``("CAL-SMA", {"sparse": True})`` above 500 objects). ``anchor_positions`` of shape
+    (A, 3): the 3-D default ``build_map`` uses with such anchors (the table's ``spatial``
+    column: ``COVIS-3D`` for sightings, ``SPATIAL-BA`` for 3-D rays, with or without ranges)."""
+    if anchor_dimension(anchor_positions) == 3:
+        label = default_for_histories_3d(histories, sensor, mask)
+        return (label, {}) if return_params else label
     parts = getattr(histories, "parts", None)
     if isinstance(parts, Mapping) and not isinstance(histories, Mapping):
         timeline = timeline if timeline is not None else getattr(histories, "timeline", None)
@@ -290,19 +306,70 @@ def _with_covariances_3d(result, uncertainty, est, X, mask, sensor, anchor_ids, 
 def _held_out_checked(histories, anchor_ids, anchor_positions, method, **kwargs) -> Map:
     """``build_map(..., uncertainty="anchors")``: the map with its own covariances (``True``),
     scaled by its held-out anchors (:func:`mappers.covariances.with_held_out_check`): each
-    anchor in turn mapped by the same method from the other anchors."""
-    result = build_map(histories, anchor_ids, anchor_positions, method, uncertainty=True,
-                       **kwargs)
+    anchor in turn mapped by the same method from the other anchors; where that map cannot place
+    it (a sparse logged run) and the method ends with a planar adjustment, the adjustment alone
+    is fitted again from the full map with that anchor free
+    (:func:`mappers.viewpoints.marginals.released_anchor`)."""
     ids = np.asarray(anchor_ids, dtype=int)
     pos = np.asarray(anchor_positions, dtype=float)
+    if anchor_dimension(anchor_positions) == 3:
+        result, release = build_map(histories, anchor_ids, anchor_positions, method,
+                                    uncertainty=True, **kwargs), None
+    else:
+        params = {k: kwargs.pop(k) for k in list(kwargs)
+                  if k not in ("sensor", "mask", "timeline", "normalize", "random_state")}
+        result, est, mapped = _build_2d(histories, anchor_ids, anchor_positions, method,
+                                        kwargs["sensor"], kwargs["mask"], kwargs["timeline"],
+                                        kwargs["normalize"], kwargs["random_state"], True, params)
+        for note in result.warnings:
+            warnings.warn(note, MapWarning, stacklevel=3)
+        kwargs = {**kwargs, **params}
+        release = _releaser(result, est, mapped, histories, ids, pos, kwargs)
 
     def held_out(j):
         keep = np.arange(len(ids)) != j
-        m = build_map(histories, ids[keep], pos[keep], method, uncertainty=True, **kwargs)
-        return m.positions[ids[j]], m.covariances[ids[j]]
+        try:
+            m = build_map(histories, ids[keep], pos[keep], method, uncertainty=True, **kwargs)
+            p, c = m.positions[ids[j]], m.covariances[ids[j]]
+            if np.all(np.isfinite(p)) and np.all(np.isfinite(c)):
+                return p, c
+        except (MappingError, ValueError):
+            if release is None:
+                raise
+        if release is None:
+            return p, c
+        return release(j)
 
     checked = with_held_out_check(result, held_out, pos)
     for note in checked.warnings[len(result.warnings):]:
         warnings.warn(note, MapWarning, stacklevel=3)
     return checked
 
+
+def _releaser(result, est, mapped, histories, ids, pos, kwargs):
+    """``release(j)``: anchor ``j`` held out of ``est``'s adjustment, in the map's frame
+    (:func:`mappers.viewpoints.marginals.released_anchor`); None when ``est`` has none."""
+    if not has_model_covariances(est) or np.any(~np.isin(ids, mapped)):
+        return None
+    parts = getattr(histories, "parts", None)
+    timeline = kwargs["timeline"]
+    if isinstance(parts, Mapping) and not isinstance(histories, Mapping):
+        timeline = timeline if timeline is not None else getattr(histories, "timeline", None)
+        histories = dict(parts)
+    if isinstance(histories, Mapping):
+        X, M, _, timeline = check_fused(histories, kwargs["mask"], timeline)
+    else:
+        X, M, _, timeline = check_inputs(histories, kwargs["sensor"], kwargs["mask"], timeline)
+        if sp.issparse(X):
+            X, M = X.toarray(), (M.toarray() if sp.issparse(M) else M)
+    rows = (lambda a: None if a is None else (  # noqa: E731 - the mapped rows of each array
+        {k: None if v is None else v[mapped] for k, v in a.items()} if isinstance(a, dict)
+        else a[mapped]))
+    local = np.searchsorted(mapped, ids)
+    T = np.asarray(result.affine, dtype=float)
+
+    def release(j):
+        p, c = released_anchor(est, rows(X), rows(M), local, pos, j, timeline)
+        return np.r_[p, 1.0] @ T, T[:2].T @ c @ T[:2]
+
+    return release

@@ -55,7 +55,7 @@ def make_env(env_id: str, steps: int, env_kwargs: Mapping[str, Any] | None = Non
 
     if env_id not in gym.registry:
         raise ValueError(f"unknown env id {env_id!r}; the registered LFMDR env ids are "
-                         f"{list(lfmdr_gym.ENV_IDS)}")
+                         f"{list(lfmdr_gym.ENV_IDS)} and (3-D) {list(lfmdr_gym.ENV_IDS_3D)}")
     return gym.make(env_id, max_episode_steps=max(int(steps), 1), **dict(env_kwargs or {}))
 
 

@@ -14,12 +14,14 @@ from typing import Any
 
 import numpy as np
 
+from mappers.defaults import choose_method
 from mappers.fitting import Map
 from mappers.spatial.covisibility_3d import CoVisibility3D
 from mappers.spatial.rays import RAY_COLUMNS
 from mappers.spatial.spatial_ba import SpatialAdjustment
 
-__all__ = ["METHODS_3D", "anchor_dimension", "build_map_3d", "fit_map_3d", "step_columns_3d"]
+__all__ = ["METHODS_3D", "anchor_dimension", "build_map_3d", "default_for_histories_3d",
+           "default_method_3d", "fit_map_3d", "step_columns_3d"]
 
 METHODS_3D = {"SPATIAL-BA": SpatialAdjustment, "COVIS-3D": CoVisibility3D}
 """The 3-D methods by label: rays (and ranges) -> SPATIAL-BA, sightings -> COVIS-3D."""
@@ -56,10 +58,23 @@ def _unpack(histories, sensor, mask):
     return X, sensor, mask
 
 
-def default_method_3d(sensor: str) -> str:
-    """The 3-D default for a sensor: ``"COVIS-3D"`` for sightings, ``"SPATIAL-BA"`` for rays
-    (with or without ranges)."""
-    return "COVIS-3D" if sensor == "visibility" else "SPATIAL-BA"
+def default_method_3d(sensor, masked: bool = False) -> str:
+    """The 3-D default for a sensor (or set of fused sensors), the ``spatial`` column of
+    :data:`mappers.defaults.DEFAULTS`: ``"COVIS-3D"`` for sightings, ``"SPATIAL-BA"`` for rays
+    (with or without ranges). A sensor with no 3-D method is a ValueError saying so."""
+    chosen = choose_method(sensor, masked=masked, dimension=3)
+    if chosen is None:
+        raise ValueError(f"no 3-D method maps {sensor!r} histories: with 3-D anchors give "
+                         "sightings (visibility), 3-D rays (bearing) or rays and ranges")
+    return chosen[0]
+
+
+def default_for_histories_3d(histories, sensor: str | None = None, mask=None) -> str:
+    """The label :func:`build_map_3d` maps ``histories`` with when no method is given."""
+    X, sensor, mask = _unpack(histories, sensor, mask)
+    masked = any(v is not None for v in mask.values()) if isinstance(mask, Mapping) \
+        else mask is not None
+    return default_method_3d(sensor, masked)
 
 
 def build_map_3d(histories, anchor_ids, anchor_positions, method: str | None = None, *,

@@ -37,6 +37,9 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
         range_noise, range_growth: a range's noise [m], ``range_noise + range_growth * r**2``.
         loss, loss_scale: the robust loss ("cauchy", "huber" or None) at that many noise units.
         max_iter: Levenberg-Marquardt iterations at most.
+        tol: stop when an iteration lowers the cost by less than this share of it. 1e-6: on
+            ``LFMDR-Camera3D-v0`` (rays and ranges, 1 degree, 2 cm) the map's error is the same
+            to 1e-5 m as with 1e-10, in a third of the iterations (``benchmarks/bench_camera3d.py``).
         fit_range_scale: estimate one factor of all ranges (a stereo calibration's scale error).
         anchor_noise: None: the anchors are held fixed; a number [m]: they are adjusted under a
             prior of that deviation, and the adjusted map is then placed on them by the
@@ -62,7 +65,7 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
 
     def __init__(self, *, bearing_noise: float = float(np.deg2rad(1.0)), range_noise: float = 0.02,
                  range_growth: float = 0.0, loss: str | None = "cauchy", loss_scale: float = 3.0,
-                 max_iter: int = 200, fit_range_scale: bool = False,
+                 max_iter: int = 200, tol: float = 1e-6, fit_range_scale: bool = False,
                  anchor_noise: float | None = None, max_ray_error: float = float(np.deg2rad(5.0)),
                  dense_coupling_bytes: float = DENSE_COUPLING_MAX_BYTES):
         self.bearing_noise = bearing_noise
@@ -71,6 +74,7 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
         self.loss = loss
         self.loss_scale = loss_scale
         self.max_iter = max_iter
+        self.tol = tol
         self.fit_range_scale = fit_range_scale
         self.anchor_noise = anchor_noise
         self.max_ray_error = max_ray_error
@@ -96,8 +100,14 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
         if anchor_ids is None or anchor_positions is None:
             raise ValueError("SPATIAL-BA needs anchors: anchor_ids and anchor_positions (A, 3)")
         ids, pos = check_anchors_3d(anchor_ids, anchor_positions, obs.n_objects)
+        if not (isinstance(self.tol, (int, float)) and self.tol >= 0):
+            raise ValueError(f"tol must be a number >= 0, got {self.tol!r}")
         if np.isfinite(obs.range).any():
-            start = register_rays(obs, ids, pos, start=register_points(obs, ids, pos))
+            refine = {"bearing_noise": self.bearing_noise, "range_noise": self.range_noise,
+                      "range_growth": self.range_growth, "loss": self.loss,
+                      "loss_scale": self.loss_scale, "max_iter": self.max_iter,
+                      "dense_coupling_bytes": self.dense_coupling_bytes}
+            start = register_rays(obs, ids, pos, start=register_points(obs, ids, pos, refine))
         else:
             start = self._rays_start(obs, ids, pos)
         if not np.isfinite(start[2][:, 0]).any():
@@ -108,7 +118,8 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
         res = adjust_viewpoints(obs, *start, fixed, bearing_noise=self.bearing_noise,
                                 range_noise=self.range_noise, range_growth=self.range_growth,
                                 loss=self.loss, loss_scale=self.loss_scale,
-                                max_iter=self.max_iter, fit_range_scale=self.fit_range_scale,
+                                max_iter=self.max_iter, tol=self.tol,
+                                fit_range_scale=self.fit_range_scale,
                                 anchor_noise=self.anchor_noise,
                                 dense_coupling_bytes=self.dense_coupling_bytes)
         # what the model covariances re-linearise (mappers.spatial.marginals): the sightings

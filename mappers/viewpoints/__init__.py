@@ -10,6 +10,7 @@ from mappers.viewpoints.marginals import (
     adjustment_covariances,
     has_model_covariances,
     model_covariances,
+    released_anchor,
     schur_information,
     step_blocks,
 )
@@ -35,7 +36,7 @@ __all__ = [
     "BearingAdjustment", "BearingAdjustmentWarning",
     *engine.__all__,
     "adjustment_covariances", "has_model_covariances", "model_covariances",
-    "schur_information", "step_blocks",
+    "released_anchor", "schur_information", "step_blocks",
     "RangeBearingAdjustment",
     "anchored_start", "fit_start", "keep_if_better",
     "MAX_FOV_DEG", "MAX_FREE_OBJECTS", "ConeProblem", "ViewAdjustment", "ViewAdjustmentWarning",

@@ -53,7 +53,7 @@ from mappers.viewpoints.engine import (
 from mappers.viewpoints.range_bearing import RangeBearingAdjustment
 
 __all__ = [
-    "adjustment_covariances", "has_model_covariances", "model_covariances",
+    "adjustment_covariances", "has_model_covariances", "model_covariances", "released_anchor",
     "sandwich_covariances", "schur_information", "step_blocks",
 ]
 
@@ -206,6 +206,33 @@ def _adjustment(est):
         return est
     inner = getattr(est, "adjustment_", None)
     return inner if isinstance(inner, BearingAdjustment | RangeBearingAdjustment) else None
+
+
+def released_anchor(est, X, mask, anchor_ids, anchor_positions, j, timeline=None):
+    """The ``j``-th anchor held out of the fitted adjustment in ``est``: the same adjustment
+    (its parameters) fitted again from ``est``'s map with that anchor free and the others held,
+    and the held-out anchor's ``(position, covariance)`` there (:func:`adjustment_covariances`).
+    ``X``, ``mask`` and ``timeline`` as for :func:`adjustment_covariances`; ``anchor_ids`` rows of
+    ``X``, ``anchor_positions`` (A, 2). The adjustment starts from the full map, so a held-out
+    anchor is placed where the pipeline's start map could not place it without that anchor (a
+    sparse logged run); the readings and the other anchors decide where it goes."""
+    from sklearn.base import clone
+
+    adj = _adjustment(est)
+    if adj is None:
+        raise ValueError(f"{type(est).__name__} holds no bundle adjustment")
+    ids = np.asarray(anchor_ids, dtype=int)
+    keep = np.arange(len(ids)) != j
+    new = clone(adj)
+    start = np.asarray(adj.embedding_, dtype=float)
+    pos = np.asarray(anchor_positions, dtype=float)[keep]
+    if isinstance(adj, RangeBearingAdjustment):
+        new.fit(X, masks=mask, anchor_ids=ids[keep], anchor_positions=pos, start_positions=start)
+    else:
+        Xb, Mb = (X["bearing"], (mask or {}).get("bearing")) if isinstance(X, dict) else (X, mask)
+        new.fit(Xb, mask=Mb, anchor_ids=ids[keep], anchor_positions=pos, start_positions=start)
+    cov = adjustment_covariances(new, X, mask, ids[keep], timeline)
+    return new.embedding_[ids[j]], cov[ids[j]]
 
 
 def has_model_covariances(est) -> bool:

@@ -363,13 +363,16 @@ def test_an_unknown_env_id_is_a_clear_error_naming_the_registered_ids(command, t
     err = _error([command, "--env", "LFMDR-Foo-v0", "--steps", "10", "--out", out], capsys)
     assert err.startswith(f"lfmdr {command}: error: unknown env id 'LFMDR-Foo-v0'")
     assert all(env_id in err for env_id in ENV_IDS)
+    if command == "collect":
+        assert "LFMDR-Camera3D-v0" in err
 
 
 def test_the_env_id_help_names_every_registered_id():
-    from lfmdr_gym import ENV_IDS
+    from lfmdr_gym import ENV_IDS, ENV_IDS_3D
     from lfmdr_gym.cli import _ENV_ID_HELP
 
-    assert _ENV_ID_HELP.endswith("(" + ", ".join(ENV_IDS) + ")")
+    assert "(" + ", ".join(ENV_IDS) + ")" in _ENV_ID_HELP
+    assert "(" + ", ".join(ENV_IDS_3D) + ":" in _ENV_ID_HELP
 
 
 def test_env_is_an_env_id_and_env_kw_an_env_keyword_in_every_command():

@@ -138,3 +138,17 @@ def test_held_out_anchors_widen_covariances_that_miss_a_systematic_error():
     np.testing.assert_array_equal(checked.covariances[ANCHORS], 0.0)
     assert coverage(checked.positions, checked.covariances, P, others) > coverage(
         model.positions, model.covariances, P, others)
+
+
+def test_released_anchor_is_placed_by_the_readings_and_the_other_anchors():
+    from mappers.core.uncertainty import mahalanobis_squared
+    from mappers.viewpoints import BearingAdjustment, released_anchor
+
+    P, X = _bearing(1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        est = BearingAdjustment().fit(X, anchor_ids=ANCHORS, anchor_positions=P[ANCHORS])
+        p, c = released_anchor(est, X, None, ANCHORS, P[ANCHORS], 2)
+    assert np.all(np.linalg.eigvalsh(c) > 0)
+    assert 0.0 < np.linalg.norm(p - P[2]) < 0.05  # freed: moved, but by the readings' noise
+    assert mahalanobis_squared((p - P[2])[None], c[None])[0] < 30.0

@@ -201,8 +201,10 @@ def moe_settings(request, monkeypatch):
         monkeypatch.setattr(scores, "_BATCH", 150)
 
 
-@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("seed", [0, 1, *(pytest.param(s, marks=pytest.mark.slow) for s in (2, 3))])
 def test_moe_fast_equals_bruteforce(seed, moe_settings):
+    """The fast MOE equals the brute force on 70 layouts per seed (every degenerate kind of
+    :func:`_layouts` ten times): two seeds in the default run, two more with ``-m slow``."""
     for est, truth in _layouts(seed, 70):
         assert _moe_fast(est, truth) == _moe_bruteforce(est, truth)
         assert _moe_fast(truth, est) == _moe_bruteforce(truth, est)
