@@ -38,8 +38,8 @@ STEPS = {50: 2000, 200: 8000, 1000: 20000, 10000: 400000}
 METHODS = ("CAL-SMA:sparse=True", "CAL-SMA", "SMA(WGT)", "ISOMAP", "LEM")
 MASKED_METHODS = ("default", "COVIS-SPARSE", "COVIS-AUTO")
 """With ``--max-range`` the histories are masked: build_map's default (BEARING-BA, which starts
-from COVIS-AUTO, up to 500 objects, COVIS-SPARSE above), the sparse path and the dense
-co-observation map."""
+from COVIS-AUTO up to 500 objects and from COVIS-SPARSE above, there on the sparse Schur engine),
+the sparse co-observation map alone and the dense one."""
 ENV_IDS = {"visibility": "LFMDR-Visibility-v0", "bearing": "LFMDR-Bearing-v0"}
 
 
@@ -103,6 +103,12 @@ def run_method(path: str, method: str) -> dict:
     return out
 
 
+def _metres(x: float) -> str:
+    """An error [m] to 4 decimals, or in powers of ten below a millimetre (a map that is exact
+    up to the solver's tolerance)."""
+    return f"{x:.4f}" if x >= 1e-3 else f"{x:.1e}"
+
+
 def _child(args: list[str], timeout: float) -> dict:
     cmd = [sys.executable, __file__, "--child", *args]
     try:
@@ -164,7 +170,7 @@ def main() -> None:
                     continue
                 name = method if method != "default" else f"default ({r['method']})"
                 print(f"         {name:<18} {r['seconds']:8.1f} s ({r['cpu_seconds']:.1f}) peak "
-                      f"{r['peak_mb']:7.0f} MB ({r['base_mb']:.0f})  MPE {r['mpe']:.4f} m  "
+                      f"{r['peak_mb']:7.0f} MB ({r['base_mb']:.0f})  MPE {_metres(r['mpe'])} m  "
                       f"MOE {r['moe']:.3f} % ({r['moe_how']}, {r['moe_seconds']:.1f} s)")
             sys.stdout.flush()
     if args.json:

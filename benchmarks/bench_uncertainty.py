@@ -1,8 +1,8 @@
 """Per-landmark uncertainty (``build_map(uncertainty=True)``): is it calibrated, sharp and cheap?
 
     python benchmarks/bench_uncertainty.py [--layouts 25] [--steps 1000] [--seed0 12000]
-        [--sets visibility,bearing,range-bearing,bearing-view90,mrclam]
-        [--csv docs/results/uncertainty/uncertainty.csv]
+        [--sets visibility,bearing,range-bearing,bearing-view90,mrclam,starloc,...]
+        [--uncertainty true|anchors] [--csv docs/results/uncertainty/uncertainty.csv]
 
 Simulated sets: each layout is one random walk of ``LFMDR-Bearing-v0`` (50 objects, 4 corner
 anchors), seeds ``seed0, seed0 + 1, ...`` (fresh: never used to choose a setting), and from its
@@ -32,6 +32,13 @@ runs' landmarks inside their regions (leave-one-run-out: the run's figure does n
 factor chosen on it), applied to that run (not a default of the library: the figures say
 whether one factor carries from run to run).
 
+``mrclam-anchors``: the same runs with ``uncertainty="anchors"`` (the covariances checked and
+scaled by the held-out anchors, :mod:`mappers.core.held_out_anchors`). ``starloc`` and
+``starloc-anchors``: every STAR-loc s3 sequence under ``--starloc`` mapped from stereo rays and
+ranges (SPATIAL-BA, :func:`lfmdr_gym.experiments.starloc.map_starloc`), its scored tags scored
+in 3-D (chi-squared(3)), with ``uncertainty=True`` and ``"anchors"``. ``--uncertainty anchors``
+asks the simulated sets for ``"anchors"`` instead of True.
+
 Per map: the share of non-anchor landmarks whose truth lies inside their 95 % region (squared
 Mahalanobis distance at most the chi-squared(2) 0.95 quantile), the mean RMS radius of their
 95 % ellipses (:func:`mappers.core.uncertainty.rms_radius`), their mean position error, and the
@@ -39,7 +46,11 @@ CPU and wall time of the map alone and of the map with its uncertainty (both bui
 this process). The summary per set pools the landmarks of all maps: coverage (goal 0.88-0.99
 simulated, >= 0.80 real), sharpness = mean RMS radius / mean error (goal <= 3; a calibrated
 Gaussian gives about 1.95), and the ratio of the median CPU times with and without uncertainty
-(goal <= 1.5).
+(goal <= 1.5). ``wide`` counts the landmarks whose 95 % region is wider than the anchors'
+extent (its RMS radius above the largest distance between two anchors: "anywhere on the map",
+e.g. a STAR-loc tag seen along one ray only), and ``sharp. rest`` is the sharpness of the
+others (CSV: ``n_wide``, ``rms_radius_informative``, ``mpe_informative``): one such region
+can make the mean RMS radius, and so the sharpness, meaningless.
 """
 
 from __future__ import annotations
@@ -66,9 +77,13 @@ from mappers import build_map
 from mappers.core.uncertainty import chi2_quantile, mahalanobis_squared, rms_radius
 
 SETS = ("visibility", "bearing", "range-bearing", "bearing-view90", "visibility-other-sim",
-        "mrclam")
+        "mrclam", "mrclam-anchors", "starloc", "starloc-anchors")
+REAL = {"mrclam", "mrclam-anchors", "starloc", "starloc-anchors"}
+UNCERTAINTY: bool | str = True
+"""What the simulated sets ask ``build_map`` for (``--uncertainty``)."""
 FIELDS = ("set", "layout", "method", "n_scored", "inside", "rms_radius", "mpe", "cpu_map",
-          "cpu_uncertainty", "wall_map", "wall_uncertainty")
+          "cpu_uncertainty", "wall_map", "wall_uncertainty", "n_wide", "rms_radius_informative",
+          "mpe_informative")
 
 
 def _timed(fn):
@@ -87,15 +102,33 @@ def score(positions, cov, truth, objects) -> tuple[int, int, float, float]:
     q = mahalanobis_squared(truth[objects] - positions[objects], cov[objects])
     radius = rms_radius(cov[objects])
     err = np.linalg.norm(positions[objects] - truth[objects], axis=1)
-    return (len(objects), int(np.sum(q <= chi2_quantile(2))), float(np.mean(radius)),
+    return (len(objects), int(np.sum(q <= chi2_quantile(positions.shape[1]))),
+            float(np.mean(radius)),
             float(np.mean(err)))
+
+
+def informative(positions, cov, truth, objects, anchors_xyz) -> dict:
+    """The landmarks whose 95 % region is wider than the anchors' extent (RMS radius above the
+    largest distance between two anchors: the region says "anywhere on the map", e.g. a tag
+    seen along one ray) counted, and the mean RMS radius and position error of the others."""
+    objects = np.asarray(objects)
+    objects = objects[np.all(np.isfinite(positions[objects]), axis=1)]
+    a = np.asarray(anchors_xyz, dtype=float)
+    extent = float(np.max(np.linalg.norm(a[:, None] - a[None], axis=2)))
+    radius = rms_radius(cov[objects])
+    wide = ~(radius <= extent)
+    err = np.linalg.norm(positions[objects] - truth[objects], axis=1)
+    keep = ~wide
+    return {"n_wide": int(wide.sum()),
+            "rms_radius_informative": float(np.mean(radius[keep])) if keep.any() else math.nan,
+            "mpe_informative": float(np.mean(err[keep])) if keep.any() else math.nan}
 
 
 def map_row(name, layout, histories, anchors, truth, **kwargs) -> dict:
     """One map without and with uncertainty, scored."""
     plain, cpu0, wall0 = _timed(lambda: build_map(histories, anchors, truth[anchors], **kwargs))
     m, cpu1, wall1 = _timed(lambda: build_map(histories, anchors, truth[anchors],
-                                              uncertainty=True, **kwargs))
+                                              uncertainty=UNCERTAINTY, **kwargs))
     if not np.array_equal(plain.positions, m.positions, equal_nan=True):
         raise AssertionError(f"{name} {layout}: uncertainty=True changed the map")
     objects = np.setdiff1d(np.arange(len(truth)), anchors)
@@ -104,12 +137,13 @@ def map_row(name, layout, histories, anchors, truth, **kwargs) -> dict:
     q = mahalanobis_squared(truth[ok] - m.positions[ok], m.covariances[ok])
     return {"_q": q, "set": name, "layout": layout, "method": m.method, "n_scored": n, "inside": inside,
             "rms_radius": radius, "mpe": mpe, "cpu_map": cpu0, "cpu_uncertainty": cpu1,
-            "wall_map": wall0, "wall_uncertainty": wall1}
+            "wall_map": wall0, "wall_uncertainty": wall1,
+            **informative(m.positions, m.covariances, truth, objects, truth[anchors])}
 
 
 def simulated_rows(seed: int, steps: int, sets) -> list[dict]:
     rows = []
-    if not set(sets) - {"visibility-other-sim", "mrclam"}:
+    if not set(sets) - REAL - {"visibility-other-sim"}:
         P, X, _ = other_sim(seed, n=steps, fov=360.0)
         return [map_row("visibility-other-sim", seed, X, np.arange(4), P, sensor="visibility")]
     env = gym.make("LFMDR-Bearing-v0")
@@ -139,34 +173,69 @@ def simulated_rows(seed: int, steps: int, sets) -> list[dict]:
     return rows
 
 
-def mrclam_rows(data: Path) -> list[dict]:
+def starloc_rows(data: Path, name: str) -> list[dict]:
+    """Every s3 sequence under ``data`` mapped from stereo (rays and ranges, SPATIAL-BA with
+    :data:`lfmdr_gym.experiments.starloc.STARLOC_PARAMS`), its scored tags scored in 3-D;
+    ``name`` "starloc": ``uncertainty=True``, "starloc-anchors": ``uncertainty="anchors"``."""
+    from lfmdr_gym.datasets.starloc import read_starloc, scored_tags, starloc_survey
+    from lfmdr_gym.experiments.starloc import map_starloc
+
+    mode = "anchors" if name.endswith("-anchors") else True
+    rows = []
+    for seq in sorted(p for p in (data / "data").glob("*_s3") if p.is_dir()):
+        plain, cpu0, wall0 = _timed(lambda s=seq: map_starloc(s))
+        r, cpu1, wall1 = _timed(lambda s=seq: map_starloc(s, uncertainty=mode))
+        xyz = starloc_survey(seq).set_index("landmark")[["x", "y", "z"]]
+        tags = scored_tags(read_starloc(seq, "range-bearing"), starloc_survey(seq), r.anchors)
+        tags = [t for t in tags if t in r.positions]
+        if not tags:
+            continue
+        pos = np.array([r.positions[t] for t in tags])
+        cov = np.array([r.covariances[t] for t in tags])
+        truth = xyz.loc[tags].to_numpy(dtype=float)
+        n, inside, radius, mpe = score(pos, cov, truth, np.arange(len(tags)))
+        rows.append({"_q": mahalanobis_squared(truth - pos, cov), "set": name,
+                     "layout": seq.name, "method": r.method, "n_scored": n, "inside": inside,
+                     "rms_radius": radius, "mpe": mpe, "cpu_map": cpu0, "cpu_uncertainty": cpu1,
+                     "wall_map": wall0, "wall_uncertainty": wall1,
+                     **informative(pos, cov, truth, np.arange(len(tags)),
+                                   [r.positions[a] for a in r.anchors])})
+    return rows
+
+
+def mrclam_rows(data: Path, name: str = "mrclam") -> list[dict]:
     from lfmdr_gym.experiments.mrclam import map_mrclam_run
 
+    mode = "anchors" if name.endswith("-anchors") else True
     rows, q_runs = [], {}
     for run_dir in sorted(p for p in data.glob("MRCLAM_Dataset*") if p.is_dir()):
         plain, cpu0, wall0 = _timed(lambda d=run_dir: map_mrclam_run(d, "range-bearing",
                                                                       plot=False))
         r, cpu1, wall1 = _timed(lambda d=run_dir: map_mrclam_run(d, "range-bearing", plot=False,
-                                                                 uncertainty=True))
+                                                                 uncertainty=mode))
         anchors = np.flatnonzero(np.isin(r.subjects, r.anchor_subjects))
         objects = np.setdiff1d(np.arange(len(r.subjects)), anchors)
         n, inside, radius, mpe = score(r.positions, r.covariances, r.truth, objects)
         rows.append({"_q": mahalanobis_squared(r.truth[objects] - r.positions[objects],
                                                r.covariances[objects]),
-                     "set": "mrclam", "layout": run_dir.name, "method": r.method, "n_scored": n,
+                     "set": name, "layout": run_dir.name, "method": r.method, "n_scored": n,
                      "inside": inside, "rms_radius": radius, "mpe": mpe, "cpu_map": cpu0,
-                     "cpu_uncertainty": cpu1, "wall_map": wall0, "wall_uncertainty": wall1})
+                     "cpu_uncertainty": cpu1, "wall_map": wall0, "wall_uncertainty": wall1,
+                     **informative(r.positions, r.covariances, r.truth, objects,
+                                   r.truth[anchors])})
         ok = objects[np.all(np.isfinite(r.positions[objects]), axis=1)]
         q_runs[run_dir.name] = mahalanobis_squared(r.truth[ok] - r.positions[ok],
                                                    r.covariances[ok])
-    for row in list(rows):  # leave-one-run-out inflation (module docstring)
+    for row in list(rows) if mode is True else []:  # leave-one-run-out (module docstring)
         others = np.concatenate([q for name, q in q_runs.items() if name != row["layout"]])
         if not others.size:
             continue
         factor = float(np.quantile(others, 0.95)) / chi2_quantile(2)
         rows.append({**row, "set": "mrclam-inflated", "_q": q_runs[row["layout"]] / factor,
                      "inside": int(np.sum(q_runs[row["layout"]] <= factor * chi2_quantile(2))),
-                     "rms_radius": row["rms_radius"] * math.sqrt(factor)})
+                     "rms_radius": row["rms_radius"] * math.sqrt(factor),
+                     "rms_radius_informative": (row["rms_radius_informative"]
+                                                * math.sqrt(factor))})
     return rows
 
 
@@ -178,10 +247,17 @@ def summary(rows: list[dict]) -> list[dict]:
         n = sum(int(r["n_scored"]) for r in rs)
         radius = sum(float(r["rms_radius"]) * int(r["n_scored"]) for r in rs) / n
         err = sum(float(r["mpe"]) * int(r["n_scored"]) for r in rs) / n
+        kept = [(int(r["n_scored"]) - int(r["n_wide"]), float(r["rms_radius_informative"]),
+                 float(r["mpe_informative"])) for r in rs if r.get("n_wide", "") != ""]
+        kept = [k for k in kept if k[0] > 0]
+        m = sum(k[0] for k in kept)
         out.append({
             "set": name, "layouts": len(rs), "method": rs[0]["method"],
             "coverage": sum(int(r["inside"]) for r in rs) / n,
             "sharpness": radius / err, "mpe": err,
+            "wide": sum(int(r["n_wide"]) for r in rs if r.get("n_wide", "") != ""),
+            "sharpness_informative": (sum(k[0] * k[1] for k in kept)
+                                      / sum(k[0] * k[2] for k in kept)) if m else math.nan,
             "time_ratio": (statistics.median(float(r["cpu_uncertainty"]) for r in rs)
                            / statistics.median(float(r["cpu_map"]) for r in rs)),
         })
@@ -205,32 +281,40 @@ def main(argv=None) -> int:
     ap.add_argument("--seed0", type=int, default=12000)
     ap.add_argument("--sets", default=",".join(SETS))
     ap.add_argument("--data", type=Path, default=Path("/work/shared/data/mrclam"))
+    ap.add_argument("--starloc", type=Path, default=Path("/work/shared/data/starloc"))
     ap.add_argument("--csv", type=Path, default=None)
+    ap.add_argument("--uncertainty", choices=("true", "anchors"), default="true",
+                    help="the simulated sets' mode: True, or 'anchors' (held-out anchors' check)")
     args = ap.parse_args(argv)
+    global UNCERTAINTY
+    UNCERTAINTY = True if args.uncertainty == "true" else "anchors"
     sets = [s for s in args.sets.split(",") if s]
     unknown = set(sets) - set(SETS)
     if unknown:
         ap.error(f"unknown sets {sorted(unknown)}; choose from {list(SETS)}")
     rows: list[dict] = []
-    if "mrclam" in sets:
-        if not args.data.is_dir():
-            ap.error(f"no MRCLAM data at {args.data}")
-        rows += mrclam_rows(args.data)
+    for name in [s for s in sets if s in REAL]:
+        data = args.starloc if name.startswith("starloc") else args.data
+        if not data.is_dir():
+            ap.error(f"no {name.split('-')[0]} data at {data}")
+        rows += (starloc_rows if name.startswith("starloc") else mrclam_rows)(data, name)
         if args.csv:
             write_csv(args.csv, rows)
-    for k in range(args.layouts if set(sets) - {"mrclam"} else 0):
+    for k in range(args.layouts if set(sets) - REAL else 0):
         rows += simulated_rows(args.seed0 + k, args.steps, sets)
         if args.csv:
             write_csv(args.csv, rows)  # after every layout: a partial run keeps its rows
         print(f"layout {k + 1}/{args.layouts} done", flush=True)
     print(f"{'set':<16}{'layouts':>8}{'coverage':>10}{'sharpness':>11}{'MPE [m]':>10}"
-          f"{'time x':>8}  method")
+          f"{'time x':>8}{'wide':>6}{'sharp. rest':>12}  method")
     for s in summary(rows):
         print(f"{s['set']:<16}{s['layouts']:>8}{s['coverage']:>10.3f}{s['sharpness']:>11.2f}"
-              f"{s['mpe']:>10.4f}{s['time_ratio']:>8.2f}  {s['method']}")
+              f"{s['mpe']:>10.4f}{s['time_ratio']:>8.2f}{s['wide']:>6}"
+              f"{s['sharpness_informative']:>12.2f}  {s['method']}")
     for name in dict.fromkeys(r["set"] for r in rows):
         q = np.concatenate([r["_q"] for r in rows if r["set"] == name])
-        print(f"{name}: inflation for 0.95 = {np.nanquantile(q, 0.95) / chi2_quantile(2):.3f}")
+        d = 3 if name.startswith("starloc") else 2
+        print(f"{name}: inflation for 0.95 = {np.nanquantile(q, 0.95) / chi2_quantile(d):.3f}")
     return 0
 
 

@@ -5,14 +5,14 @@ from __future__ import annotations
 import math
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
 from lfmdr_gym.checks import check_int, check_real
-from lfmdr_gym.render import HumanViewer, available_render_modes, draw_frame, human_rendering_error
+from lfmdr_gym.render import draw_frame
 from lfmdr_gym.sim import sensors, tags3d, view3d
-from lfmdr_gym.sim.world import Layout, World, action_turn
+from lfmdr_gym.sim.world import Layout, World
+from lfmdr_gym.world_env import WorldEnv
 from mappers.core.sensors import sensors_of
 
 __all__ = ["CAMERA3D_SENSORS", "Camera3DEnv"]
@@ -28,7 +28,7 @@ WALL_TAG_CORNER_MARGIN = 0.1
 _STREAM_TAG = 0x63336400  # mixed into the reset seed: the noise stream is apart from np_random
 
 
-class Camera3DEnv(gym.Env):
+class Camera3DEnv(WorldEnv):
     """
     ## Description
 
@@ -113,8 +113,6 @@ class Camera3DEnv(gym.Env):
     - v0: initial version (issue 34).
     """
 
-    metadata = {"render_modes": available_render_modes(), "render_fps": 10}
-
     def __init__(
         self,
         sensor: str = "range-bearing",
@@ -162,8 +160,7 @@ class Camera3DEnv(gym.Env):
         self.tag_heights = tags3d.check_heights(tag_heights)
         if self.world.arena_half <= WALL_TAG_CORNER_MARGIN and self.n_wall_tags:
             raise ValueError(f"arena_size={arena_size} leaves no wall away from the corners for tags")
-        self.step_length = check_real("step_length", step_length, low=0.0, low_open=True)
-        self.max_turn = check_real("max_turn", max_turn, low=0.0, low_open=True, high=math.pi)
+        self._set_motion(step_length, max_turn)
         self.camera = view3d.CameraModel(height=check_real("camera_height", camera_height),
                                          pitch_deg=pitch_deg, hfov_deg=hfov_deg, vfov_deg=vfov_deg,
                                          max_range=max_range, occlusion=occlusion)
@@ -175,14 +172,8 @@ class Camera3DEnv(gym.Env):
                                    ("range_noise", range_noise, "range")):
             if value and needs not in self.sensors:
                 raise ValueError(f"{name} applies to the {needs} sensor, not to {sensor!r}")
-        self.n_proximity_rays = check_int("n_proximity_rays", n_proximity_rays, low=1)
-        self.proximity_range = check_real("proximity_range", proximity_range, low=0.0, low_open=True)
-        if render_mode == "human" and human_rendering_error() is not None:
-            raise human_rendering_error()
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, "
-                             f"got {render_mode!r}")
-        self.render_mode = render_mode
+        self._set_proximity(n_proximity_rays, proximity_range)
+        self._set_render_mode(render_mode)
 
         a = self.world.arena_half
         reach = self.camera.max_range
@@ -203,14 +194,10 @@ class Camera3DEnv(gym.Env):
         if self._masked:
             entries["observed"] = spaces.MultiBinary(m)
         self.observation_space = spaces.Dict(entries)
-        self.action_space = spaces.Box(-self.max_turn, self.max_turn, (1,), np.float32)
-        self._dirs = sensors.ray_directions(self.n_proximity_rays)
         self._tags = np.zeros((0, 3))
         self._hosts = np.zeros(0, dtype=np.int64)
         self._anchor_ids = np.zeros(0, dtype=np.int64)
         self._noise: np.random.Generator | None = None
-        self._last_obs: dict[str, np.ndarray] | None = None
-        self._viewer: HumanViewer | None = None
 
     # ------------------------------------------------------------------ episodes
     def reset(self, *, seed: int | None = None,
@@ -248,20 +235,7 @@ class Camera3DEnv(gym.Env):
             arr.setflags(write=False)
         w.build(Layout(posts, np.zeros(0, dtype=np.int64), pose))
         self._tags, self._hosts, self._anchor_ids = tags, hosts, ids
-        obs = self._observe()
-        if self.render_mode == "human":
-            self.render()
-        return obs, self._info(False)
-
-    def step(self, action: Any) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        if not self.world.built:
-            raise gym.error.ResetNeeded("call reset() before step()")
-        turn = action_turn(action, self.max_turn)
-        blocked = self.world.move(turn, self.step_length)
-        obs = self._observe()
-        if self.render_mode == "human":
-            self.render()
-        return obs, 0.0, False, False, self._info(blocked)
+        return self._first_observation()
 
     def _observe(self) -> dict[str, np.ndarray]:
         w = self.world
@@ -296,45 +270,21 @@ class Camera3DEnv(gym.Env):
         ).astype(np.float32)
         if self._masked:
             obs["observed"] = seen.astype(np.int8)
-        self._last_obs = obs
         return obs
 
     def _info(self, blocked: bool) -> dict[str, Any]:
-        w = self.world
-        return {
-            "robot_pose": w.pose,
-            "object_positions": self._tags.copy(),
-            "anchor_ids": self._anchor_ids.copy(),
-            "anchor_positions": self._tags[self._anchor_ids].copy(),
-            "post_positions": w.object_positions.copy(),
-            "blocked": bool(blocked),
-        }
+        return self._world_info(bool(blocked), self._tags, self._anchor_ids,
+                                self._tags[self._anchor_ids],
+                                post_positions=self.world.object_positions)
 
     # ------------------------------------------------------------------ rendering
-    def render(self) -> np.ndarray | None:
-        """A top view (``"rgb_array"``) or a window update (``"human"``): the tags at their
-        floor positions, those read this step in green (:func:`lfmdr_gym.render.draw_frame`)."""
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' "
-                            "to gymnasium.make")
-            return None
-        if not self.world.built:
-            raise gym.error.ResetNeeded("call reset() before render()")
+    def _frame(self) -> np.ndarray:
+        """A top view: the tags at their floor positions, those read this step in green
+        (:func:`lfmdr_gym.render.draw_frame`)."""
         w = self.world
         obs = self._last_obs or {}
         seen = obs.get("observed", obs.get("visibility"))
-        frame = draw_frame(arena_half=w.arena_half, object_positions=self._tags[:, :2],
-                           object_radius=w.object_radius, robot_pose=w.pose,
-                           robot_radius=w.robot_radius, anchor_ids=self._anchor_ids,
-                           sensor="visibility", reading=seen, proximity=obs.get("proximity"))
-        if self.render_mode == "rgb_array":
-            return frame
-        if self._viewer is None:
-            self._viewer = HumanViewer(frame.shape[0], self.metadata["render_fps"])
-        self._viewer.show(frame)
-        return None
-
-    def close(self) -> None:
-        if self._viewer is not None:
-            self._viewer.close()
-            self._viewer = None
+        return draw_frame(arena_half=w.arena_half, object_positions=self._tags[:, :2],
+                          object_radius=w.object_radius, robot_pose=w.pose,
+                          robot_radius=w.robot_radius, anchor_ids=self._anchor_ids,
+                          sensor="visibility", reading=seen, proximity=obs.get("proximity"))

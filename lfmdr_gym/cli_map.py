@@ -188,6 +188,9 @@ def add_convert(sub: Any) -> None:
                    help="also write the tags' surveyed positions here (for --truth)")
     t.add_argument("--anchors", default=None, metavar="A.csv",
                    help="also write the six anchors of the STAR-loc benchmark here")
+    t.add_argument("--disparity-offset", type=float, default=0.0, metavar="PX",
+                   help="pixels the disparities are too large by: range = fu b / (disparity - "
+                        "PX) (default 0; the STAR-loc benchmark uses 0.5)")
     _add_table_out(t)
     t.set_defaults(handler=_cmd_convert_starloc)
     from lfmdr_gym.datasets import rosbag  # (imports rosbags only when it reads a bag)
@@ -230,7 +233,7 @@ def _cmd_convert_starloc(args: argparse.Namespace) -> int:
     from lfmdr_gym.datasets.starloc import read_starloc, starloc_anchors, starloc_survey
     from lfmdr_gym.histories.observation_table import write_landmarks, write_observations
 
-    table = read_starloc(args.src, args.sensor)
+    table = read_starloc(args.src, args.sensor, args.disparity_offset)
     survey = starloc_survey(args.src) if (args.landmarks or args.anchors) else None
     written = [write_observations(table, args.out)]
     if args.landmarks is not None:

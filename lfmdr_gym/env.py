@@ -5,16 +5,16 @@ from __future__ import annotations
 import math
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from lfmdr_gym.checks import check_int, check_real
-from lfmdr_gym.render import HumanViewer, available_render_modes, draw_frame, human_rendering_error
+from lfmdr_gym.checks import check_real
+from lfmdr_gym.render import draw_frame
 from lfmdr_gym.sim import sensors
 from lfmdr_gym.sim.grid import CellGrid
 from lfmdr_gym.sim.sensing_limits import SensingLimits
-from lfmdr_gym.sim.world import World, action_turn
+from lfmdr_gym.sim.world import World
+from lfmdr_gym.world_env import WorldEnv
 from mappers.core.sensors import SENSORS, check_sensor, sensors_of
 
 __all__ = ["LFMDREnv", "OBSERVATION_TYPES", "observation_factory"]
@@ -93,7 +93,7 @@ def observation_factory(env: LFMDREnv, sensor: str):
 
 
 # ----------------------------------------------------------------------------- the environment
-class LFMDREnv(gym.Env):
+class LFMDREnv(WorldEnv):
     """
     ## Description
 
@@ -209,10 +209,6 @@ class LFMDREnv(gym.Env):
       visibility-bearing) and the camera preset later still, as new ids.
     """
 
-    # "human" is offered only where it can work (pygame and a display), so that Gymnasium's
-    # check_env, which renders every listed mode, passes on a headless machine.
-    metadata = {"render_modes": available_render_modes(), "render_fps": 10}
-
     def __init__(
         self,
         sensor: str = "visibility",
@@ -252,16 +248,14 @@ class LFMDREnv(gym.Env):
             n_anchors=n_anchors,
         )
         self.sensor = sensor
-        self.step_length = check_real("step_length", step_length, low=0.0, low_open=True)
-        self.max_turn = check_real("max_turn", max_turn, low=0.0, low_open=True, high=math.pi)
+        self._set_motion(step_length, max_turn)
         self.visual_angle_deg = check_real(
             "visual_angle_deg", visual_angle_deg, low=0.0, low_open=True, high=180.0, high_open=True
         )
         if not isinstance(occlusion, bool | np.bool_):
             raise ValueError(f"occlusion must be True or False, got {occlusion!r}")
         self.occlusion = bool(occlusion)
-        self.n_proximity_rays = check_int("n_proximity_rays", n_proximity_rays, low=1)
-        self.proximity_range = check_real("proximity_range", proximity_range, low=0.0, low_open=True)
+        self._set_proximity(n_proximity_rays, proximity_range)
         self.max_range = (
             None if max_range is None else check_real("max_range", max_range, low=0.0, low_open=True)
         )
@@ -269,19 +263,11 @@ class LFMDREnv(gym.Env):
                       range_noise=range_noise, miss_rate=miss_rate, false_rate=false_rate,
                       line_of_sight=line_of_sight)
         self.range_noise = check_real("range_noise", range_noise, low=0.0)
-        if render_mode == "human" and human_rendering_error() is not None:
-            raise human_rendering_error()
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(
-                f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}"
-            )
-        self.render_mode = render_mode
+        self._set_render_mode(render_mode)
 
         self._set_up_sensing(names, limits)
         self._anchor_positions = np.zeros((0, 2))
         self._grid: CellGrid | None = None
-        self._last_obs: dict[str, np.ndarray] | None = None
-        self._viewer: HumanViewer | None = None
 
     def _set_up_sensing(self, names: tuple[str, ...], limits: dict) -> None:
         """The observation types of the sensors ``names``, the imperfect-sensing limits, the
@@ -300,14 +286,12 @@ class LFMDREnv(gym.Env):
                                       range_high=getattr(range_type or self._obs_type, "high", 1.0),
                                       **limits)
                         if SensingLimits.active(limits) else None)
-        self._dirs = sensors.ray_directions(self.n_proximity_rays)
         # One candidate prefilter serves the proximity ring and a nearby-only sensor.
         self._reach = max(self.proximity_range + self.world.object_radius,
                           *(t.reach for t in self._obs_types.values()))
         self._reach2 = self._reach * self._reach
         self._r2 = self.world.object_radius * self.world.object_radius
         self._xy = np.zeros(2)  # the robot's (x, y), reused every step
-        self.action_space = spaces.Box(-self.max_turn, self.max_turn, (1,), np.float32)
         self.observation_space = spaces.Dict(
             {
                 **{key: t.space for key, t in self._obs_types.items()},
@@ -334,20 +318,7 @@ class LFMDREnv(gym.Env):
                       if all(t.local for t in self._obs_types.values()) and self._limits is None
                       else None)
         self._anchor_positions = layout.object_positions[layout.anchor_ids]
-        obs = self._observe()
-        if self.render_mode == "human":
-            self.render()
-        return obs, self._info(False)
-
-    def step(self, action: Any) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        if not self.world.built:
-            raise gym.error.ResetNeeded("call reset() before step()")
-        turn = action_turn(action, self.max_turn)
-        blocked = self.world.move(turn, self.step_length)
-        obs = self._observe()
-        if self.render_mode == "human":
-            self.render()
-        return obs, 0.0, False, False, self._info(blocked)
+        return self._first_observation()
 
     def _observe(self) -> dict[str, np.ndarray]:
         # The hot path: a handful of numpy calls on arrays of ~50 rows, where each call's fixed
@@ -380,33 +351,19 @@ class LFMDREnv(gym.Env):
         if self._limits is not None:
             limited, obs["observed"] = self._limits.apply(readings, rel, d2, h)
             obs.update(limited)
-        self._last_obs = obs
         return obs
 
     def _info(self, blocked: bool) -> dict[str, Any]:
-        # Fresh arrays every call: a caller may keep or modify them (and check_env insists).
         w = self.world
-        return {
-            "robot_pose": w.pose,
-            "object_positions": w.object_positions.copy(),
-            "anchor_ids": w.anchor_ids.copy(),
-            "anchor_positions": self._anchor_positions.copy(),
-            "blocked": blocked,
-        }
+        return self._world_info(blocked, w.object_positions, w.anchor_ids, self._anchor_positions)
 
     # ------------------------------------------------------------------ rendering
-    def render(self) -> np.ndarray | None:
-        """An RGB frame (``"rgb_array"``) or a window update (``"human"``); see :mod:`lfmdr_gym.render`."""
-        if self.render_mode is None:
-            gym.logger.warn(
-                "render() called without a render_mode; pass render_mode='rgb_array' to gymnasium.make"
-            )
-            return None
-        if not self.world.built:
-            raise gym.error.ResetNeeded("call reset() before render()")
+    def _frame(self) -> np.ndarray:
+        """The frame :meth:`render` shows: the arena, the objects coloured by the drawn sensor's
+        reading, the robot and its proximity ring (:func:`lfmdr_gym.render.draw_frame`)."""
         w = self.world
         obs = self._last_obs or {}
-        frame = draw_frame(
+        return draw_frame(
             arena_half=w.arena_half,
             object_positions=w.object_positions,
             object_radius=w.object_radius,
@@ -418,14 +375,3 @@ class LFMDREnv(gym.Env):
             proximity=obs.get("proximity"),
             observed=obs.get("observed"),
         )
-        if self.render_mode == "rgb_array":
-            return frame
-        if self._viewer is None:
-            self._viewer = HumanViewer(frame.shape[0], self.metadata["render_fps"])
-        self._viewer.show(frame)
-        return None
-
-    def close(self) -> None:
-        if self._viewer is not None:
-            self._viewer.close()
-            self._viewer = None

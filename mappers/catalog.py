@@ -509,7 +509,7 @@ _BUILTINS: tuple[MethodSpec, ...] = (
     # (docs/imperfect-sensing.md): no sweep.
     MethodSpec("BEARING-BA", "mappers.viewpoints.bearing:BearingAdjustment", {}, {},
                "the bearing default's map refined by estimating the viewpoints (bearing-only "
-               "bundle adjustment), anchors fixed", sensors=("bearing",), **_MASKED),
+               "bundle adjustment), anchors fixed", sensors=("bearing",), sparse=True, **_MASKED),
     MethodSpec("VIS-BA-WALK", "mappers.viewpoints.visibility:VisibilityAdjustment",
                {"continuity": True, "align": True, "overrelax": 1.0, "grid_cells": 4,
                 "prior_iters": 1, "model_rounds": 2},

@@ -3,9 +3,10 @@
 Two sources, chosen by ``uncertainty``:
 
 * ``"model"`` — from the normal equations of a bundle adjustment, where the method ends with one
-  (``BEARING-BA``, ``LOC-SMA`` refined by its range-bearing or bearing adjustment): the objects'
-  marginal covariances with the viewpoints eliminated and the anchors fixed, scaled by the
-  robustly weighted residuals' variance (:mod:`mappers.viewpoints.marginals`);
+  (``BEARING-BA``, ``LOC-SMA`` refined by its range-bearing or bearing adjustment, and in 3-D
+  ``SPATIAL-BA``): the objects' marginal covariances with the viewpoints eliminated and the
+  anchors fixed, scaled by the robustly weighted residuals' variance
+  (:mod:`mappers.viewpoints.marginals`, :mod:`mappers.spatial.marginals`);
 * ``"bootstrap"`` — for every method: a moving-block bootstrap over the history's steps
   (Künsch 1989; blocks of ``ceil(sqrt(N))`` consecutive steps, since consecutive steps of a walk
   see nearly the same scene), :data:`BOOTSTRAP_REPLICATES` replicate histories each mapped by
@@ -31,17 +32,23 @@ from typing import Any
 import numpy as np
 
 from mappers.core.errors import MappingError
+from mappers.core.held_out_anchors import held_out_factor
 from mappers.core.uncertainty import (
     check_uncertainty,
+    mahalanobis_squared,
     moving_blocks,
     sample_covariances,
     sample_size_factor,
     transform_covariances,
 )
 from mappers.fitting import Map
-from mappers.viewpoints import adjustment_covariances, has_model_covariances
+from mappers.spatial.marginals import spatial_covariances
+from mappers.spatial.spatial_ba import SpatialAdjustment
+from mappers.viewpoints import adjustment_covariances
+from mappers.viewpoints import has_model_covariances as _has_planar_model
 
-__all__ = ["BOOTSTRAP_INFLATION", "BOOTSTRAP_REPLICATES", "MIN_REPLICATES", "with_covariances"]
+__all__ = ["BOOTSTRAP_INFLATION", "BOOTSTRAP_REPLICATES", "MIN_REPLICATES", "has_model_covariances",
+           "with_covariances", "with_held_out_check"]
 
 BOOTSTRAP_REPLICATES = 20
 """Replicate maps of a bootstrap."""
@@ -55,6 +62,12 @@ layouts of the project's world (``--sets visibility``; docs/guide/uncertainty.md
 
 MIN_REPLICATES = 10
 """An object placed in fewer replicates gets a NaN covariance (and a note)."""
+
+
+def has_model_covariances(est) -> bool:
+    """Whether the fitted estimator ``est`` ends with a bundle adjustment whose normal equations
+    give covariances: BEARING-BA, LOC-SMA refined by an adjustment, SPATIAL-BA (3-D)."""
+    return isinstance(est, SpatialAdjustment) or _has_planar_model(est)
 
 
 def _finish(result: Map, cov: np.ndarray) -> np.ndarray:
@@ -72,6 +85,8 @@ def _rows(a, rows):
 
 
 def _model(result: Map, est, mapped: np.ndarray, X, mask, timeline) -> np.ndarray:
+    if isinstance(est, SpatialAdjustment):  # 3-D: every row fitted, in the output frame
+        return spatial_covariances(est)
     local = np.searchsorted(mapped, np.asarray(result.anchor_ids, dtype=int))
     cov_local = adjustment_covariances(est, X, mask, local, timeline)
     d = result.positions.shape[1]
@@ -120,16 +135,55 @@ def with_covariances(result: Map, uncertainty, *, est: Any, mapped: np.ndarray, 
     mode = check_uncertainty(uncertainty)
     if mode is False:
         return result
-    if mode is True:
+    if mode in (True, "anchors"):  # ("anchors": build_map scales these afterwards)
         mode = "model" if has_model_covariances(est) else "bootstrap"
     notes: list[str] = []
     if mode == "model":
         if not has_model_covariances(est):
             raise ValueError(
                 f"uncertainty='model' needs a method that ends with a bundle adjustment "
-                f"(BEARING-BA, LOC-SMA refined), not {result.method!r}: use 'bootstrap' or True")
+                f"(BEARING-BA, LOC-SMA refined, SPATIAL-BA), not {result.method!r}: use 'bootstrap' or True")
         cov = _model(result, est, mapped, _rows(X, mapped), _rows(mask, mapped), timeline)
     else:
         cov = _bootstrap(result, n_steps, refit, random_state, notes)
     return dataclasses.replace(result, covariances=_finish(result, cov),
                                warnings=(*result.warnings, *notes))
+
+
+def with_held_out_check(result: Map, held_out: Callable[[int], tuple[np.ndarray, np.ndarray]],
+                        anchor_positions: np.ndarray) -> Map:
+    """``result`` (a map with its covariances) with the covariances of its non-anchor objects
+    scaled by what its anchors say of them (:mod:`mappers.core.held_out_anchors`):
+    ``held_out(j)`` maps again without the ``j``-th anchor and returns that anchor's position and
+    covariance there (a MappingError or ValueError: it cannot be mapped without it). The anchors'
+    squared Mahalanobis distances give the factor (1 when they pass the test); a note in
+    ``Map.warnings`` says what was found. With fewer than two anchors checked the covariances are
+    kept as they are, with a note saying they could not be checked."""
+    positions = np.asarray(anchor_positions, dtype=float)
+    q = []
+    for j in range(len(positions)):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # the held-out maps' notes are the map's, again
+                p, c = held_out(j)
+        except (MappingError, ValueError):
+            continue
+        # an anchor not placed, or with a singular covariance it lies off: no check from it
+        qj = float(mahalanobis_squared((np.asarray(p) - positions[j])[None], np.asarray(c)[None])[0])
+        if np.isfinite(qj):
+            q.append(qj)
+    d = positions.shape[1]
+    if len(q) < 2:
+        note = (f"uncertainty: only {len(q)} of {len(positions)} anchors could be mapped without "
+                "themselves: the covariances are not checked (they may be too small on logged "
+                "data)")
+        return dataclasses.replace(result, warnings=(*result.warnings, note))
+    factor, k = held_out_factor(np.array(q), d)
+    cov = np.array(result.covariances, dtype=float)
+    free = np.ones(len(cov), dtype=bool)
+    free[list(result.anchor_ids)] = False
+    cov[free] *= factor
+    note = (f"uncertainty: {len(q)} held-out anchors give the variance factor {k:.3g}; "
+            + ("the covariances pass the test (kept)" if factor == 1.0 else
+               f"the covariances are multiplied by {factor:.3g}"))
+    return dataclasses.replace(result, covariances=cov, warnings=(*result.warnings, note))

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
+import numpy as np
 import scipy.sparse as sp
 
 from mappers.core.flicker import FLICKER_THRESHOLD, MIN_PERSISTENCE, flicker_rate, persistence
@@ -44,6 +45,7 @@ __all__ = [
     "Choice",
     "choose_for_history",
     "choose_method",
+    "is_sightings_log",
     "localisation_free",
 ]
 
@@ -75,6 +77,8 @@ class Choice:
 _RB = frozenset({"range", "bearing"})
 _VB = frozenset({"visibility", "bearing"})
 _SPARSE: Mapping[str, Any] = MappingProxyType({"sparse": True})
+_LARGE_BEARING_BA: Mapping[str, Any] = MappingProxyType(
+    {"start": "COVIS-SPARSE", "schur_solver": "cg", "max_rounds": 3})
 _COVIS_3D, _SPATIAL_BA = "COVIS-3D", "SPATIAL-BA"
 
 DEFAULTS: Mapping[tuple[str | frozenset[str], bool], Choice] = MappingProxyType({
@@ -89,8 +93,11 @@ DEFAULTS: Mapping[tuple[str | frozenset[str], bool], Choice] = MappingProxyType(
     # them (docs/bearing-on-real-data.md).
     ("visibility", True): Choice("VIEW-BA", "DROPOUT-BLEND", large="DROPOUT-BLEND",
                                  logged="COVIS-ENSEMBLE", spatial=_COVIS_3D),
-    ("bearing", True): Choice("BEARING-BA", "COVIS-AUTO", large="COVIS-SPARSE",
-                              logged="COVIS-ENSEMBLE", spatial=_SPATIAL_BA),
+    # Above the size threshold masked bearing is BEARING-BA started from COVIS-SPARSE, its joint
+    # step on the sparse Schur engine (conjugate gradients), three rounds (issue 34's goal:
+    # M = 1,000, N = 20,000 in <= 10 s, docs/guide/scale.md).
+    ("bearing", True): Choice("BEARING-BA", "COVIS-AUTO", large="BEARING-BA",
+                              large_params=_LARGE_BEARING_BA, logged="COVIS-ENSEMBLE", spatial=_SPATIAL_BA),
     ("range", True): Choice("RANGE-QUANTILE", "RANGE-QUANTILE"),
     (_RB, False): Choice("LOC-SMA", "LOC-SMA", {"refine": None}, spatial=_SPATIAL_BA),
     (_RB, True): Choice("LOC-SMA", "LOC-SMA", {"refine": None}, spatial=_SPATIAL_BA),
@@ -141,6 +148,23 @@ def localisation_free(sensor, masked: bool = False) -> tuple[str, dict[str, Any]
     return row.localisation_free, dict(row.localisation_free_params)
 
 
+def is_sightings_log(X, mask) -> bool:
+    """Whether a masked visibility history (``X`` and ``mask`` (M, N), dense or scipy sparse)
+    is a log of sightings: every observed entry reads 1, so the mask says what was seen, not what
+    was in view (a table of detections: ``lfmdr_gym.histories.observations``). VIEW-BA reads the
+    mask as the view cone, which such a log is not: through a 90-degree view of both simulators
+    its map of the sightings alone is worse than its start map, and on MRCLAM it keeps it
+    (``benchmarks/bench_defaults_carry.py``). False for a complete history (``mask`` None)."""
+    if mask is None:
+        return False
+    if sp.issparse(mask) or sp.issparse(X):
+        observed = sp.csr_array(mask, dtype=bool)
+        seen = observed.multiply(sp.csr_array(X) > 0.5)
+        return observed.nnz > 0 and seen.nnz == observed.nnz
+    observed = np.asarray(mask, dtype=bool)
+    return bool(observed.any() and np.all(np.asarray(X)[observed] > 0.5))
+
+
 def choose_for_history(X, mask, sensor: str, timeline=None,
                        notes: list[str] | None = None) -> tuple[str, dict[str, Any]] | None:
     """:func:`choose_method` for a single sensor's histories as ``build_map`` checked them
@@ -149,9 +173,18 @@ def choose_for_history(X, mask, sensor: str, timeline=None,
     walk's — :func:`mappers.core.flicker.persistence` at least :data:`MIN_PERSISTENCE` — and
     that flickers like a sensor with dropouts, :func:`mappers.core.flicker.flicker_rate` above
     :data:`FLICKER_THRESHOLD`), a note says so. Perfect histories never flicker so much: their
-    rate is a few percent."""
+    rate is a few percent. A masked visibility history that is a log of sightings
+    (:func:`is_sightings_log`) gets the localisation-free map instead of ``VIEW-BA``, with a
+    note."""
     n = X.shape[0]
     plain = choose_method(sensor, masked=mask is not None, n_objects=n)
+    if plain is not None and plain[0] == "VIEW-BA" and is_sightings_log(X, mask):
+        label, params = localisation_free(sensor, masked=True)
+        if notes is not None:
+            notes.append(f"every observed entry of the masked visibility history is a sighting: a "
+                         f"log of what was seen, not of what was in view, so the mask is not a "
+                         f"view cone and it is mapped with {label!r}, not 'VIEW-BA'")
+        return label, params
     if (mask is not None or sp.issparse(X) or n > SCALABLE_ABOVE_OBJECTS
             or choose_method(sensor, dropouts=True, n_objects=n) == plain):
         return plain

@@ -16,13 +16,21 @@ import numpy as np
 import scipy.sparse as sp
 
 from mappers.catalog import implied_params, resolve_method
+from mappers.core.errors import MappingError
 from mappers.core.fused_histories import check_fused
 from mappers.core.sensors import COLUMNS_PER_STEP, check_sensor_set
 from mappers.core.uncertainty import check_uncertainty
-from mappers.covariances import with_covariances
+from mappers.covariances import has_model_covariances, with_covariances, with_held_out_check
 from mappers.defaults import choose_for_history
 from mappers.fitting import Map, check_inputs, fit_checked, fit_fused_method
-from mappers.spatial.pipeline_3d import anchor_dimension, build_map_3d, default_for_histories_3d
+from mappers.spatial.pipeline_3d import (
+    anchor_dimension,
+    build_map_3d,
+    default_for_histories_3d,
+    fit_map_3d,
+    step_columns_3d,
+)
+from mappers.viewpoints import released_anchor
 
 __all__ = ["Map", "MapWarning", "build_map", "default_method"]
 
@@ -81,10 +89,13 @@ def build_map(
         random_state: seed handed to methods that take one (and to the bootstrap's draws).
         uncertainty: False (the default): no covariances, ``Map.covariances`` is None and nothing
             else changes; ``"model"``: from the normal equations of the method's bundle
-            adjustment (``BEARING-BA``, ``LOC-SMA`` refined); ``"bootstrap"``: from replicate maps
+            adjustment (``BEARING-BA``, ``LOC-SMA`` refined, ``SPATIAL-BA``); ``"bootstrap"``: from replicate maps
             of a moving-block bootstrap over the steps (any method; about 20 maps' time);
             True: ``"model"`` where the method has one, else ``"bootstrap"``
-            (:mod:`mappers.covariances`).
+            (:mod:`mappers.covariances`); ``"anchors"``: True's covariances checked by the
+            anchors, each mapped in turn from the others, and scaled when they miss them
+            (:mod:`mappers.core.held_out_anchors`; about one map more per anchor). 3-D maps:
+            the model for SPATIAL-BA, the bootstrap for COVIS-3D.
         **params: method parameters (``n_neighbors`` = K, ``sigma2``, ``degree``, ...).
 
     Returns:
@@ -96,21 +107,36 @@ def build_map(
         ValueError: bad input, naming the problem. MappingError (a ValueError) when the method
         itself fails (e.g. Hessian LLE's eigenproblem), naming the method and the cause.
     """
+    if check_uncertainty(uncertainty) == "anchors":
+        return _held_out_checked(histories, anchor_ids, anchor_positions, method, sensor=sensor,
+                                 mask=mask, timeline=timeline, normalize=normalize,
+                                 random_state=random_state, **params)
     if anchor_dimension(anchor_positions) == 3:
+        uncertainty = check_uncertainty(uncertainty)
+        result, est, X3, mask3, sensor3 = fit_map_3d(histories, anchor_ids, anchor_positions,
+                                                     method, sensor=sensor, mask=mask, **params)
         if uncertainty is not False:
-            raise ValueError("uncertainty= is not available for 3-D maps yet: Map.covariances is "
-                             "computed for 2-D maps only (leave uncertainty=False)")
-        result = build_map_3d(histories, anchor_ids, anchor_positions, method, sensor=sensor,
-                              mask=mask, **params)
+            result = _with_covariances_3d(result, uncertainty, est, X3, mask3, sensor3,
+                                          anchor_ids, anchor_positions, random_state)
         for note in result.warnings:
             warnings.warn(note, MapWarning, stacklevel=2)
         return result
+    result = _build_2d(histories, anchor_ids, anchor_positions, method, sensor, mask, timeline,
+                       normalize, random_state, check_uncertainty(uncertainty), params)[0]
+    for note in result.warnings:
+        warnings.warn(note, MapWarning, stacklevel=2)
+    return result
+
+
+def _build_2d(histories, anchor_ids, anchor_positions, method, sensor, mask, timeline, normalize,
+              random_state, uncertainty, params):
+    """``build_map``'s 2-D map (with its covariances unless ``uncertainty`` is False), the fitted
+    estimator and the rows it was fitted on: ``(Map, est, mapped)``."""
     parts = getattr(histories, "parts", None)
     if isinstance(parts, Mapping) and not isinstance(histories, Mapping):
         # a fused History (lfmdr_gym): its single-sensor parts, each with its own mask
         timeline = timeline if timeline is not None else getattr(histories, "timeline", None)
         histories = dict(parts)
-    uncertainty = check_uncertainty(uncertainty)
     if isinstance(histories, Mapping):
         result, est, mapped = _build_fused_map(histories, anchor_ids, anchor_positions, method,
                                                sensor, mask, timeline, normalize, random_state,
@@ -122,9 +148,7 @@ def build_map(
         result = _with_covariances(result, uncertainty, est, mapped, histories, anchor_ids,
                                    anchor_positions, sensor, mask, timeline, normalize,
                                    random_state, params)
-    for note in result.warnings:
-        warnings.warn(note, MapWarning, stacklevel=2)
-    return result
+    return result, est, mapped
 
 
 
@@ -247,3 +271,105 @@ def _with_covariances(result, uncertainty, est, mapped, histories, anchor_ids, a
     return with_covariances(result, uncertainty, est=est, mapped=mapped, X=X, mask=M,
                             n_steps=n_steps, refit=refit, random_state=random_state,
                             timeline=timeline)
+
+
+def _with_covariances_3d(result, uncertainty, est, X, mask, sensor, anchor_ids, anchor_positions,
+                         random_state) -> Map:
+    """``result`` (a 3-D map) with ``Map.covariances``: the model's for SPATIAL-BA, a bootstrap's
+    for COVIS-3D (each replicate the same method on the chosen steps' columns)."""
+    per_step = step_columns_3d(X, sensor)
+    if isinstance(X, Mapping):
+        n_steps = X["bearing"].shape[1] // per_step["bearing"]
+
+        def cut(steps):
+            masks = dict(mask or {})
+            return ({k: v[:, _step_columns(steps, per_step[k])] for k, v in X.items()},
+                    {k: None if masks.get(k) is None else
+                     np.asarray(masks[k])[:, _step_columns(steps, per_step[k])] for k in X})
+    else:
+        n_steps = X.shape[1] // per_step
+
+        def cut(steps):
+            cols = _step_columns(steps, per_step)
+            return X[:, cols], None if mask is None else np.asarray(mask)[:, cols]
+
+    def refit(steps):
+        Xr, Mr = cut(steps)
+        return build_map_3d(Xr, anchor_ids, anchor_positions, result.method, sensor=sensor,
+                            mask=Mr, **result.params).positions
+
+    return with_covariances(result, uncertainty, est=est, mapped=np.arange(len(result.positions)),
+                            X=X, mask=mask, n_steps=n_steps, refit=refit,
+                            random_state=random_state)
+
+
+def _held_out_checked(histories, anchor_ids, anchor_positions, method, **kwargs) -> Map:
+    """``build_map(..., uncertainty="anchors")``: the map with its own covariances (``True``),
+    scaled by its held-out anchors (:func:`mappers.covariances.with_held_out_check`): each
+    anchor in turn mapped by the same method from the other anchors; where that map cannot place
+    it (a sparse logged run) and the method ends with a planar adjustment, the adjustment alone
+    is fitted again from the full map with that anchor free
+    (:func:`mappers.viewpoints.marginals.released_anchor`)."""
+    ids = np.asarray(anchor_ids, dtype=int)
+    pos = np.asarray(anchor_positions, dtype=float)
+    if anchor_dimension(anchor_positions) == 3:
+        result, release = build_map(histories, anchor_ids, anchor_positions, method,
+                                    uncertainty=True, **kwargs), None
+    else:
+        params = {k: kwargs.pop(k) for k in list(kwargs)
+                  if k not in ("sensor", "mask", "timeline", "normalize", "random_state")}
+        result, est, mapped = _build_2d(histories, anchor_ids, anchor_positions, method,
+                                        kwargs["sensor"], kwargs["mask"], kwargs["timeline"],
+                                        kwargs["normalize"], kwargs["random_state"], True, params)
+        for note in result.warnings:
+            warnings.warn(note, MapWarning, stacklevel=3)
+        kwargs = {**kwargs, **params}
+        release = _releaser(result, est, mapped, histories, ids, pos, kwargs)
+
+    def held_out(j):
+        keep = np.arange(len(ids)) != j
+        try:
+            m = build_map(histories, ids[keep], pos[keep], method, uncertainty=True, **kwargs)
+            p, c = m.positions[ids[j]], m.covariances[ids[j]]
+            if np.all(np.isfinite(p)) and np.all(np.isfinite(c)):
+                return p, c
+        except (MappingError, ValueError):
+            if release is None:
+                raise
+        if release is None:
+            return p, c
+        return release(j)
+
+    checked = with_held_out_check(result, held_out, pos)
+    for note in checked.warnings[len(result.warnings):]:
+        warnings.warn(note, MapWarning, stacklevel=3)
+    return checked
+
+
+def _releaser(result, est, mapped, histories, ids, pos, kwargs):
+    """``release(j)``: anchor ``j`` held out of ``est``'s adjustment, in the map's frame
+    (:func:`mappers.viewpoints.marginals.released_anchor`); None when ``est`` has none."""
+    if not has_model_covariances(est) or np.any(~np.isin(ids, mapped)):
+        return None
+    parts = getattr(histories, "parts", None)
+    timeline = kwargs["timeline"]
+    if isinstance(parts, Mapping) and not isinstance(histories, Mapping):
+        timeline = timeline if timeline is not None else getattr(histories, "timeline", None)
+        histories = dict(parts)
+    if isinstance(histories, Mapping):
+        X, M, _, timeline = check_fused(histories, kwargs["mask"], timeline)
+    else:
+        X, M, _, timeline = check_inputs(histories, kwargs["sensor"], kwargs["mask"], timeline)
+        if sp.issparse(X):
+            X, M = X.toarray(), (M.toarray() if sp.issparse(M) else M)
+    rows = (lambda a: None if a is None else (  # noqa: E731 - the mapped rows of each array
+        {k: None if v is None else v[mapped] for k, v in a.items()} if isinstance(a, dict)
+        else a[mapped]))
+    local = np.searchsorted(mapped, ids)
+    T = np.asarray(result.affine, dtype=float)
+
+    def release(j):
+        p, c = released_anchor(est, rows(X), rows(M), local, pos, j, timeline)
+        return np.r_[p, 1.0] @ T, T[:2].T @ c @ T[:2]
+
+    return release

@@ -86,13 +86,19 @@ def _detections(seq: Path) -> pd.DataFrame:
     return d
 
 
-def read_starloc(seq_dir: str | Path, sensor: str = "range-bearing") -> pd.DataFrame:
+def read_starloc(seq_dir: str | Path, sensor: str = "range-bearing",
+                 disparity_offset: float = 0.0) -> pd.DataFrame:
     """The observation table of one STAR-loc sequence folder (see the module's docstring).
 
     Args:
         seq_dir: ``data/<sequence>`` of the dataset, holding ``apriltag_cal_global.csv`` and
             ``calib.json``.
         sensor: one of :data:`STARLOC_SENSORS`.
+        disparity_offset: pixels the measured disparities are taken to be too large by: the
+            range is ``fu * b / (disparity - disparity_offset)`` (a stereo rectification's
+            constant disparity error makes the ranges off by a share that grows with them;
+            :data:`lfmdr_gym.experiments.starloc.STARLOC_DISPARITY_OFFSET` says what the
+            benchmark uses). 0 (default): the disparities as measured.
 
     Returns:
         A DataFrame with ``time`` [s], ``landmark`` (the AprilTag id, int), ``frame`` (the image
@@ -113,11 +119,18 @@ def read_starloc(seq_dir: str | Path, sensor: str = "range-bearing") -> pd.DataF
     calib = _calibration(seq)
     d = _detections(seq)
     disparity = (d["left_u"] - d["right_u"]).to_numpy(dtype=float)
+    if not np.isfinite(disparity_offset):
+        raise StarlocError(f"disparity_offset must be a finite number of pixels, got "
+                           f"{disparity_offset!r}")
     if sensor == "range-bearing" and np.any(disparity <= 0):
         k = int(np.flatnonzero(disparity <= 0)[0])
         raise StarlocError(f"{seq / _DETECTIONS}: line {k + 2}: disparity left_u - right_u = "
                            f"{disparity[k]:g} <= 0 (tag {int(d['apriltag_id'].iloc[k])}): a stereo "
                            "range needs a positive disparity")
+    if sensor == "range-bearing" and np.any(disparity - disparity_offset <= 0):
+        k = int(np.flatnonzero(disparity - disparity_offset <= 0)[0])
+        raise StarlocError(f"{seq / _DETECTIONS}: line {k + 2}: disparity {disparity[k]:g} minus "
+                           f"the disparity_offset {disparity_offset:g} is <= 0: no range")
     dup = d.duplicated(["time_s", "apriltag_id"])
     if dup.any():
         k = int(np.flatnonzero(dup)[0])
@@ -136,7 +149,8 @@ def read_starloc(seq_dir: str | Path, sensor: str = "range-bearing") -> pd.DataF
         norm = np.linalg.norm(ray, axis=1)
         table["ray_x"], table["ray_y"], table["ray_z"] = (ray / norm[:, None]).T
         if sensor == "range-bearing":
-            depth = calib["fu"] * calib["b"] / disparity  # the point's Z; its norm is Z * |ray|
+            # the point's Z; its norm is Z * |ray|
+            depth = calib["fu"] * calib["b"] / (disparity - disparity_offset)
             table["range"] = depth * norm
     table = table.sort_values(["frame", "landmark"], kind="stable").reset_index(drop=True)
     table.attrs = {"source": "starloc", "sequence": seq.name, "sensor": sensor,

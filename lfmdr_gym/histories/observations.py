@@ -208,6 +208,61 @@ def _values_at(matrix: sp.csr_array, row: np.ndarray, col: np.ndarray) -> np.nda
 
 
 # ------------------------------------------------------------------------ table -> History
+def _row_ids(declared: Any, seen_ids: np.ndarray, codes: np.ndarray,
+             anchor_ids: list[Any]) -> tuple[np.ndarray, np.ndarray]:
+    """The history's landmark ids (row order) and each table row's history row: the table's
+    ``attrs["landmarks"]`` when it declares them, else the sighted and anchor ids sorted. Every
+    anchor must be among the landmarks the log knows."""
+    if declared is not None:
+        # read as a CSV's ids are (the JSON "7" or 7 is landmark 7, "007" a string)
+        ids = np.asarray(normalise_ids(pd.Series([str(v) for v in declared]), "landmark",
+                                       _Where("attrs['landmarks']", None)).tolist(), dtype=object)
+        listed = set(ids.tolist())
+        if len(listed) != len(ids):
+            raise ValueError("the table's attrs['landmarks'] lists a landmark twice")
+        outside = [v for v in seen_ids.tolist() if v not in listed]
+        if outside:
+            raise ValueError(f"landmarks {outside[:10]} are in the table but not in its "
+                             f"attrs['landmarks']")
+    else:
+        ids = _sorted_ids(set(seen_ids.tolist()) | set(anchor_ids))
+    li = _positions(ids, seen_ids.tolist())[codes]
+    # anchors: in the log (their count and shape are checked by the caller)
+    known = set(ids.tolist()) if declared is not None else set(seen_ids.tolist())
+    absent = [a for a in anchor_ids if a not in known]
+    if absent:
+        raise ValueError(f"anchors {absent} are never sighted in the log (landmarks sighted: "
+                         f"{_sorted_ids(seen_ids)[:20].tolist()}{' ...' if len(seen_ids) > 20 else ''})")
+    return ids, li
+
+
+def _steps(table: pd.DataFrame, attrs: dict[str, Any], robot: np.ndarray, robot_ids: list[Any],
+           bin_width: float | None, drop_empty_bins: bool) -> Any:
+    """The history's steps: per-robot time bins of ``bin_width`` seconds, else one per frame
+    (with the frames the table declares empty)."""
+    if bin_width is not None:
+        check_real("bin_width", bin_width, low=0.0, low_open=True)
+        return time_steps(robot, table["time"].to_numpy(np.float64), len(robot_ids), bin_width,
+                          drop_empty_bins=drop_empty_bins)
+    extra = _empty_frames(attrs.get("empty_frames"), robot_ids, "robot" in table.columns)
+    return tick_steps(robot, _ticks(table, robot), len(robot_ids), extra=extra)
+
+
+def _truth_positions(truth: pd.DataFrame | None,
+                     ids: np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:
+    """The (M, 2) true positions (NaN: unknown; for scoring only) and the meta entries naming
+    the landmarks the truth misses and the truth rows no landmark uses."""
+    positions = np.full((len(ids), 2), np.nan)
+    if truth is None:
+        return positions, {}
+    at = _positions(ids, truth["landmark"].tolist())
+    positions[at[at >= 0]] = truth[["x", "y"]].to_numpy(np.float64)[at >= 0]
+    have = set(truth["landmark"].tolist())
+    return positions, {"truth_missing": [v for v in ids.tolist() if v not in have],
+                       "truth_unused": [v for v, p in zip(truth["landmark"], at, strict=True)
+                                        if p < 0]}
+
+
 def observations_to_history(
     table: pd.DataFrame,
     anchors: pd.DataFrame | str | os.PathLike,
@@ -253,38 +308,11 @@ def observations_to_history(
     anchor_ids = anchors["landmark"].tolist()
     _same_kind({"the table": seen_ids, "the anchors": anchor_ids,
                 **({} if truth is None else {"the truth": truth["landmark"].tolist()})})
-    declared = attrs.get("landmarks")
-    if declared is not None:
-        # read as a CSV's ids are (the JSON "7" or 7 is landmark 7, "007" a string)
-        ids = np.asarray(normalise_ids(pd.Series([str(v) for v in declared]), "landmark",
-                                       _Where("attrs['landmarks']", None)).tolist(), dtype=object)
-        listed = set(ids.tolist())
-        if len(listed) != len(ids):
-            raise ValueError("the table's attrs['landmarks'] lists a landmark twice")
-        outside = [v for v in seen_ids.tolist() if v not in listed]
-        if outside:
-            raise ValueError(f"landmarks {outside[:10]} are in the table but not in its "
-                             f"attrs['landmarks']")
-    else:
-        ids = _sorted_ids(set(seen_ids.tolist()) | set(anchor_ids))
-    li = _positions(ids, seen_ids.tolist())[codes]
-    # anchors: in the log, at least 3, not collinear
-    known = set(ids.tolist()) if declared is not None else set(seen_ids.tolist())
-    absent = [a for a in anchor_ids if a not in known]
-    if absent:
-        raise ValueError(f"anchors {absent} are never sighted in the log (landmarks sighted: "
-                         f"{_sorted_ids(seen_ids)[:20].tolist()}{' ...' if len(seen_ids) > 20 else ''})")
+    ids, li = _row_ids(attrs.get("landmarks"), seen_ids, codes, anchor_ids)
     anchor_pos = anchors[["x", "y"]].to_numpy(np.float64)
     check_not_collinear(anchor_pos, "anchor positions")
-    # steps
     robot, robot_ids = _robots(table, robot_col)
-    if bin_width is not None:
-        check_real("bin_width", bin_width, low=0.0, low_open=True)
-        steps = time_steps(robot, table["time"].to_numpy(np.float64), len(robot_ids), bin_width,
-                           drop_empty_bins=drop_empty_bins)
-    else:
-        extra = _empty_frames(attrs.get("empty_frames"), robot_ids, "robot" in table.columns)
-        steps = tick_steps(robot, _ticks(table, robot), len(robot_ids), extra=extra)
+    steps = _steps(table, attrs, robot, robot_ids, bin_width, drop_empty_bins)
     n_steps, m = steps.n_steps, len(ids)
     readings: dict[str, Any] = {}
     if "bearing" in parts:
@@ -296,16 +324,7 @@ def observations_to_history(
     cells = cell_values(parts, li, steps.step, (m, n_steps), **readings)
     complete = bool(attrs.get("complete", False))
     built = {s: assemble(cells, s, masked=not complete, sparse=sparse) for s in parts}
-    # ground truth (scoring only)
-    positions = np.full((m, 2), np.nan)
-    meta_truth: dict[str, Any] = {}
-    if truth is not None:
-        at = _positions(ids, truth["landmark"].tolist())
-        positions[at[at >= 0]] = truth[["x", "y"]].to_numpy(np.float64)[at >= 0]
-        have = set(truth["landmark"].tolist())
-        meta_truth = {"truth_missing": [v for v in ids.tolist() if v not in have],
-                      "truth_unused": [v for v, p in zip(truth["landmark"], at, strict=True)
-                                       if p < 0]}
+    positions, meta_truth = _truth_positions(truth, ids)
     anchor_rows = _positions(ids, anchor_ids)
     if truth is None:
         positions[anchor_rows] = anchor_pos
@@ -367,6 +386,55 @@ def _entries(history: History) -> tuple[sp.csr_array, bool]:
     return sp.csr_array(grid, dtype=bool), masked
 
 
+def _robot_frames(history: History) -> tuple[np.ndarray, np.ndarray, list[Any]]:
+    """Each step's robot number and frame, and the robots' ids: from the history's timeline
+    (which must be in (robot, tick) order without repeats), else one robot whose frames are the
+    step numbers."""
+    n = history.n_steps
+    if history.timeline is None:
+        return np.zeros(n, np.int64), np.arange(n, dtype=np.int64), []
+    tl = history.timeline
+    order_ok = np.all((tl[1:, 0] > tl[:-1, 0]) |
+                      ((tl[1:, 0] == tl[:-1, 0]) & (tl[1:, 1] > tl[:-1, 1])))
+    if not order_ok:
+        raise ValueError("the history's steps are not in (robot, tick) order without repeats;"
+                         " a table's frames would reorder them")
+    robot_of, frame_of = tl[:, 0], tl[:, 1]
+    # robot ids: the history's own (meta["robots"], as a loader or this module keeps them) if
+    # they name every robot of the timeline, else the timeline's robot numbers
+    named = history.meta.get("robots")
+    n_robots = int(robot_of.max()) + 1 if n else 0
+    robot_ids = (list(named) if isinstance(named, list) and len(named) >= n_robots
+                 and len(set(map(str, named))) == len(named) else list(range(n_robots)))
+    return robot_of, frame_of, (_id_array(robot_ids).tolist() if robot_ids else [])
+
+
+def _readings(history: History, row: np.ndarray, step: np.ndarray) -> dict[str, np.ndarray]:
+    """The table's reading columns of the entries (``row``, ``step``), per sensor of the
+    history: ``visible`` (only if some observed entry reads 0), ``bearing`` with its exact
+    ``bearing_cos, bearing_sin``, ``range``."""
+    out: dict[str, np.ndarray] = {}
+    parts = history.parts or {history.sensor: history}
+    for s, p in parts.items():
+        data = p.sparse
+        if s == "visibility":
+            v = _values_at(data, row, step)
+            if not np.isin(v, (0.0, 1.0)).all():
+                raise ValueError("visibility readings must be 0 or 1")
+            if (v == 0).any():
+                out["visible"] = v.astype(np.int8)
+        elif s == "bearing":
+            c, sn = _values_at(data, row, 2 * step), _values_at(data, row, 2 * step + 1)
+            if np.any((c == 0) & (sn == 0)):
+                raise ValueError("an observed bearing reads (0, 0) (an object at the robot's "
+                                 "centre): it has no direction to write")
+            out["bearing"] = np.arctan2(sn, c)
+            out["bearing_cos"], out["bearing_sin"] = c, sn
+        else:
+            out["range"] = _values_at(data, row, step)
+    return out
+
+
 def history_to_observations(history: History, *, landmarks: Any = None) -> ObservationLog:
     """Write a :class:`History` as an observation table, its anchors and its ground truth.
 
@@ -389,23 +457,7 @@ def history_to_observations(history: History, *, landmarks: Any = None) -> Obser
     ids = _id_array(landmark_ids(history) if landmarks is None else landmarks)
     if len(ids) != m or len(set(ids.tolist())) != m:
         raise ValueError(f"landmarks must be {m} distinct ids (one per row), got {len(ids)}")
-    if history.timeline is not None:
-        tl = history.timeline
-        order_ok = np.all((tl[1:, 0] > tl[:-1, 0]) |
-                          ((tl[1:, 0] == tl[:-1, 0]) & (tl[1:, 1] > tl[:-1, 1])))
-        if not order_ok:
-            raise ValueError("the history's steps are not in (robot, tick) order without repeats;"
-                             " a table's frames would reorder them")
-        robot_of, frame_of = tl[:, 0], tl[:, 1]
-        # robot ids: the history's own (meta["robots"], as a loader or this module keeps them) if
-        # they name every robot of the timeline, else the timeline's robot numbers
-        named = history.meta.get("robots")
-        n_robots = int(robot_of.max()) + 1 if n else 0
-        robot_ids = (list(named) if isinstance(named, list) and len(named) >= n_robots
-                     and len(set(map(str, named))) == len(named) else list(range(n_robots)))
-        robot_ids = _id_array(robot_ids).tolist() if robot_ids else []
-    else:
-        robot_of, frame_of = np.zeros(n, np.int64), np.arange(n, dtype=np.int64)
+    robot_of, frame_of, robot_ids = _robot_frames(history)
     grid, masked = _entries(history)
     coo = grid.tocoo()
     order = np.lexsort((coo.row, coo.col))  # step by step, landmarks in row order
@@ -415,24 +467,7 @@ def history_to_observations(history: History, *, landmarks: Any = None) -> Obser
         out["robot"] = _id_array(robot_ids)[robot_of[step]]
     out["frame"] = frame_of[step]
     out["landmark"] = ids[row]
-    parts = history.parts or {history.sensor: history}
-    for s, p in parts.items():
-        data = p.sparse
-        if s == "visibility":
-            v = _values_at(data, row, step)
-            if not np.isin(v, (0.0, 1.0)).all():
-                raise ValueError("visibility readings must be 0 or 1")
-            if (v == 0).any():
-                out["visible"] = v.astype(np.int8)
-        elif s == "bearing":
-            c, sn = _values_at(data, row, 2 * step), _values_at(data, row, 2 * step + 1)
-            if np.any((c == 0) & (sn == 0)):
-                raise ValueError("an observed bearing reads (0, 0) (an object at the robot's "
-                                 "centre): it has no direction to write")
-            out["bearing"] = np.arctan2(sn, c)
-            out["bearing_cos"], out["bearing_sin"] = c, sn
-        else:
-            out["range"] = _values_at(data, row, step)
+    out.update(_readings(history, row, step))
     table = pd.DataFrame(out)
     has_rows = np.zeros(n, bool)
     has_rows[step] = True

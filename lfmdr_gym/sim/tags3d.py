@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from lfmdr_gym.checks import check_int, check_real
+from lfmdr_gym.sim.world import check_anchor_indices
 
 __all__ = ["TagLayout", "check_anchor_ids", "check_heights", "check_tags", "choose_anchors", "coplanar",
            "place_tags"]
@@ -123,16 +124,7 @@ def choose_anchors(positions: np.ndarray, n_anchors: int) -> np.ndarray:
 
 def check_anchor_ids(anchor_ids: Any, positions: np.ndarray) -> np.ndarray:
     """User anchor indices: >= 4 distinct integers in range, not on one plane."""
-    ids = np.asarray(anchor_ids)
-    if ids.ndim != 1 or not np.issubdtype(ids.dtype, np.integer):
-        raise ValueError(f"anchor_ids must be a 1-D integer array, got {ids.dtype} {ids.shape}")
-    ids = ids.astype(np.int64)
-    if ids.size < 4:
-        raise ValueError(f"anchor_ids needs at least 4 anchors in 3-D, got {ids.size}")
-    if ids.min() < 0 or ids.max() >= positions.shape[0]:
-        raise ValueError(f"anchor_ids must lie in [0, {positions.shape[0]}), got {ids.tolist()}")
-    if np.unique(ids).size != ids.size:
-        raise ValueError(f"anchor_ids must be distinct, got {ids.tolist()}")
+    ids = check_anchor_indices(anchor_ids, positions.shape[0], 4, " in 3-D")
     if coplanar(positions[ids]):
         raise ValueError(f"anchor_ids {ids.tolist()} name tags on one plane: a 3-D map needs "
                          "four not on one plane")

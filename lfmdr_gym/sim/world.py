@@ -30,7 +30,7 @@ import pymunk
 from lfmdr_gym.checks import check_int, check_real
 from lfmdr_gym.sim.grid import sample_separated
 
-__all__ = ["ANCHOR_CHOICES", "Layout", "World", "action_turn", "wrap_angle"]
+__all__ = ["ANCHOR_CHOICES", "Layout", "World", "action_turn", "check_anchor_indices", "wrap_angle"]
 
 ANCHOR_CHOICES = ("corners", "random", "grid")
 LAYOUT_OPTIONS = ("object_positions", "anchor_ids", "robot_pose")
@@ -93,6 +93,25 @@ def collinear(points: np.ndarray, rtol: float = 1e-6) -> bool:
     centred = points - points.mean(axis=0)
     sv = np.linalg.svd(centred, compute_uv=False)
     return bool(sv[0] == 0.0 or sv[-1] <= rtol * sv[0])
+
+
+def check_anchor_indices(anchor_ids: Any, n_positions: int, min_count: int,
+                         where: str = "") -> np.ndarray:
+    """User anchor indices (a reset option) as an (A,) int64 array, else a ValueError naming
+    ``anchor_ids``: a 1-D integer array of at least ``min_count`` distinct indices in
+    ``[0, n_positions)``. ``where`` ends the too-few message (``" in 3-D"``). The geometry (not
+    collinear, not on one plane) is the caller's check."""
+    ids = np.asarray(anchor_ids)
+    if ids.ndim != 1 or not np.issubdtype(ids.dtype, np.integer):
+        raise ValueError(f"anchor_ids must be a 1-D integer array, got {ids.dtype} {ids.shape}")
+    ids = ids.astype(np.int64)
+    if ids.size < min_count:
+        raise ValueError(f"anchor_ids needs at least {min_count} anchors{where}, got {ids.size}")
+    if ids.min() < 0 or ids.max() >= n_positions:
+        raise ValueError(f"anchor_ids must lie in [0, {n_positions}), got {ids.tolist()}")
+    if np.unique(ids).size != ids.size:
+        raise ValueError(f"anchor_ids must be distinct, got {ids.tolist()}")
+    return ids
 
 
 def nearest_distinct(positions: np.ndarray, targets: np.ndarray) -> np.ndarray:
@@ -354,16 +373,7 @@ class World:
 
     def check_anchor_ids(self, anchor_ids: Any, positions: np.ndarray) -> np.ndarray:
         """Validate user anchor indices: >= 3 distinct integers in range, not collinear."""
-        ids = np.asarray(anchor_ids)
-        if ids.ndim != 1 or not np.issubdtype(ids.dtype, np.integer):
-            raise ValueError(f"anchor_ids must be a 1-D integer array, got {ids.dtype} {ids.shape}")
-        ids = ids.astype(np.int64)
-        if ids.size < 3:
-            raise ValueError(f"anchor_ids needs at least 3 anchors, got {ids.size}")
-        if ids.min() < 0 or ids.max() >= positions.shape[0]:
-            raise ValueError(f"anchor_ids must lie in [0, {positions.shape[0]}), got {ids.tolist()}")
-        if np.unique(ids).size != ids.size:
-            raise ValueError(f"anchor_ids must be distinct, got {ids.tolist()}")
+        ids = check_anchor_indices(anchor_ids, positions.shape[0], 3)
         if collinear(positions[ids]):
             raise ValueError(f"anchor_ids {ids.tolist()} name collinear objects")
         return ids

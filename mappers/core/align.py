@@ -12,7 +12,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["apply_affine", "check_anchor_ids", "check_anchors", "check_not_collinear", "fit_affine"]
+__all__ = ["apply_affine", "check_anchor_ids", "check_anchor_positions", "check_anchors", "check_not_collinear",
+           "fit_affine"]
 
 
 def check_not_collinear(points: np.ndarray, what: str, *, rtol: float = 1e-6) -> None:
@@ -61,16 +62,25 @@ def check_anchors(
     their known (A, 2) positions, finite and not collinear (an affine map needs three).
     """
     ids = check_anchor_ids(anchor_ids, n_objects)
+    pos = check_anchor_positions(anchor_positions, ids.size)
+    check_not_collinear(pos, "anchor positions (world)")
+    return ids, pos
+
+
+def check_anchor_positions(anchor_positions: Any, n_anchors: int, dim: int = 2) -> np.ndarray:
+    """The known positions of ``n_anchors`` anchors as an (A, ``dim``) float array, else
+    ValueError: not numeric, another shape, or NaN/inf. The 2-D and 3-D anchor checks
+    (:func:`check_anchors`, :func:`mappers.core.align_3d.check_anchors_3d`) share it; the
+    geometry (not on one line or plane) is theirs."""
     try:
         pos = np.array(anchor_positions, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"anchor_positions must be a numeric (A, 2) array: {exc}") from exc
-    if pos.shape != (ids.size, 2):
-        raise ValueError(f"anchor_positions must have shape ({ids.size}, 2), got {pos.shape}")
+        raise ValueError(f"anchor_positions must be a numeric (A, {dim}) array: {exc}") from exc
+    if pos.shape != (n_anchors, dim):
+        raise ValueError(f"anchor_positions must have shape ({n_anchors}, {dim}), got {pos.shape}")
     if not np.all(np.isfinite(pos)):
         raise ValueError("anchor_positions contain NaN or inf")
-    check_not_collinear(pos, "anchor positions (world)")
-    return ids, pos
+    return pos
 
 
 def fit_affine(src: np.ndarray, dst: np.ndarray) -> np.ndarray:

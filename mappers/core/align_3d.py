@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from mappers.core.align import check_anchor_ids
+from mappers.core.align import check_anchor_ids, check_anchor_positions
 
 __all__ = [
     "apply_affine_3d",
@@ -68,12 +68,7 @@ def check_anchors_3d(anchor_ids: Any, anchor_positions: Any, n_objects: int, *,
     """Validated 3-D anchors: (A,) int64 ids (distinct, in [0, n_objects)) and (A, 3) finite
     positions, not on one line (``fit="similarity"``) or not on one plane (``fit="affine"``)."""
     ids = check_anchor_ids(anchor_ids, n_objects, min_count=4 if fit == "affine" else 3)
-    try:
-        pos = np.array(anchor_positions, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"anchor_positions must be a numeric (A, 3) array: {exc}") from exc
-    if pos.shape != (ids.size, 3):
-        raise ValueError(f"anchor_positions must have shape ({ids.size}, 3), got {pos.shape}")
+    pos = check_anchor_positions(anchor_positions, ids.size, dim=3)
     if fit == "affine":
         check_not_coplanar(pos, "anchor positions (world)")
     elif fit == "similarity":

@@ -9,11 +9,15 @@ import numpy as np
 __all__ = ["mean_orientation_error", "mean_position_error", "sampled_orientation_error"]
 
 
-def _check_pair(estimate, truth, exclude) -> tuple[np.ndarray, np.ndarray]:
+def check_scored_pair(estimate, truth, exclude, dim: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of ``estimate`` and ``truth`` (both (M, ``dim``)) that a score compares: all but
+    the object ids in ``exclude`` (integers in [-M, M)). ValueError naming the problem for a
+    wrong shape, a bad id, or a NaN/inf row left in (an unmapped object must be excluded). The
+    2-D and 3-D scores (:mod:`mappers.core.scores_3d`) share it."""
     est = np.asarray(estimate, dtype=float)
     tru = np.asarray(truth, dtype=float)
-    if est.ndim != 2 or est.shape[1] != 2:
-        raise ValueError(f"estimate must have shape (M, 2), got {est.shape}")
+    if est.ndim != 2 or est.shape[1] != dim:
+        raise ValueError(f"estimate must have shape (M, {dim}), got {est.shape}")
     if tru.shape != est.shape:
         raise ValueError(f"truth must have the shape of estimate {est.shape}, got {tru.shape}")
     keep = np.ones(len(est), dtype=bool)
@@ -44,7 +48,7 @@ def mean_position_error(
     ``exclude`` lists object ids left out (e.g. the anchors, to score non-anchor objects only).
     NaN rows (unmapped objects) must be excluded explicitly: they raise ValueError.
     """
-    est, tru = _check_pair(estimate, truth, exclude)
+    est, tru = check_scored_pair(estimate, truth, exclude)
     if len(est) == 0:
         raise ValueError("no objects left to score after exclude")
     return float(np.mean(np.linalg.norm(est - tru, axis=1)))
@@ -359,7 +363,7 @@ def mean_orientation_error(
     all points collinear with it) uses the brute-force block instead, so degenerate layouts
     cost at most about as much as the brute force.
     """
-    est, tru = _check_pair(estimate, truth, exclude)
+    est, tru = check_scored_pair(estimate, truth, exclude)
     n = len(est)
     if n < 3:
         raise ValueError(f"need at least 3 objects for orientation error, got {n}")
@@ -397,7 +401,7 @@ def sampled_orientation_error(
         raise ValueError(f"confidence must be in (0, 1), got {confidence!r}")
     if isinstance(n_triangles, bool) or not isinstance(n_triangles, int | np.integer) or n_triangles < 1:
         raise ValueError(f"n_triangles must be a positive integer, got {n_triangles!r}")
-    est, tru = _check_pair(estimate, truth, exclude)
+    est, tru = check_scored_pair(estimate, truth, exclude)
     n = len(est)
     if n < 3:
         raise ValueError(f"need at least 3 objects for orientation error, got {n}")

@@ -17,37 +17,18 @@ from itertools import combinations
 
 import numpy as np
 
+from mappers.core.scores import check_scored_pair
+
 __all__ = ["mean_position_error_3d", "tetrahedron_orientation_error"]
 
 _EXACT_MAX_QUADRUPLES = 2_000_000
 """Up to this many quadruples every one is scored; above it a uniform sample of this many."""
 
 
-def _check_pair_3d(estimate, truth, exclude) -> tuple[np.ndarray, np.ndarray]:
-    est, tru = np.asarray(estimate, dtype=float), np.asarray(truth, dtype=float)
-    if est.ndim != 2 or est.shape[1] != 3:
-        raise ValueError(f"estimate must have shape (M, 3), got {est.shape}")
-    if tru.shape != est.shape:
-        raise ValueError(f"truth must have the shape of estimate {est.shape}, got {tru.shape}")
-    keep = np.ones(len(est), dtype=bool)
-    ex = np.asarray(list(exclude) if exclude is not None else [], dtype=np.int64)
-    if ex.size:
-        if ex.min() < 0 or ex.max() >= len(est):
-            raise ValueError(f"exclude ids out of range for M={len(est)}: {ex.tolist()}")
-        keep[ex] = False
-    est, tru = est[keep], tru[keep]
-    for name, arr in (("estimate", est), ("truth", tru)):
-        bad = np.flatnonzero(~np.all(np.isfinite(arr), axis=1))
-        if bad.size:
-            raise ValueError(f"{name} has NaN/inf rows (among the kept rows: {bad.tolist()[:10]}); "
-                             "pass them in exclude= (e.g. exclude=map.unmapped)")
-    return est, tru
-
-
 def mean_position_error_3d(estimate, truth, exclude: Iterable[int] | None = None) -> float:
     """Mean Euclidean distance [m] between estimated and true (M, 3) positions, leaving out the
     ids in ``exclude`` (anchors, unmapped objects: NaN rows must be excluded)."""
-    est, tru = _check_pair_3d(estimate, truth, exclude)
+    est, tru = check_scored_pair(estimate, truth, exclude, dim=3)
     if len(est) == 0:
         raise ValueError("no objects left to score after exclude")
     return float(np.mean(np.linalg.norm(est - tru, axis=1)))
@@ -68,7 +49,7 @@ def tetrahedron_orientation_error(estimate, truth, exclude: Iterable[int] | None
     ``estimate`` than in ``truth`` (see the module's docstring); quadruples flat in truth (sign
     0) are not counted. Exact up to ``max_quadruples`` quadruples, else estimated from that many
     drawn uniformly (distinct ids) with ``random_state``."""
-    est, tru = _check_pair_3d(estimate, truth, exclude)
+    est, tru = check_scored_pair(estimate, truth, exclude, dim=3)
     n = len(est)
     if n < 4:
         raise ValueError(f"need at least 4 objects for the orientation error in 3-D, got {n}")

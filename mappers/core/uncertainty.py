@@ -38,9 +38,11 @@ __all__ = [
     "transform_covariances",
 ]
 
-UNCERTAINTY_MODES = (False, True, "model", "bootstrap")
+UNCERTAINTY_MODES = (False, True, "model", "bootstrap", "anchors")
 """The values ``build_map(uncertainty=...)`` takes: none, the method's own (``True``), from the
-normal equations (``"model"``), from a bootstrap over steps (``"bootstrap"``)."""
+normal equations (``"model"``), from a bootstrap over steps (``"bootstrap"``), the method's own
+checked and scaled by the held-out anchors (``"anchors"``,
+:mod:`mappers.core.held_out_anchors`)."""
 
 
 def check_uncertainty(value) -> bool | str:

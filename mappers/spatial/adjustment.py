@@ -22,9 +22,23 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mappers.spatial.rays import RayObservations
-from mappers.viewpoints import robust_cost, robust_weights, scatter_sum, schur_step
+from mappers.viewpoints import (
+    DENSE_COUPLING_MAX_BYTES,
+    Coupling,
+    Damping,
+    damped_step,
+    robust_cost,
+    robust_weights,
+    scatter_sum,
+    schur_step,
+    use_sparse_coupling,
+)
 
-__all__ = ["AdjustmentResult", "adjust_viewpoints"]
+__all__ = ["DAMPING", "AdjustmentResult", "adjust_viewpoints"]
+
+DAMPING = Damping(up=10.0, down=10.0, floor=1e-9, tries=None, ceiling=1e8, accept_equal=False)
+"""The 6-DoF adjustment's Levenberg-Marquardt damping rule (:class:`mappers.viewpoints.Damping`):
+raised until a step lowers the cost or the damping reaches 1e8."""
 
 
 class AdjustmentResult(NamedTuple):
@@ -96,7 +110,8 @@ def adjust_viewpoints(obs: RayObservations, P0: np.ndarray, R0: np.ndarray, C0: 
                       loss: str | None = "cauchy", loss_scale: float = 3.0,
                       max_iter: int = 100, tol: float = 1e-10,
                       fit_range_scale: bool = False, scale_rounds: int = 4,
-                      anchor_noise: float | None = None) -> AdjustmentResult:
+                      anchor_noise: float | None = None,
+                      dense_coupling_bytes: float = DENSE_COUPLING_MAX_BYTES) -> AdjustmentResult:
     """Adjust the points and the steps' poses to the sightings (see the module's docstring).
 
     Args:
@@ -118,11 +133,14 @@ def adjust_viewpoints(obs: RayObservations, P0: np.ndarray, R0: np.ndarray, C0: 
         anchor_noise: None: the ``fixed`` objects are held exactly where they are; a number
             [m]: they are adjusted too, held by a prior of that standard deviation (the anchors'
             survey error), so that the map keeps the shape its sightings give it.
+        dense_coupling_bytes: the pose-point coupling is a dense (N, 6, 3F) array up to this
+            many bytes, above it one block per sighting with the points' reduced system sparse
+            (:mod:`mappers.viewpoints.sparse_schur`, the same step to rounding).
     """
     if anchor_noise is not None and not anchor_noise > 0:
         raise ValueError(f"anchor_noise must be None or > 0, got {anchor_noise!r}")
     result = _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, loss,
-                     loss_scale, max_iter, tol, anchor_noise)
+                     loss_scale, max_iter, tol, anchor_noise, dense_coupling_bytes)
     has_r = np.isfinite(obs.range)
     factor = 1.0
     for _ in range(scale_rounds if fit_range_scale and has_r.any() else 0):
@@ -135,14 +153,15 @@ def adjust_viewpoints(obs: RayObservations, P0: np.ndarray, R0: np.ndarray, C0: 
         factor *= k
         obs = obs._replace(range=obs.range * k)
         result = _adjust(obs, P, R, C, fixed, bearing_noise, range_noise, range_growth, loss,
-                         loss_scale, max_iter, tol, anchor_noise)
+                         loss_scale, max_iter, tol, anchor_noise, dense_coupling_bytes)
         if abs(k - 1.0) < 1e-4:
             break
     return result._replace(range_scale=factor)
 
 
 def _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, loss, loss_scale,
-            max_iter, tol, anchor_noise=None) -> AdjustmentResult:
+            max_iter, tol, anchor_noise=None,
+            dense_coupling_bytes=DENSE_COUPLING_MAX_BYTES) -> AdjustmentResult:
     """One adjustment of :func:`adjust_viewpoints` (the ranges as they are)."""
     if loss not in ("cauchy", "huber", None):
         raise ValueError(f"loss must be 'cauchy', 'huber' or None, got {loss!r}")
@@ -162,6 +181,7 @@ def _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, lo
     steps = np.flatnonzero(posed)
     step_index = np.full(len(C), -1)
     step_index[steps] = np.arange(steps.size)
+    sparse = use_sparse_coupling(steps.size, 6, 3, int(free.sum()), dense_coupling_bytes)
 
     def cost_of(P, R, C):
         e = prob.residuals(P, R, C)[0]
@@ -174,23 +194,22 @@ def _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, lo
         w = robust_weights(np.linalg.norm(e, axis=1), loss_scale, loss)
         Jc, Jp = prob.jacobians(R, v, nv, vh)
         step_blocks = _normal_blocks(prob, e, w, Jc, Jp, step_index[prob.t], free_index,
-                                     steps.size, int(free.sum()))
+                                     steps.size, int(free.sum()), sparse)
         if soft.size:  # the anchors' prior: (p - anchor) / anchor_noise, Jacobian I / noise
             step_blocks[1][free_index[soft]] += np.eye(3) / anchor_noise**2
             step_blocks[4][free_index[soft]] += (P[soft] - target) / anchor_noise**2
-        improved = False
-        while lam < 1e8:
+
+        def trial(lam, step_blocks=step_blocks, P=P, R=R, C=C):
             dc, dp = schur_step(*step_blocks, lam)
             Pn, Rn, Cn = P.copy(), R.copy(), C.copy()
             Pn[free] += dp
             Rn[steps] = R[steps] @ Rotation.from_rotvec(dc[:, :3]).as_matrix()
             Cn[steps] += dc[:, 3:]
-            new = cost_of(Pn, Rn, Cn)
-            if new < cost:
-                P, R, C, improved = Pn, Rn, Cn, True
-                lam = max(lam / 10.0, 1e-9)
-                break
-            lam *= 10.0
+            return (Pn, Rn, Cn), cost_of(Pn, Rn, Cn)
+
+        state, new, lam, improved = damped_step(trial, cost, lam, DAMPING)
+        if improved:
+            P, R, C = state
         if not improved or cost - new <= tol * cost:
             cost = new if improved else cost
             break
@@ -198,15 +217,19 @@ def _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, lo
     return AdjustmentResult(P, R, C, cost, it)
 
 
-def _normal_blocks(prob, e, w, Jc, Jp, t, free_index, n_steps, n_free):
+def _normal_blocks(prob, e, w, Jc, Jp, t, free_index, n_steps, n_free, sparse=False):
     """The Gauss-Newton normal blocks of the poses and the free points, as
-    :func:`mappers.viewpoints.schur_step` takes them."""
+    :func:`mappers.viewpoints.schur_step` takes them (``sparse``: the coupling as a
+    :class:`mappers.viewpoints.Coupling`)."""
     U = scatter_sum(t, w[:, None, None] * np.einsum("kri,krj->kij", Jc, Jc), n_steps)
     g = scatter_sum(t, w[:, None] * np.einsum("kri,kr->ki", Jc, e), n_steps)
     f = free_index[prob.i]
     k = np.flatnonzero(f >= 0)
     V = scatter_sum(f[k], w[k, None, None] * np.einsum("kri,krj->kij", Jp[k], Jp[k]), n_free)
     h = scatter_sum(f[k], w[k, None] * np.einsum("kri,kr->ki", Jp[k], e[k]), n_free)
+    if sparse:
+        blocks = w[k, None, None] * np.einsum("kri,krj->kij", Jc[k], Jp[k])
+        return U, V, Coupling(blocks, t[k], f[k], n_steps, n_free), g, h
     W = np.zeros((n_steps, 6, n_free, 3))
     np.add.at(W, (t[k], slice(None), f[k], slice(None)),
               w[k, None, None] * np.einsum("kri,krj->kij", Jc[k], Jp[k]))

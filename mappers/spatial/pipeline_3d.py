@@ -17,10 +17,11 @@ import numpy as np
 from mappers.defaults import choose_method
 from mappers.fitting import Map
 from mappers.spatial.covisibility_3d import CoVisibility3D
+from mappers.spatial.rays import RAY_COLUMNS
 from mappers.spatial.spatial_ba import SpatialAdjustment
 
-__all__ = ["METHODS_3D", "anchor_dimension", "build_map_3d", "default_method_3d",
-           "default_for_histories_3d"]
+__all__ = ["METHODS_3D", "anchor_dimension", "build_map_3d", "default_for_histories_3d",
+           "default_method_3d", "fit_map_3d", "step_columns_3d"]
 
 METHODS_3D = {"SPATIAL-BA": SpatialAdjustment, "COVIS-3D": CoVisibility3D}
 """The 3-D methods by label: rays (and ranges) -> SPATIAL-BA, sightings -> COVIS-3D."""
@@ -82,6 +83,14 @@ def build_map_3d(histories, anchor_ids, anchor_positions, method: str | None = N
     ``positions`` and ``embedding`` are (M, 3), NaN rows for the objects listed in
     ``unmapped``. ``method``: ``"SPATIAL-BA"`` or ``"COVIS-3D"`` (None: by the sensor);
     ``params`` go to the method."""
+    return fit_map_3d(histories, anchor_ids, anchor_positions, method, sensor=sensor, mask=mask,
+                      **params)[0]
+
+
+def fit_map_3d(histories, anchor_ids, anchor_positions, method: str | None = None, *,
+               sensor: str | None = None, mask=None, **params):
+    """:func:`build_map_3d`'s map, with the fitted estimator and the unpacked histories, their
+    mask(s) and sensor: ``(Map, est, X, mask, sensor)`` (what the covariances need)."""
     X, sensor, mask = _unpack(histories, sensor, mask)
     label = method.upper() if isinstance(method, str) else default_method_3d(sensor)
     if label not in METHODS_3D:
@@ -93,9 +102,20 @@ def build_map_3d(histories, anchor_ids, anchor_positions, method: str | None = N
     Y = est.fit_transform(X, anchor_ids=anchor_ids, anchor_positions=anchor_positions, **inputs)
     placed = np.all(np.isfinite(Y), axis=1)
     unmapped = tuple(int(i) for i in np.flatnonzero(~placed))
-    notes = (f"{len(unmapped)} object(s) could not be placed: {list(unmapped)[:20]}",) \
+    # worded as the 2-D notes (mappers.fitting): the object ids (rows of the history), all of them
+    notes = (f"objects {list(unmapped)} could not be placed from their histories",) \
         if unmapped else ()
-    return Map(positions=Y, unmapped=unmapped, embedding=Y.copy(), method=label,
-               params={k: getattr(est, k) for k in inspect.signature(type(est)).parameters},
-               sensor=sensor, warnings=notes, affine=None,
-               anchor_ids=tuple(int(i) for i in np.asarray(anchor_ids)))
+    result = Map(positions=Y, unmapped=unmapped, embedding=Y.copy(), method=label,
+                 params={k: getattr(est, k) for k in inspect.signature(type(est)).parameters},
+                 sensor=sensor, warnings=notes, affine=None,
+                 anchor_ids=tuple(int(i) for i in np.asarray(anchor_ids)))
+    return result, est, X, mask, sensor
+
+
+def step_columns_3d(X, sensor: str) -> dict | int:
+    """Columns one step takes in 3-D histories ``X`` of ``sensor`` as :func:`fit_map_3d` unpacks
+    them: 1 for sightings, :data:`~mappers.spatial.rays.RAY_COLUMNS` for rays, a mapping of
+    those for fused histories."""
+    if isinstance(X, Mapping):
+        return {k: RAY_COLUMNS if k == "bearing" else 1 for k in X}
+    return 1 if sensor == "visibility" else RAY_COLUMNS

@@ -5,8 +5,10 @@ objects, without odometry and without a motion model.
   sensor's frame (range times ray), so the angle between two rays and the two ranges fix their
   distance whatever the pose (the law of cosines). Steps that share three objects not on a line
   are registered rigidly (Kabsch/Umeyama, no scale) one after another from a seed step; each
-  chain of registered steps is a rigid piece, which the anchors it holds (three or more, not on
-  a line) place in the world by a similarity.
+  chain of registered steps is a rigid piece, adjusted in its own frame (with ``refine``: the
+  6-DoF adjustment spreads the chain's accumulated error), which three or more placed objects
+  it holds (anchors first, not on a line) place in the world by a similarity, or fewer placed
+  objects together with pose-free distances to placed ones, when they fix its pose uniquely.
 * Rays alone (:func:`register_rays`): the anchors are the first known points; a step that sees
   three or more known objects is resected by orthogonal iteration (Lu, Hager & Mjolsness, *Fast
   and globally convergent pose estimation from video images*, IEEE TPAMI 22(6), 2000), and an
@@ -21,8 +23,11 @@ not registered).
 from __future__ import annotations
 
 import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
 
 from mappers.core.align_3d import umeyama
+from mappers.spatial.adjustment import adjust_viewpoints
 from mappers.spatial.rays import RayObservations
 
 __all__ = ["MIN_RAY_ANGLE", "orthogonal_iteration", "register_points", "register_rays", "triangulate"]
@@ -53,12 +58,15 @@ def _spans(points: np.ndarray) -> bool:
     return bool(s[1] > _MIN_SPAN)
 
 
-def register_points(obs: RayObservations, anchor_ids: np.ndarray, anchor_positions: np.ndarray):
+def register_points(obs: RayObservations, anchor_ids: np.ndarray, anchor_positions: np.ndarray,
+                    refine: dict | None = None):
     """``(P, R, C)``: points (M, 3), rotations sensor -> world (N, 3, 3) and positions (N, 3)
     from the steps' 3-D points (rays times ranges; sightings without a range are not used),
     each rigid piece placed by its anchors (see the module's docstring), then every step that
     sees three placed objects registered to them in the world, until none is left; NaN where not
-    placed."""
+    placed. ``refine``: keywords of :func:`mappers.spatial.adjustment.adjust_viewpoints` (the
+    noise and loss) to adjust each piece of two or more steps with before it is placed; None:
+    the pieces as chained."""
     m, n = obs.n_objects, obs.n_steps
     pts = obs.ray * obs.range[:, None]
     groups = [g[np.isfinite(obs.range[g])] for g in _groups(obs)]
@@ -73,9 +81,18 @@ def register_points(obs: RayObservations, anchor_ids: np.ndarray, anchor_positio
         pieces.append(_grow_piece(obs, pts, groups, todo, seed))
     P[anchor_ids] = anchor_positions
     pieces = _merge_pieces(pieces)
+    if refine is not None:
+        pieces = [_refine_piece(obs, piece, refine) for piece in pieces]
     pairs = _pair_distances(obs, pts, groups)
+    scale = None  # the pieces' scale: that of the first placed by three or more points
     while pieces:  # place the pieces the placed points fix, until none is left that they fix
-        left = [piece for piece in pieces if not _place_piece(piece, P, R, C, pairs)]
+        left = []
+        for piece in pieces:
+            used = _place_piece(piece, P, R, C, pairs, scale)
+            if used is None:
+                left.append(piece)
+            elif scale is None and used[1]:
+                scale = used[0]
         if len(left) == len(pieces):
             break
         pieces = left
@@ -126,6 +143,35 @@ def _grow_piece(obs, pts, groups, todo, seed):
     return total, count, poses
 
 
+_PIECE_PRIOR = 1.0
+"""The deviation [m] of the prior that holds a piece's points near their chained places while
+the piece is adjusted (:func:`_refine_piece`): loose, it only fixes the piece's gauge."""
+
+
+def _refine_piece(obs, piece, params):
+    """A piece of two or more steps adjusted in its own frame by the 6-DoF adjustment
+    (:func:`mappers.spatial.adjustment.adjust_viewpoints` with ``params``): chaining steps one
+    after another lets their errors add up along the chain (a loop of steps does not close); the
+    adjustment spreads them over all the piece's sightings, so that the piece keeps the shape
+    its sightings give it when the anchors and the distances place it."""
+    total, count, poses = piece
+    if len(poses) < 2:
+        return piece
+    mine = count > 0
+    P0 = np.full_like(total, np.nan)
+    P0[mine] = total[mine] / count[mine, None]
+    R0 = np.full((obs.n_steps, 3, 3), np.nan)
+    C0 = np.full((obs.n_steps, 3), np.nan)
+    for k, (Rt, ct) in poses.items():
+        R0[k], C0[k] = Rt, ct
+    ranged = obs._replace(step=obs.step[np.isfinite(obs.range)], obj=obs.obj[np.isfinite(obs.range)],
+                          ray=obs.ray[np.isfinite(obs.range)], range=obs.range[np.isfinite(obs.range)])
+    res = adjust_viewpoints(ranged, P0, R0, C0, mine, anchor_noise=_PIECE_PRIOR, **params)
+    steps = list(poses)
+    return (np.where(mine[:, None], res.points, 0.0) * count[:, None], count,
+            {k: (res.rotations[k], res.positions[k]) for k in steps})
+
+
 def _merge_pieces(pieces):
     """The pieces joined where one shares three or more objects (not on a line) with another:
     the smaller registered rigidly onto the larger, repeatedly, largest first."""
@@ -170,11 +216,13 @@ def _pair_distances(obs, pts, groups) -> dict[tuple[int, int], float]:
     return {k: float(np.median(v)) for k, v in found.items()}
 
 
-def _place_piece(piece, P, R, C, pairs) -> bool:
+def _place_piece(piece, P, R, C, pairs, scale):
     """Place a piece in the world when the points placed already fix it: three or more of its
-    points placed, not on a line (a similarity), or two and pose-free distances from its other
-    points to placed ones (the turn about the line through the two is the one that fits those
-    distances best, :func:`_hinge`). Points placed already stay; returns whether it was placed."""
+    points placed, not on a line (a similarity), or else its points placed and the pose-free
+    distances from its other points to placed ones, where those fix its pose unambiguously
+    (:func:`_fit_piece`, at the scale ``scale`` of the pieces placed already, 1 if None). Points
+    placed already stay; returns None if it was not placed, else the scale used and whether it
+    came from a similarity."""
     total, count, poses = piece
     mine = count > 0
     local = np.full_like(total, np.nan)
@@ -183,60 +231,95 @@ def _place_piece(piece, P, R, C, pairs) -> bool:
     common = np.flatnonzero(mine & known)
     if common.size >= 3 and _spans(P[common]) and _spans(local[common]):
         Rs, s, t = umeyama(local[common], P[common], True)
-    elif common.size == 2:
-        found = _hinge(local, P, common, mine & ~known, known & ~mine, pairs)
-        if found is None:
-            return False
-        Rs, s, t = found
+        similar = True
     else:
-        return False
+        found = _fit_piece(local, P, common, mine & ~known, known & ~mine, pairs,
+                           1.0 if scale is None else scale)
+        if found is None:
+            return None
+        (Rs, s, t), similar = found, False
     new = mine & ~known
     P[new] = s * local[new] @ Rs.T + t
     for k, (Rt, ct) in poses.items():
         R[k] = Rs @ Rt
         C[k] = s * Rs @ ct + t
-    return True
+    return s, similar
 
 
-def _rotation_onto(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The rotation taking the unit vector ``a`` onto the unit vector ``b`` (Rodrigues)."""
-    v, c = np.cross(a, b), float(a @ b)
-    if c < -1.0 + 1e-12:  # opposite: half a turn about any perpendicular
-        p = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
-        p /= np.linalg.norm(p)
-        return 2.0 * np.outer(p, p) - np.eye(3)
-    K = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-    return np.eye(3) + K + K @ K / (1.0 + c)
+_PIECE_NOISE = 0.05
+"""The deviation [m] a piece's placed points and its pose-free distances are weighed with when a
+piece is placed by them (:func:`_fit_piece`): a few centimetres, a stereo point's error."""
+
+_PIECE_MAX_RMS = 0.10
+"""Largest root-mean-square misfit [m] of a piece placed by distances (:func:`_fit_piece`)."""
+
+_PIECE_STARTS = Rotation.create_group("O")
+"""The rotations a piece's placement starts from: the 24 turns of the cube (Rotation.create_group),
+so that every local minimum of the fit is within 45 degrees of a start."""
 
 
-def _hinge(local, P, common, movers, others, pairs, n_angles: int = 720):
-    """``(R, s, t)`` placing a piece that shares two points with the placed ones: those two fix
-    the scale and a line, and the turn about the line is the one (of ``n_angles``) whose placed
-    ``movers`` best fit their pose-free distances to the placed ``others``; None without such
-    distances."""
-    a, b = common
+def _rodrigues(w: np.ndarray) -> np.ndarray:
+    """The rotation matrix of the rotation vector ``w`` (Rodrigues' formula; by hand because
+    SciPy's Rotation objects cost more than the small fit that calls this thousands of times)."""
+    a = float(np.linalg.norm(w))
+    if a < 1e-12:
+        return np.eye(3)
+    k = w / a
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(a) * K + (1.0 - np.cos(a)) * K @ K
+
+
+def _fit_piece(local, P, common, movers, others, pairs, scale):
+    """``(R, s, t)`` placing a piece by its placed points (fewer than three, or on a line) and the
+    pose-free distances from its other points (``movers``) to placed ones (``others``): the rigid
+    pose (at ``scale``) that fits both in least squares (a soft-L1 loss; SciPy's least_squares),
+    from the 24 turns of the cube. None unless the fit is unique: at least eight constraints (two
+    more than the pose's six unknowns, so that a wrong pose shows as a misfit: two common points
+    and one distance leave the turn about their line at two mirror places, or at one place that
+    a small error moves far), a misfit of at most 10 cm, and no other local minimum that moves
+    the piece's points by more than 10 cm fitting within three times the misfit (or 1 cm more):
+    such a piece is left unplaced, not guessed.
+
+    Written by hand: a piece's pose from a mix of point matches and distances is no library's
+    registration (Umeyama's needs three matched points)."""
     use = [(i, j, d) for (i, j), d in pairs.items()
            for i, j in ((i, j), (j, i)) if movers[i] and others[j]]
-    if not use:
+    if 3 * common.size + len(use) < 8:
         return None
-    la, lb, wa, wb = local[a], local[b], P[a], P[b]
-    if np.linalg.norm(lb - la) < _MIN_SPAN or np.linalg.norm(wb - wa) < _MIN_SPAN:
+    ui, uj, ud = (np.array(v, dtype=float if k == 2 else np.int64)
+                  for k, v in enumerate(zip(*use, strict=True))) if use else (
+        np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+    here = np.flatnonzero(np.all(np.isfinite(local), axis=1))
+    centre = local[here].mean(axis=0)
+    target = P[common].mean(axis=0) if common.size else P[uj].mean(axis=0)
+
+    def moved(x, idx):
+        return scale * (local[idx] - centre) @ _rodrigues(x[:3]).T + x[3:]
+
+    def residuals(x):
+        e_common = (moved(x, common) - P[common]).ravel()
+        e_dist = np.linalg.norm(moved(x, ui) - P[uj], axis=1) - scale * ud
+        return np.concatenate([e_common, e_dist]) / _PIECE_NOISE
+
+    fits = []
+    for r0 in _PIECE_STARTS:
+        x0 = np.concatenate([r0.as_rotvec(), target])
+        if common.size:  # the start's turn, then the shift that puts the common points on theirs
+            x0[3:] += (P[common] - moved(x0, common)).mean(axis=0)
+        sol = least_squares(residuals, x0, loss="soft_l1", f_scale=2.0, max_nfev=60)
+        rms = _PIECE_NOISE * float(np.sqrt(np.mean(sol.fun**2)))
+        fits.append((rms, sol.x))
+    fits.sort(key=lambda f: f[0])
+    best_rms, best = fits[0]
+    if best_rms > _PIECE_MAX_RMS:
         return None
-    s = np.linalg.norm(wb - wa) / np.linalg.norm(lb - la)
-    axis = (wb - wa) / np.linalg.norm(wb - wa)
-    R0 = _rotation_onto((lb - la) / np.linalg.norm(lb - la), axis)
-    i, j, d = (np.array(v) for v in zip(*use, strict=True))
-    x0 = s * (local[i] - la) @ R0.T  # the movers about wa, before the turn
-    best = None
-    for theta in np.linspace(0.0, 2.0 * np.pi, n_angles, endpoint=False):
-        K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]],
-                      [-axis[1], axis[0], 0.0]])
-        Rt = np.eye(3) + np.sin(theta) * K + (1.0 - np.cos(theta)) * K @ K
-        err = np.sum((np.linalg.norm(wa + x0 @ Rt.T - P[j], axis=1) - d) ** 2)
-        if best is None or err < best[0]:
-            best = (err, Rt @ R0)
-    Rs = best[1]
-    return Rs, s, wa - s * Rs @ la
+    spot = moved(best, here)
+    for rms, x in fits[1:]:
+        apart = np.sqrt(np.mean(np.sum((moved(x, here) - spot) ** 2, axis=1)))
+        if apart > 0.1 and rms <= max(3.0 * best_rms, best_rms + 0.01):
+            return None
+    Rs = _rodrigues(best[:3])
+    return Rs, scale, best[3:] - scale * Rs @ centre
 
 
 def orthogonal_iteration(p: np.ndarray, u: np.ndarray, iters: int = 60):

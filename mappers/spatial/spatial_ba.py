@@ -25,6 +25,7 @@ from mappers.spatial.covisibility_3d import CoVisibility3D
 from mappers.spatial.rays import ray_observations
 from mappers.spatial.registration import MIN_RAY_ANGLE, register_points, register_rays
 from mappers.spatial.regrow import intersect_by_consensus, step_ray_errors
+from mappers.viewpoints import DENSE_COUPLING_MAX_BYTES
 
 __all__ = ["SpatialAdjustment"]
 
@@ -56,16 +57,23 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
             rays diverge by less than 10 degrees (its depth along them is not fixed) was not
             placed consistently: it is left unmapped (NaN, listed in ``inconsistent_``) rather than
             reported where the adjustment left it.
+        dense_coupling_bytes: the adjustment's pose-point coupling is dense up to this many
+            bytes, sparse above (:func:`mappers.spatial.adjustment.adjust_viewpoints`).
 
     Attributes (after fit): ``embedding_`` (M, 3) world positions, NaN for objects it could not
     place or placed inconsistently (``inconsistent_``, see ``max_ray_error``); ``rotations_`` (N, 3, 3) and ``positions_`` (N, 3) the steps' poses (NaN: step not
-    used); ``range_scale_``; ``n_iter_``.
+    used); ``range_scale_``; ``n_iter_``; ``observations_``, ``adjusted_`` (the
+    :class:`~mappers.spatial.adjustment.AdjustmentResult` before the similarity onto the
+    anchors), ``anchor_ids_`` and ``similarity_`` (rotation, scale, translation taking
+    ``adjusted_`` to the output; the identity without ``anchor_noise``): what the model
+    covariances need (:mod:`mappers.spatial.marginals`).
     """
 
     def __init__(self, *, bearing_noise: float = float(np.deg2rad(1.0)), range_noise: float = 0.02,
                  range_growth: float = 0.0, loss: str | None = "cauchy", loss_scale: float = 3.0,
                  max_iter: int = 200, tol: float = 1e-6, fit_range_scale: bool = False,
-                 anchor_noise: float | None = None, max_ray_error: float = float(np.deg2rad(5.0))):
+                 anchor_noise: float | None = None, max_ray_error: float = float(np.deg2rad(5.0)),
+                 dense_coupling_bytes: float = DENSE_COUPLING_MAX_BYTES):
         self.bearing_noise = bearing_noise
         self.range_noise = range_noise
         self.range_growth = range_growth
@@ -76,6 +84,7 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
         self.fit_range_scale = fit_range_scale
         self.anchor_noise = anchor_noise
         self.max_ray_error = max_ray_error
+        self.dense_coupling_bytes = dense_coupling_bytes
 
     def fit(self, X, y=None, *, anchor_ids=None, anchor_positions=None, mask=None, masks=None):
         """Fit to a 3-D bearing history ``X`` (M, 3N) or fused histories ``{"bearing": rays,
@@ -100,7 +109,11 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
         if not (isinstance(self.tol, (int, float)) and self.tol >= 0):
             raise ValueError(f"tol must be a number >= 0, got {self.tol!r}")
         if np.isfinite(obs.range).any():
-            start = register_rays(obs, ids, pos, start=register_points(obs, ids, pos))
+            refine = {"bearing_noise": self.bearing_noise, "range_noise": self.range_noise,
+                      "range_growth": self.range_growth, "loss": self.loss,
+                      "loss_scale": self.loss_scale, "max_iter": self.max_iter,
+                      "dense_coupling_bytes": self.dense_coupling_bytes}
+            start = register_rays(obs, ids, pos, start=register_points(obs, ids, pos, refine))
         else:
             start = self._rays_start(obs, ids, pos)
         if not np.isfinite(start[2][:, 0]).any():
@@ -115,13 +128,20 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
                                 loss=self.loss, loss_scale=self.loss_scale,
                                 max_iter=self.max_iter, tol=self.tol,
                                 fit_range_scale=self.fit_range_scale,
-                                anchor_noise=self.anchor_noise)
+                                anchor_noise=self.anchor_noise,
+                                dense_coupling_bytes=self.dense_coupling_bytes)
+        # what the model covariances re-linearise (mappers.spatial.marginals): the sightings
+        # with the ranges as finally scaled, the adjustment before any similarity, the anchors
+        self.observations_ = obs._replace(range=obs.range * res.range_scale)
+        self.adjusted_, self.anchor_ids_ = res, ids
+        self.similarity_ = (np.eye(3), 1.0, np.zeros(3))
         if self.anchor_noise is not None:  # the map's own shape, placed on the anchors
             Rs, scale, t = umeyama(res.points[ids], pos, True)
             res = res._replace(points=scale * res.points @ Rs.T + t,
                                rotations=Rs @ res.rotations,
                                positions=scale * res.positions @ Rs.T + t)
             self.similarity_scale_ = scale
+            self.similarity_ = (Rs, scale, t)
         self.inconsistent_ = _inconsistent(obs, res, self.max_ray_error, ids)
         points = res.points.copy()
         points[self.inconsistent_] = np.nan
@@ -163,7 +183,8 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
             res = adjust_viewpoints(obs, P, R, C, fixed, bearing_noise=self.bearing_noise,
                                     loss=self.loss, loss_scale=self.loss_scale,
                                     max_iter=REGROW_ITER, tol=1e-4,
-                                    anchor_noise=self.anchor_noise)
+                                    anchor_noise=self.anchor_noise,
+                                    dense_coupling_bytes=self.dense_coupling_bytes)
             P, R, C = res.points, res.rotations.copy(), res.positions.copy()
             if self.anchor_noise is not None:
                 P = P.copy()

@@ -6,7 +6,14 @@ from __future__ import annotations
 from mappers.viewpoints import engine
 from mappers.viewpoints.bearing import BearingAdjustment, BearingAdjustmentWarning
 from mappers.viewpoints.engine import *  # noqa: F403 (its __all__, re-exported below)
-from mappers.viewpoints.marginals import adjustment_covariances, has_model_covariances
+from mappers.viewpoints.marginals import (
+    adjustment_covariances,
+    has_model_covariances,
+    model_covariances,
+    released_anchor,
+    schur_information,
+    step_blocks,
+)
 from mappers.viewpoints.range_bearing import RangeBearingAdjustment
 from mappers.viewpoints.start_map import anchored_start, fit_start, keep_if_better
 from mappers.viewpoints.view_cone import (
@@ -28,7 +35,8 @@ from mappers.viewpoints.walk_prior import forward_backward, gaussian_taps
 __all__ = [
     "BearingAdjustment", "BearingAdjustmentWarning",
     *engine.__all__,
-    "adjustment_covariances", "has_model_covariances",
+    "adjustment_covariances", "has_model_covariances", "model_covariances",
+    "released_anchor", "schur_information", "step_blocks",
     "RangeBearingAdjustment",
     "anchored_start", "fit_start", "keep_if_better",
     "MAX_FOV_DEG", "MAX_FREE_OBJECTS", "ConeProblem", "ViewAdjustment", "ViewAdjustmentWarning",

@@ -48,14 +48,18 @@ import warnings
 from numbers import Integral, Real
 
 import numpy as np
+import scipy.sparse as sp
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from mappers.core.validation import check_views
 from mappers.defaults import localisation_free
 from mappers.viewpoints.engine import (
-    bearing_angles,
+    DENSE_COUPLING_MAX_BYTES,
+    Damping,
+    bearing_observations,
     bearing_residuals,
+    damped_step,
     initial_poses,
     intersect,
     joint_step,
@@ -65,11 +69,16 @@ from mappers.viewpoints.engine import (
     robust_cost,
     robust_weights,
     scatter_sum,
+    use_sparse_coupling,
     wrap_angles,
 )
 from mappers.viewpoints.start_map import anchored_start, fit_start, keep_if_better
 
 __all__ = ["BearingAdjustment", "BearingAdjustmentWarning"]
+
+DAMPING = Damping(up=10.0, down=10.0, floor=1e-9, tries=12, accept_equal=True)
+"""BEARING-BA's Levenberg-Marquardt damping rule (:class:`mappers.viewpoints.engine.Damping`)."""
+
 
 class BearingAdjustmentWarning(UserWarning):
     """The refinement kept (part of) the start map: too few views, parallel rays, no gain."""
@@ -93,6 +102,12 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
             parallel rays) keeps its start position.
         solver: ``"joint"`` (Levenberg-Marquardt on poses and objects) or ``"alternate"``.
         random_state: handed to the start method.
+        dense_coupling_bytes: the joint step holds the pose-object coupling as a dense
+            (N, 3, 2F) array up to this many bytes, and above it one block per observation with
+            the objects' reduced system sparse (:mod:`mappers.viewpoints.sparse_schur`; the same
+            step to rounding), so that thousands of objects and tens of thousands of steps fit.
+        schur_solver: how the sparse step solves the objects' reduced system: ``"lu"`` (sparse
+            LU) or ``"cg"`` (block-Jacobi preconditioned conjugate gradients).
 
     Attributes:
         embedding_ (M, 2) in world coordinates; start_ the start map; poses_ (N, 3) the
@@ -114,12 +129,16 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         "min_spread": [Interval(Real, 0, 1, closed="both")],
         "solver": [StrOptions({"joint", "alternate"})],
         "random_state": ["random_state"],
+        "dense_coupling_bytes": [Interval(Real, 0, None, closed="left")],
+        "schur_solver": [StrOptions({"lu", "cg"})],
     }
 
     def __init__(self, *, start: str | None = None, loss: str | None = "huber",
                  robust_scale: float = 2.0, max_rounds: int = 6, tol: float = 1e-7,
                  pose_iters: int = 2, min_step_objects: int = 3, min_views: int = 5,
-                 min_spread: float = 1e-3, solver: str = "joint", random_state=0) -> None:
+                 min_spread: float = 1e-3, solver: str = "joint", random_state=0,
+                 dense_coupling_bytes: float = DENSE_COUPLING_MAX_BYTES,
+                 schur_solver: str = "lu") -> None:
         self.start = start
         self.loss = loss
         self.robust_scale = robust_scale
@@ -131,9 +150,17 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         self.min_spread = min_spread
         self.solver = solver
         self.random_state = random_state
+        self.dense_coupling_bytes = dense_coupling_bytes
+        self.schur_solver = schur_solver
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.input_tags.sparse = True  # compact (scipy.sparse) histories are read as they are
+        return tags
 
     def _start_map(self, X, mask, ids, pos) -> np.ndarray:
-        masked = mask is not None and not np.all(mask)
+        masked = mask is not None and (mask.nnz < np.prod(mask.shape) if sp.issparse(mask)
+                                       else not np.all(mask))
         label = self.start or localisation_free("bearing", masked)[0]
         if label.strip().upper() == "BEARING-BA":
             raise ValueError("start must name another method than 'BEARING-BA'")
@@ -148,26 +175,32 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         self._validate_params()
         if sensor != "bearing":
             raise ValueError(f"BEARING-BA maps bearing histories, got a {sensor} history")
-        X = check_views(self, X, mask)
-        theta, seen = bearing_angles(X, mask)
-        m = theta.shape[1]
+        if sp.issparse(X):  # kept sparse: only the observations are read
+            X = sp.csr_array(X, dtype=np.float64)
+            if X.shape[0] < 3 or not np.all(np.isfinite(X.data)):
+                raise ValueError(f"BEARING-BA needs at least 3 objects and finite readings, got "
+                                 f"shape {X.shape}")
+        else:
+            X = check_views(self, X, mask)
+        obs, n, m = bearing_observations(X, mask)
         ids, pos, P0 = anchored_start(
             "BEARING-BA", anchor_ids, anchor_positions, m, start_positions,
             lambda ids, pos: self._start_map(X, mask, ids, pos),
         )
         self.start_ = P0.copy()
-        self.embedding_ = self._refine(theta, seen, P0, ids)
+        self.embedding_ = self._refine(obs, n, m, P0, ids)
         return self
 
-    def _refine(self, theta, seen, P0, ids) -> np.ndarray:
-        n, m = theta.shape
+    def _refine(self, obs, n, m, P0, ids) -> np.ndarray:
         placed = np.all(np.isfinite(P0), axis=1)
         free = placed.copy()
         free[ids] = False
-        seen = seen & placed[None, :]
-        seen &= (seen.sum(1) >= self.min_step_objects)[:, None]
-        t, i = np.nonzero(seen)
-        obs = (t, i, theta[t, i])
+        t, i, th = obs
+        keep = placed[i]
+        t, i, th = t[keep], i[keep], th[keep]
+        keep = np.bincount(t, minlength=n)[t] >= self.min_step_objects
+        t, i = t[keep], i[keep]
+        obs = (t, i, th[keep])
         P = np.where(placed[:, None], P0, 0.0)
         self.kept_ = np.array([], dtype=int)
         C, phi, ok0 = initial_poses(P, obs, n)
@@ -240,23 +273,24 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
 
         free_index = np.full(len(P), -1)
         free_index[free] = np.arange(free.sum())
+        sparse = use_sparse_coupling(len(C), 3, 2, int(free.sum()), self.dense_coupling_bytes)
         lam, current, rounds = 1e-4, cost(P, C, phi), 0
         for rounds in range(1, self.max_rounds + 1):  # noqa: B007 - the count is returned
             res, _ = bearing_residuals(P, C, phi, obs)
             blocks = normal_blocks(P, C, phi, obs, wb * robust_weights(res, scale, self.loss),
-                                    free_index, int(free.sum()))
-            for _ in range(12):
-                dc, dp = joint_step(*blocks, lam)
+                                    free_index, int(free.sum()), sparse=sparse)
+
+            def trial(lam, blocks=blocks, P=P, C=C, phi=phi, cost=cost):
+                dc, dp = joint_step(*blocks, lam, solver=self.schur_solver)
                 P2 = P.copy()
                 P2[free] += dp
                 C2, phi2 = C + dc[:, :2], wrap_angles(phi + dc[:, 2])
-                new = cost(P2, C2, phi2)
-                if np.isfinite(new) and new <= current:
-                    break
-                lam *= 10.0
-            else:
+                return (P2, C2, phi2, dp), cost(P2, C2, phi2)
+
+            state, new, lam, accepted = damped_step(trial, current, lam, DAMPING)
+            if not accepted:
                 break  # no step lowers the cost: converged (or stuck)
-            P, C, phi, lam = P2, C2, phi2, max(lam / 10.0, 1e-9)
+            P, C, phi, dp = state
             done = current - new <= 1e-6 * current or not dp.size or np.abs(dp).max() <= self.tol
             current = new
             out = ~self._inside(C)

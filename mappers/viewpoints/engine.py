@@ -4,18 +4,38 @@ Angles and their residuals, the robust loss (Huber or Cauchy weights and costs),
 and iterative resection of each step's pose from a map, the intersection of rays, and the
 Levenberg-Marquardt step with the viewpoints eliminated by the Schur complement (each pose's
 3x3 block is solved away, leaving the free objects' normal equations), as bundle adjusters do
-(Triggs et al., *Bundle Adjustment — A Modern Synthesis*, 2000). BEARING-BA
-(:mod:`mappers.viewpoints.bearing`), the view-cone and range-bearing adjustments and the
+(Triggs et al., *Bundle Adjustment — A Modern Synthesis*, 2000), dense or, for problems whose
+dense pose-object coupling would not fit, sparse (:mod:`mappers.viewpoints.sparse_schur`), and
+the one Levenberg-Marquardt driver (:func:`damped_step`) under each adjustment's damping rule
+(:class:`Damping`). BEARING-BA (:mod:`mappers.viewpoints.bearing`), the view-cone and
+range-bearing adjustments, the 6-DoF adjustment (:mod:`mappers.spatial.adjustment`) and the
 online bundle use these pieces.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
+import scipy.sparse as sp
+
+from mappers.viewpoints.sparse_schur import (
+    DENSE_COUPLING_MAX_BYTES,
+    Coupling,
+    sparse_schur_step,
+    use_sparse_coupling,
+)
 
 __all__ = [
+    "DENSE_COUPLING_MAX_BYTES",
+    "Coupling",
+    "Damping",
     "bearing_angles",
+    "bearing_observations",
     "bearing_residuals",
+    "damped_step",
     "initial_poses",
     "intersect",
     "joint_step",
@@ -27,6 +47,8 @@ __all__ = [
     "robust_weights",
     "scatter_sum",
     "schur_step",
+    "sparse_schur_step",
+    "use_sparse_coupling",
     "wrap_angles",
 ]
 
@@ -65,6 +87,37 @@ def bearing_angles(X, mask=None) -> tuple[np.ndarray, np.ndarray]:
             "pass normalize=False)"
         )
     return np.arctan2(s, c), seen
+
+
+def bearing_observations(X, mask=None) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], int, int]:
+    """``((t, i, theta), N, M)``: the step, object and bearing [rad] of each observation (as
+    :func:`bearing_angles` sees them), ordered by step then object, from a dense history or a
+    ``scipy.sparse`` one (with a sparse or dense mask; the (N, M) arrays of
+    :func:`bearing_angles` are never built for it). ValueError as :func:`bearing_angles`."""
+    if not sp.issparse(X):
+        theta, seen = bearing_angles(X, mask)
+        t, i = np.nonzero(seen)
+        return (t, i, theta[t, i]), theta.shape[0], theta.shape[1]
+    X = sp.csr_array(X, dtype=float)
+    if X.ndim != 2 or X.shape[1] % 2 or X.shape[1] == 0:
+        raise ValueError(f"a bearing history has 2 columns (cos, sin) per step, got shape {X.shape}")
+    c, s = X[:, 0::2], X[:, 1::2]
+    seen = sp.csr_array((c != 0) + (s != 0), dtype=bool)
+    if mask is not None:
+        mask = sp.csr_array(mask, dtype=bool)
+        if mask.shape != X.shape:
+            raise ValueError(f"mask must have the shape of the history {X.shape}, got {mask.shape}")
+        seen = sp.csr_array(seen.multiply(mask[:, 0::2]).multiply(mask[:, 1::2]), dtype=bool)
+    seen.eliminate_zeros()
+    i, t = seen.nonzero()
+    order = np.lexsort((i, t))
+    t, i = t[order], i[order]
+    cv, sv = np.asarray(c[i, t]).ravel(), np.asarray(s[i, t]).ravel()
+    norm = np.hypot(cv, sv)
+    if not np.all(np.isfinite(norm)) or np.any(np.abs(norm - 1.0) > _UNIT_TOL):
+        raise ValueError("a bearing history holds unit (cos, sin) pairs; found observed pairs of "
+                         f"norm {norm[np.abs(norm - 1.0) > _UNIT_TOL][:3].round(3).tolist()}")
+    return (t, i, np.arctan2(sv, cv)), X.shape[1] // 2, X.shape[0]
 
 
 def robust_weights(res: np.ndarray, scale: float, loss: str | None) -> np.ndarray:
@@ -188,10 +241,11 @@ def ray_spread(phi, obs, used, m):
     return np.where(tr > 0, (tr / 2 - disc) / np.maximum(tr / 2 + disc, 1e-300), 0.0)
 
 
-def normal_blocks(P, C, phi, obs, w, free_index, n_free):
+def normal_blocks(P, C, phi, obs, w, free_index, n_free, sparse: bool = False):
     """The blocks of the Gauss-Newton normal equations of the joint problem (poses and free
     objects): ``U`` (N, 3, 3), ``V`` (F, 2, 2), ``Wf`` (N, 3, 2F), gradients ``g`` (N, 3) and
-    ``h`` (F, 2), for weighted residuals ``w * res**2 / 2``."""
+    ``h`` (F, 2), for weighted residuals ``w * res**2 / 2``. ``sparse``: the coupling ``Wf`` as a
+    :class:`Coupling` (one block per observation) instead of the dense array."""
     t, i, _ = obs
     n = len(C)
     res, d = bearing_residuals(P, C, phi, obs)
@@ -203,25 +257,32 @@ def normal_blocks(P, C, phi, obs, w, free_index, n_free):
     tf, ff, wf, af, bf = t[k], f[k], w[k], a[k], -a[k, :2]
     V = scatter_sum(ff, wf[:, None, None] * bf[:, :, None] * bf[:, None, :], n_free)
     h = scatter_sum(ff, (wf * res[k])[:, None] * bf, n_free)
+    if sparse:
+        blocks = wf[:, None, None] * af[:, :, None] * bf[:, None, :]
+        return U, V, Coupling(blocks, tf, ff, n, n_free), g, h
     Wf = np.zeros((n, 3, n_free, 2))
     Wf[tf, :, ff, :] = wf[:, None, None] * af[:, :, None] * bf[:, None, :]
     return U, V, Wf.reshape(n, 3, 2 * n_free), g, h
 
 
-def joint_step(U, V, Wf, g, h, lam):
+def joint_step(U, V, Wf, g, h, lam, solver: str = "lu"):
     """The damped Gauss-Newton step (Levenberg-Marquardt, ``diag *= 1 + lam``) of the poses and
     the free objects, the poses eliminated per step (Schur complement on the objects): the planar
     case of :func:`schur_step` (3 pose and 2 object parameters)."""
-    return schur_step(U, V, Wf, g, h, lam)
+    return schur_step(U, V, Wf, g, h, lam, solver)
 
 
-def schur_step(U, V, Wf, g, h, lam):
+def schur_step(U, V, Wf, g, h, lam, solver: str = "lu"):
     """The damped Gauss-Newton step (Levenberg-Marquardt, ``diag *= 1 + lam``) of the poses and
     the free objects, each pose's block eliminated (Schur complement on the objects), for any
     number of pose parameters ``p`` and object coordinates ``d``: ``U`` (N, p, p), ``V`` (F, d, d),
     ``Wf`` (N, p, d F), ``g`` (N, p), ``h`` (F, d). Returns the pose steps (N, p) and the object
     steps (F, d). The planar adjustments use p = 3, d = 2; the 3-D ones
-    (:mod:`mappers.spatial`) p = 6, d = 3."""
+    (:mod:`mappers.spatial`) p = 6, d = 3. ``Wf`` a :class:`Coupling`: the sparse step
+    (:func:`sparse_schur_step`, with ``solver``), for problems whose dense coupling would not
+    fit (:func:`use_sparse_coupling`)."""
+    if isinstance(Wf, Coupling):
+        return sparse_schur_step(U, V, Wf, g, h, lam, solver)
     n, p = U.shape[:2]
     f, d = V.shape[:2]
     diag = np.arange(p)
@@ -241,3 +302,45 @@ def schur_step(U, V, Wf, g, h, lam):
     dp = np.linalg.solve(S + 1e-12 * np.eye(d * f), rhs)
     dc = -Uig - Y @ dp
     return dc, dp.reshape(f, d)
+
+
+@dataclass(frozen=True)
+class Damping:
+    """A Levenberg-Marquardt damping rule (Marquardt 1963; Nocedal & Wright, *Numerical
+    Optimization*, 2006, section 10.3): a step that does not lower the cost is retried with the
+    damping ``lam`` multiplied by ``up``, at most ``tries`` times (None: no limit) and while
+    ``lam`` is below ``ceiling`` (None: no ceiling); an accepted step divides it by ``down``, no
+    lower than ``floor``. ``accept_equal``: a step that leaves the cost equal is accepted (else
+    it must fall). Each adjustment keeps the rule it was tuned with."""
+
+    up: float = 10.0
+    down: float = 10.0
+    floor: float = 1e-9
+    tries: int | None = 12
+    ceiling: float | None = None
+    accept_equal: bool = True
+
+    def __post_init__(self) -> None:
+        if not (self.up > 1.0 and self.down >= 1.0 and self.floor >= 0.0):
+            raise ValueError(f"a damping rule needs up > 1, down >= 1, floor >= 0, got {self}")
+        if self.tries is not None and self.tries < 1:
+            raise ValueError(f"a damping rule needs tries >= 1 or None, got {self.tries}")
+
+
+def damped_step(try_step: Callable[[float], tuple[Any, float]], current: float, lam: float,
+                rule: Damping) -> tuple[Any, float, float, bool]:
+    """One Levenberg-Marquardt step under the damping ``rule``, the one driver of the
+    viewpoint adjustments' loops: ``try_step(lam)`` returns a trial state and its cost; it is
+    called with ``lam`` raised by the rule until the cost is finite and falls below ``current``
+    (or equals it, ``rule.accept_equal``). Returns ``(trial, cost, lam, accepted)``: the
+    accepted trial, its cost and the lowered damping; or, when no try was accepted,
+    ``(None, current, lam, False)`` with the raised damping."""
+    tries = 0
+    while ((rule.tries is None or tries < rule.tries)
+           and (rule.ceiling is None or lam < rule.ceiling)):
+        trial, new = try_step(lam)
+        if np.isfinite(new) and (new <= current if rule.accept_equal else new < current):
+            return trial, new, max(lam / rule.down, rule.floor), True
+        lam *= rule.up
+        tries += 1
+    return None, current, lam, False

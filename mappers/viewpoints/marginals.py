@@ -4,7 +4,10 @@ At the adjustment's solution the Gauss-Newton normal equations of the poses (one
 ``U_t`` per step) and the free objects (``V``, and the coupling ``W``) are built once more,
 undamped, with the loss's IRLS weights at the final residuals; eliminating the poses (Schur
 complement) leaves the objects' information ``S = V - W^T U^-1 W``, and the (2, 2) diagonal blocks
-of ``S^-1``, times the residuals' variance, are the objects' marginal covariances (Triggs et al.,
+of ``S^-1``, times the residuals' variance, are the objects' marginal covariances
+(:func:`schur_information`, :func:`model_covariances` and :func:`sandwich_covariances` are
+generic over the pose's size and the map's dimension: the 6-DoF adjustment in 3-D uses them too,
+:mod:`mappers.spatial.marginals`) (Triggs et al.,
 *Bundle Adjustment — A Modern Synthesis*, 2000, §9; Hartley & Zisserman, *Multiple View
 Geometry*, 2nd ed., §5.2.3). The variance is the weighted residuals' ``sum(w r²) / (K - p)``
 (``K`` residuals, ``p`` unknowns: 3 per used step, 2 per free object); with the robust weights it
@@ -33,26 +36,32 @@ say about them. Steps the adjustment left out (no pose) contribute nothing.
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from mappers.core.uncertainty import block_marginals
 from mappers.viewpoints import range_bearing as rb
 from mappers.viewpoints.bearing import BearingAdjustment
 from mappers.viewpoints.engine import (
+    DENSE_COUPLING_MAX_BYTES,
     bearing_angles,
     bearing_residuals,
     normal_blocks,
     pose_jacobian,
     robust_weights,
+    use_sparse_coupling,
 )
 from mappers.viewpoints.range_bearing import RangeBearingAdjustment
 
-__all__ = ["adjustment_covariances", "has_model_covariances", "schur_information", "step_blocks"]
+__all__ = [
+    "adjustment_covariances", "has_model_covariances", "model_covariances", "released_anchor",
+    "sandwich_covariances", "schur_information", "step_blocks",
+]
 
 
 def schur_information(U: np.ndarray, V: np.ndarray, Wf: np.ndarray) -> np.ndarray:
     """The free objects' (dF, dF) information with the poses eliminated:
-    ``blockdiag(V) - W^T U^-1 W`` for pose blocks ``U`` (N, 3, 3), object blocks ``V`` (F, d, d)
-    and couplings ``Wf`` (N, 3, dF)."""
+    ``blockdiag(V) - W^T U^-1 W`` for pose blocks ``U`` (N, p, p), object blocks ``V`` (F, d, d)
+    and couplings ``Wf`` (N, p, dF) (p = 3 for a planar pose, 6 in space)."""
     f, d = V.shape[0], V.shape[1]
     S = np.zeros((d * f, d * f))
     idx = np.arange(f)[:, None] * d + np.arange(d)[None, :]
@@ -95,32 +104,40 @@ def step_blocks(n_steps: int, timeline=None) -> np.ndarray:
     return out
 
 
-def _sandwich(S, Sinv, U, Wf, t, f, g_pose, g_obj, blocks):
-    """The (F, 2, 2) cluster-robust covariances (module docstring): ``g_pose`` (K, 3) and
-    ``g_obj`` (K, 2) each reading's gradient, ``t`` its step, ``f`` its free object (-1: none)."""
-    n, nf2 = len(U), S.shape[0]
+def sandwich_covariances(Sinv, U, Wf, t, f, g_pose, g_obj, blocks) -> np.ndarray:
+    """The (F, d, d) cluster-robust covariances (module docstring), generic over the pose size
+    ``p`` and the map's dimension ``d``: ``Sinv`` (dF, dF) the inverse of the objects' reduced
+    information, ``U`` (N, p, p) and ``Wf`` (N, p, dF) the poses' blocks, ``g_pose`` (K, p) and
+    ``g_obj`` (K, d) each reading's gradient, ``t`` its step (row of ``U``), ``f`` its free
+    object (-1: none) and ``blocks`` (N,) each step's block."""
+    n, p, d = len(U), U.shape[1], g_obj.shape[1]
     n_blocks = int(blocks.max()) + 1 if len(blocks) else 0
-    Z = np.zeros((n_blocks, nf2))
+    Z = np.zeros((n_blocks, Sinv.shape[0]))
     k = f >= 0
-    for c in range(2):
-        np.add.at(Z, (blocks[t[k]], 2 * f[k] + c), g_obj[k, c])
-    gp = np.zeros((n, 3))
+    for c in range(d):
+        np.add.at(Z, (blocks[t[k]], d * f[k] + c), g_obj[k, c])
+    gp = np.zeros((n, p))
     np.add.at(gp, t, g_pose)
-    y = np.linalg.solve(U + 1e-12 * np.eye(3), gp[..., None])[..., 0]
+    y = np.linalg.solve(U + 1e-12 * np.eye(p), gp[..., None])[..., 0]
     np.add.at(Z, blocks, -np.einsum("nij,ni->nj", Wf, y))
-    A = (Z @ Sinv).reshape(n_blocks, -1, 2)
+    A = (Z @ Sinv).reshape(n_blocks, -1, d)
     return np.einsum("bfi,bfj->fij", A, A) * n_blocks / max(n_blocks - 1, 1)
 
 
-def _covariances(S, U, Wf, sandwich_args, dof_resid, n_residuals, n_unknowns, P, free):
-    cov = np.full((len(P), 2, 2), np.nan)
+def model_covariances(S, U, Wf, sandwich_args, dof_resid, n_residuals, n_unknowns, P, free):
+    """(M, d, d): the scaled marginals of ``S`` for the ``free`` objects, each replaced by its
+    sandwich covariance (:func:`sandwich_covariances` of ``sandwich_args``) where that is wider
+    by trace; zero for the other placed objects, NaN for unplaced ones (NaN rows of ``P``).
+    The noise scale is ``dof_resid / (n_residuals - n_unknowns)``."""
+    d = P.shape[1]
+    cov = np.full((len(P), d, d), np.nan)
     placed = np.isfinite(P[:, 0])
     cov[placed] = 0.0  # the anchors (and the free objects, overwritten below)
     sigma2 = dof_resid / max(n_residuals - n_unknowns, 1)
-    model = sigma2 * block_marginals(S, 2)
+    model = sigma2 * block_marginals(S, d)
     if S.shape[0] and np.all(np.isfinite(model)):
         Sinv = np.linalg.inv(0.5 * (S + S.T))
-        robust = _sandwich(S, Sinv, U, Wf, *sandwich_args)
+        robust = sandwich_covariances(Sinv, U, Wf, *sandwich_args)
         wider = np.trace(robust, axis1=1, axis2=2) > np.trace(model, axis1=1, axis2=2)
         model[wider] = robust[wider]
     cov[free] = model
@@ -128,8 +145,17 @@ def _covariances(S, U, Wf, sandwich_args, dof_resid, n_residuals, n_unknowns, P,
 
 
 def _bearing(est: BearingAdjustment, X, mask, anchor_ids, blocks) -> np.ndarray:
-    theta, seen = bearing_angles(X, mask)
     P, C, phi, used, placed, free, free_index = _frame(est, anchor_ids)
+    limit = getattr(est, "dense_coupling_bytes", DENSE_COUPLING_MAX_BYTES)
+    if use_sparse_coupling(len(C), 3, 2, int(free.sum()), limit):
+        raise ValueError(
+            f"model covariances of BEARING-BA hold the dense (N, 3, 2F) coupling, "
+            f"{8 * 6 * len(C) * int(free.sum()) / 2**30:.1f} GiB for N = {len(C)} steps and "
+            f"F = {int(free.sum())} free objects (above its dense_coupling_bytes, {limit:.3g}); "
+            "use uncertainty='bootstrap' or fewer steps")
+    if sp.issparse(X):  # a compact history of a size the dense coupling fits
+        X, mask = X.toarray(), (mask.toarray() if sp.issparse(mask) else mask)
+    theta, seen = bearing_angles(X, mask)
     seen = seen & used[:, None] & placed[None, :]
     t, i = np.nonzero(seen)
     obs = (t, i, theta[t, i])
@@ -139,7 +165,7 @@ def _bearing(est: BearingAdjustment, X, mask, anchor_ids, blocks) -> np.ndarray:
     S = schur_information(U, V, Wf)
     a = pose_jacobian(bearing_residuals(P, C, phi, obs)[1])
     g = (w * res)[:, None] * a
-    return _covariances(S, U, Wf, (t, free_index[i], g, -g[:, :2], blocks),
+    return model_covariances(S, U, Wf, (t, free_index[i], g, -g[:, :2], blocks),
                         float(np.sum(w * res * res)), len(t),
                         3 * int(used.sum()) + 2 * int(free.sum()), est.embedding_, free)
 
@@ -169,7 +195,7 @@ def _range_bearing(est: RangeBearingAdjustment, X, masks, anchor_ids, blocks) ->
     gr = (wr * ur / est.scales_[1])[:, None] * np.column_stack(
         [-d[:, 0] / dist, -d[:, 1] / dist, np.zeros_like(dist)])
     g = ga + gr
-    return _covariances(S, U, Wf, (t, free_index[i], g, -g[:, :2], blocks),
+    return model_covariances(S, U, Wf, (t, free_index[i], g, -g[:, :2], blocks),
                         float(np.sum(wa * ua * ua + wr * ur * ur)), 2 * len(t),
                         3 * int(used.sum()) + 2 * int(free.sum()), est.embedding_, free)
 
@@ -180,6 +206,33 @@ def _adjustment(est):
         return est
     inner = getattr(est, "adjustment_", None)
     return inner if isinstance(inner, BearingAdjustment | RangeBearingAdjustment) else None
+
+
+def released_anchor(est, X, mask, anchor_ids, anchor_positions, j, timeline=None):
+    """The ``j``-th anchor held out of the fitted adjustment in ``est``: the same adjustment
+    (its parameters) fitted again from ``est``'s map with that anchor free and the others held,
+    and the held-out anchor's ``(position, covariance)`` there (:func:`adjustment_covariances`).
+    ``X``, ``mask`` and ``timeline`` as for :func:`adjustment_covariances`; ``anchor_ids`` rows of
+    ``X``, ``anchor_positions`` (A, 2). The adjustment starts from the full map, so a held-out
+    anchor is placed where the pipeline's start map could not place it without that anchor (a
+    sparse logged run); the readings and the other anchors decide where it goes."""
+    from sklearn.base import clone
+
+    adj = _adjustment(est)
+    if adj is None:
+        raise ValueError(f"{type(est).__name__} holds no bundle adjustment")
+    ids = np.asarray(anchor_ids, dtype=int)
+    keep = np.arange(len(ids)) != j
+    new = clone(adj)
+    start = np.asarray(adj.embedding_, dtype=float)
+    pos = np.asarray(anchor_positions, dtype=float)[keep]
+    if isinstance(adj, RangeBearingAdjustment):
+        new.fit(X, masks=mask, anchor_ids=ids[keep], anchor_positions=pos, start_positions=start)
+    else:
+        Xb, Mb = (X["bearing"], (mask or {}).get("bearing")) if isinstance(X, dict) else (X, mask)
+        new.fit(Xb, mask=Mb, anchor_ids=ids[keep], anchor_positions=pos, start_positions=start)
+    cov = adjustment_covariances(new, X, mask, ids[keep], timeline)
+    return new.embedding_[ids[j]], cov[ids[j]]
 
 
 def has_model_covariances(est) -> bool:

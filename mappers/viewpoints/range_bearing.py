@@ -40,17 +40,25 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from mappers.core.validation import check_fused_input
 from mappers.viewpoints.bearing import BearingAdjustmentWarning
 from mappers.viewpoints.engine import (
+    DENSE_COUPLING_MAX_BYTES,
+    Coupling,
+    Damping,
     bearing_angles,
+    damped_step,
     joint_step,
     pose_jacobian,
     robust_cost,
     robust_weights,
     scatter_sum,
+    use_sparse_coupling,
     wrap_angles,
 )
 from mappers.viewpoints.start_map import anchored_start, keep_if_better
 
-__all__ = ["RangeBearingAdjustment"]
+__all__ = ["DAMPING", "RangeBearingAdjustment"]
+
+DAMPING = Damping(up=10.0, down=10.0, floor=1e-9, tries=12, accept_equal=True)
+"""The range-bearing adjustment's Levenberg-Marquardt damping rule (BEARING-BA's)."""
 
 
 def _procrustes_poses(P, obs, n):
@@ -91,6 +99,9 @@ class RangeBearingAdjustment(TransformerMixin, BaseEstimator):
         passes: adjustments, the residual scales read again before each after the first.
         tol: a pass stops when no object moves more than this [m].
         min_views: an object read from fewer usable steps keeps its start position.
+        dense_coupling_bytes: the joint step's pose-object coupling is dense up to this many
+            bytes, one block per reading above (the sparse Schur step,
+            :mod:`mappers.viewpoints.sparse_schur`).
 
     Attributes:
         embedding_ (M, 2) in world coordinates (NaN rows: not placed); start_; poses_ (N, 3)
@@ -105,17 +116,20 @@ class RangeBearingAdjustment(TransformerMixin, BaseEstimator):
         "passes": [Interval(Integral, 1, None, closed="left")],
         "tol": [Interval(Real, 0, None, closed="left")],
         "min_views": [Interval(Integral, 2, None, closed="left")],
+        "dense_coupling_bytes": [Interval(Real, 0, None, closed="left")],
     }
 
     def __init__(self, *, loss: str | None = "huber", robust_scale: float = 2.0,
                  max_rounds: int = 8, passes: int = 2, tol: float = 1e-7,
-                 min_views: int = 3) -> None:
+                 min_views: int = 3,
+                 dense_coupling_bytes: float = DENSE_COUPLING_MAX_BYTES) -> None:
         self.loss = loss
         self.robust_scale = robust_scale
         self.max_rounds = max_rounds
         self.passes = passes
         self.tol = tol
         self.min_views = min_views
+        self.dense_coupling_bytes = dense_coupling_bytes
 
     def fit(self, X, y=None, *, masks=None, anchor_ids=None, anchor_positions=None,
             start_positions=None):
@@ -195,9 +209,10 @@ class RangeBearingAdjustment(TransformerMixin, BaseEstimator):
         return float(np.sum(wb * (robust_cost(ra / scales[0], k, self.loss)
                                   + robust_cost(rr / scales[1], k, self.loss))))
 
-    def _blocks(self, P, C, phi, obs, wb, scales, free_index, n_free):
-        """Normal-equation blocks (as :func:`mappers.viewpoints.bearing._normal_blocks`) of the
-        scaled, robustly weighted angle and range residuals."""
+    def _blocks(self, P, C, phi, obs, wb, scales, free_index, n_free, sparse=False):
+        """Normal-equation blocks (as :func:`mappers.viewpoints.engine.normal_blocks`) of the
+        scaled, robustly weighted angle and range residuals (``sparse``: the coupling as a
+        :class:`mappers.viewpoints.engine.Coupling`)."""
         t, i = obs[0], obs[1]
         n = len(C)
         ra, rr, d = bearing_residuals(P, C, phi, obs)
@@ -220,6 +235,8 @@ class RangeBearingAdjustment(TransformerMixin, BaseEstimator):
         tf, ff = t[k], f[k]
         V = scatter_sum(ff, JtWJ[k][:, :2, :2], n_free)
         h = scatter_sum(ff, -JtWu[k][:, :2], n_free)
+        if sparse:
+            return U, V, Coupling(-JtWJ[k][:, :, :2], tf, ff, n, n_free), g, h
         Wf = np.zeros((n, n_free, 3, 2))  # the object's Jacobian is minus the viewpoint's
         Wf[tf, ff] = -JtWJ[k][:, :, :2]
         Wf = Wf.transpose(0, 2, 1, 3)
@@ -230,23 +247,24 @@ class RangeBearingAdjustment(TransformerMixin, BaseEstimator):
         free_index = np.full(len(P), -1)
         free_index[free] = np.arange(free.sum())
         n_free = int(free.sum())
+        sparse = use_sparse_coupling(len(C), 3, 2, n_free, self.dense_coupling_bytes)
         lam, rounds = 1e-4, 0
         current = self._cost(P, C, phi, obs, wb, scales)
         while rounds < self.max_rounds:
             rounds += 1
-            blocks = self._blocks(P, C, phi, obs, wb, scales, free_index, n_free)
-            for _ in range(12):
+            blocks = self._blocks(P, C, phi, obs, wb, scales, free_index, n_free, sparse)
+
+            def trial(lam, blocks=blocks, P=P, C=C, phi=phi, wb=wb):
                 dc, dp = joint_step(*blocks, lam)
                 P2 = P.copy()
                 P2[free] += dp
                 C2, phi2 = C + dc[:, :2], wrap_angles(phi + dc[:, 2])
-                new = self._cost(P2, C2, phi2, obs, wb, scales)
-                if np.isfinite(new) and new <= current:
-                    break
-                lam *= 10.0
-            else:
+                return (P2, C2, phi2, dp), self._cost(P2, C2, phi2, obs, wb, scales)
+
+            state, new, lam, accepted = damped_step(trial, current, lam, DAMPING)
+            if not accepted:
                 break
-            P, C, phi, lam = P2, C2, phi2, max(lam / 10.0, 1e-9)
+            P, C, phi, dp = state
             done = current - new <= 1e-6 * current or not dp.size or np.abs(dp).max() <= self.tol
             current = new
             out = ~np.all((C >= box[0]) & (C <= box[1]), axis=1)

@@ -63,11 +63,15 @@ from mappers.catalog import METHODS
 from mappers.core.validation import check_views
 from mappers.defaults import localisation_free
 from mappers.viewpoints import view_cone_kernels as view_kernels
-from mappers.viewpoints.engine import joint_step
+from mappers.viewpoints.engine import Damping, damped_step, joint_step
 from mappers.viewpoints.start_map import anchored_start, fit_start, keep_if_better
 
 __all__ = ["MAX_FOV_DEG", "MAX_FREE_OBJECTS", "ConeProblem", "ViewAdjustment", "ViewAdjustmentWarning",
            "estimate_fov", "view_cone_score"]
+
+DAMPING = Damping(up=5.0, down=3.0, floor=1e-6, tries=8, accept_equal=False)
+"""VIEW-BA's Levenberg-Marquardt damping rule (:class:`mappers.viewpoints.engine.Damping`): a
+rejected step raises the damping 5x, at most 8 times; an accepted one lowers it 3x."""
 
 MAX_FOV_DEG = 150.0
 """Widest view [deg] the adjustment reads: a wider cone says little about the heading (with a
@@ -77,6 +81,10 @@ the map both ways)."""
 MAX_FREE_OBJECTS = 2000
 """Most free (non-anchor) objects VIEW-BA takes: its joint step holds an (N, 3, 2F) block and
 solves a (2F, 2F) system per round (at F = 2,000 and N = 2,000: 96 MB and 24 GFLOP a round)."""
+
+_PASS_ATTRS = ("embedding_", "refined_", "fov_deg_", "radius_", "poses_", "loss_",
+               "start_loss_")
+"""What one pass of :meth:`ViewAdjustment.fit` sets."""
 
 _MAX_SCORE_ENTRIES = 5e8
 """Largest steps x candidate viewpoints the grid search holds (float64: 4 GB)."""
@@ -235,15 +243,15 @@ class ConeProblem:
         free objects (BEARING-BA's Schur step), the damping raised until the loss falls (at
         most 8 tries; ``moved`` False: none did, nothing changed)."""
         _, U, V, W, g, h = self.blocks(P, C, R)
-        for _ in range(8):
+
+        def trial(lam):
             dc, dp = joint_step(U, V, W, g, h, lam)
             C2, P2 = C + dc, P.copy()
             P2[self.free_index >= 0] += dp
-            trial = self.cost(P2, C2, R)
-            if trial < loss:
-                return P2, C2, trial, max(lam / 3.0, 1e-6), True
-            lam *= 5.0
-        return P, C, loss, lam, False
+            return (P2, C2), self.cost(P2, C2, R)
+
+        state, loss, lam, moved = damped_step(trial, loss, lam, DAMPING)
+        return (*(state if moved else (P, C)), loss, lam, moved)
 
 
 class ViewAdjustment(TransformerMixin, BaseEstimator):
@@ -263,13 +271,18 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         max_start_loss: the loss per pair of the start map (viewpoints fitted) above which the
             mask is not read as a view cone and the start map is kept (between a cone's mask
             and a range limit's: ``docs/imperfect-sensing.md``, section "VIEW-BA", Guards).
+        passes: adjustments in a row, each from the map of the one before with the view's
+            width (unless given), the radius and the viewpoints found afresh on it; a pass that
+            does not lower its start's loss ends them and the map before it stands. A second
+            pass corrects a width misread on a poor start map (measured on two simulators, not
+            yet the default: ``docs/dead-ends.md``, "Defaults that carry").
         random_state: handed to the start methods.
 
     Attributes:
         embedding_ (M, 2) in world coordinates; start_ the start map; start_method_ its label;
         fov_deg_ the view's width used; radius_ the fitted visibility radius; poses_ (N, 3) the
-        viewpoints (NaN rows: steps left out); loss_, start_loss_ (per pair); refined_ (False:
-        the start map was kept).
+        viewpoints (NaN rows: steps left out); loss_, start_loss_ (per pair, of the last pass
+        kept); refined_ (False: the start map was kept).
     """
 
     _parameter_constraints: dict = {
@@ -283,13 +296,15 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         "headings": [Interval(Integral, 4, None, closed="left")],
         "pose_iters": [Interval(Integral, 0, None, closed="left")],
         "max_start_loss": [Interval(Real, 0, None, closed="neither")],
+        "passes": [Interval(Integral, 1, None, closed="left")],
         "random_state": ["random_state"],
     }
 
     def __init__(self, *, start: str | None = None, fov_deg: float | None = None,
                  rounds: int = 6, softness: float = 0.05, range_softness: float = 0.02,
                  miss_rate: float = 0.1, grid: int = 10, headings: int = 24,
-                 pose_iters: int = 3, max_start_loss: float = 0.35, random_state=0) -> None:
+                 pose_iters: int = 3, max_start_loss: float = 0.35, passes: int = 1,
+                 random_state=0) -> None:
         self.start = start
         self.fov_deg = fov_deg
         self.rounds = rounds
@@ -300,6 +315,7 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         self.headings = headings
         self.pose_iters = pose_iters
         self.max_start_loss = max_start_loss
+        self.passes = passes
         self.random_state = random_state
 
     def _start_map(self, X, mask, ids, pos, timeline) -> np.ndarray:
@@ -338,6 +354,25 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         )
         self.start_ = P0.copy()
         obs, seen = mask.T, (X.T > 0.5) & mask.T
+        self._adjust(P0, ids, obs, seen)
+        for _ in range(self.passes - 1):  # the view's width and viewpoints afresh on the map
+            if not self.refined_:
+                break
+            before = {k: getattr(self, k) for k in _PASS_ATTRS}
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                self._adjust(self.embedding_.copy(), ids, obs, seen)
+            if not self.refined_:  # no lower loss: the previous pass's map stands, silently
+                for k, v in before.items():
+                    setattr(self, k, v)
+                break
+            for w in caught:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        return self
+
+    def _adjust(self, P0, ids, obs, seen) -> None:
+        """One pass from the map ``P0``: the view's width (unless given), the viewpoints and the
+        joint rounds; sets the fitted attributes."""
         placed = np.all(np.isfinite(P0), axis=1)
         _check_score_input(P0, obs, self.grid, self.headings, self.softness)
         # the candidate viewpoints, shared by the view's width and the viewpoints' search
@@ -360,10 +395,10 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         if self.fov_deg_ > MAX_FOV_DEG:
             warnings.warn(f"a {self.fov_deg_:.0f}-degree view says little about a heading "
                           f"(above {MAX_FOV_DEG:.0f}): the start map is kept",
-                          ViewAdjustmentWarning, stacklevel=2)
+                          ViewAdjustmentWarning, stacklevel=3)
             self.embedding_, self.refined_ = P0.copy(), False
             self.loss_ = self.start_loss_ = float("nan")
-            return self
+            return
         P, loss, start_loss, C, R, steps = self._refine(P0, ids, obs, seen, placed,
                                                          (cells, cos_off, poses))
         n_pairs = max(int(steps.sum()) * int(placed.sum()), 1)
@@ -372,16 +407,15 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
             warnings.warn(f"the observed sets do not look like a view cone: from the best "
                           f"viewpoints the cone's loss is {self.start_loss_:.3g} per pair "
                           f"(above max_start_loss = {self.max_start_loss:g}); the start map is "
-                          "kept", ViewAdjustmentWarning, stacklevel=2)
+                          "kept", ViewAdjustmentWarning, stacklevel=3)
             self.embedding_, self.refined_ = P0.copy(), False
-            return self
+            return
         self.refined_, self.embedding_ = keep_if_better(
-            P, self.start_.copy(), placed, self.loss_ if np.isfinite(loss) else np.inf,
+            P, P0.copy(), placed, self.loss_ if np.isfinite(loss) else np.inf,
             self.start_loss_, "observed sets and bits", ViewAdjustmentWarning)
         if self.refined_:
             self.radius_ = R
             self.poses_[steps] = C
-        return self
 
     # -- the adjustment ------------------------------------------------------------------------
     def _candidates(self, P):

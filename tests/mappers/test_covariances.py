@@ -59,6 +59,24 @@ def test_model_needs_an_adjustment():
         _quiet(X, ANCHORS, P[ANCHORS], uncertainty="exact")
 
 
+def test_model_covariances_beyond_the_dense_coupling_are_refused():
+    """Issue 34: an adjustment on the sparse engine has no dense normal equations to invert."""
+    P, X = _bearing(3)
+    with pytest.raises(ValueError, match="dense_coupling_bytes.*bootstrap"):
+        _quiet(X, ANCHORS, P[ANCHORS], "BEARING-BA", uncertainty="model", dense_coupling_bytes=0)
+
+
+def test_a_compact_history_gets_the_dense_historys_model_covariances():
+    import scipy.sparse as sp
+
+    P, X = _bearing(4)
+    dense = _quiet(X, ANCHORS, P[ANCHORS], "BEARING-BA", uncertainty="model")
+    compact = _quiet(sp.csr_array(X), ANCHORS, P[ANCHORS], "BEARING-BA", sensor="bearing",
+                     uncertainty="model")
+    np.testing.assert_array_equal(compact.positions, dense.positions)
+    np.testing.assert_allclose(compact.covariances, dense.covariances, rtol=1e-12, atol=0)
+
+
 def test_bearing_model_covers_the_truth():
     """2-degree noise, 10 layouts: the 95 % regions hold most true positions, and are not
     merely wide (RMS radius of the ellipses a few times the mean error)."""
@@ -98,3 +116,39 @@ def test_bootstrap_of_a_visibility_map():
     radius = np.sqrt(np.trace(m.covariances[4:], axis1=1, axis2=2)).mean()
     error = np.linalg.norm(m.positions[4:] - P[4:], axis=1).mean()
     assert 0.2 < radius / error < 5.0
+
+
+def test_held_out_anchors_widen_covariances_that_miss_a_systematic_error():
+    # every object is sensed where it is not: a fixed offset of 4 cm each (a landmark's marker
+    # off its surveyed centre), which the readings' residuals cannot see: the model's ellipses
+    # miss it, the held-out anchors see it and widen them
+    P, poses = layout(16, 3), walk(150, seed=3)
+    offset = np.random.default_rng(3).normal(0.0, 0.04, P.shape)
+    _, b, _ = sensed(P + offset, poses)
+    b = b + np.random.default_rng(4).normal(0.0, np.radians(0.5), b.shape)
+    X = np.stack([np.cos(b), np.sin(b)], -1).reshape(len(P), -1)
+    model = _quiet(X, ANCHORS, P[ANCHORS], uncertainty="model")
+    checked = _quiet(X, ANCHORS, P[ANCHORS], uncertainty="anchors")
+    np.testing.assert_array_equal(checked.positions, model.positions)
+    note = [w for w in checked.warnings if "held-out anchors" in w]
+    assert note and "multiplied by" in note[0]
+    others = np.setdiff1d(np.arange(len(P)), [*ANCHORS, *model.unmapped])
+    ratio = checked.covariances[others] / model.covariances[others]
+    assert np.allclose(ratio, ratio.flat[0]) and ratio.flat[0] > 2
+    np.testing.assert_array_equal(checked.covariances[ANCHORS], 0.0)
+    assert coverage(checked.positions, checked.covariances, P, others) > coverage(
+        model.positions, model.covariances, P, others)
+
+
+def test_released_anchor_is_placed_by_the_readings_and_the_other_anchors():
+    from mappers.core.uncertainty import mahalanobis_squared
+    from mappers.viewpoints import BearingAdjustment, released_anchor
+
+    P, X = _bearing(1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        est = BearingAdjustment().fit(X, anchor_ids=ANCHORS, anchor_positions=P[ANCHORS])
+        p, c = released_anchor(est, X, None, ANCHORS, P[ANCHORS], 2)
+    assert np.all(np.linalg.eigvalsh(c) > 0)
+    assert 0.0 < np.linalg.norm(p - P[2]) < 0.05  # freed: moved, but by the readings' noise
+    assert mahalanobis_squared((p - P[2])[None], c[None])[0] < 30.0

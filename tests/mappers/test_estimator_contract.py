@@ -143,16 +143,39 @@ def _expected_failed_checks(estimator) -> dict[str, str]:
         return dict.fromkeys(_FITTED + _ARRAY_INPUT, _FUSED[kind])
     if kind in _CANNOT_FIT:
         failed = dict.fromkeys(_FITTED, _CANNOT_FIT[kind])
-        if kind is SparseCovis:  # its sparse tag is checked by fitting sparse data
+        if kind in (SparseCovis, BearingAdjustment):  # sparse tag: checked by fitting sparse data
             failed["check_estimator_sparse_tag"] = _CANNOT_FIT[kind]
+        if kind is BearingAdjustment:  # the sparse checks fit (40, 3) real-valued data too
+            failed.update(dict.fromkeys(("check_estimator_sparse_array",
+                                         "check_estimator_sparse_matrix"), _CANNOT_FIT[kind]))
         return failed
     return {}
+
+
+def _check_name(check) -> str:
+    """The name of a generic check as ``expected_failed_checks`` keys it (a check comes as a
+    ``functools.partial`` of the check function)."""
+    return getattr(check, "func", check).__name__
 
 
 @pytest.mark.filterwarnings("ignore::mappers.calibrated.cal_sma.FoldWarning")
 @parametrize_with_checks(ESTIMATORS, expected_failed_checks=_expected_failed_checks)
 def test_sklearn_estimator_checks(estimator, check):
-    check(estimator)
+    reason = _expected_failed_checks(estimator).get(_check_name(check))
+    if reason is None:
+        check(estimator)
+        return
+    # An expected failure (marked xfail by parametrize_with_checks): its outcome is reported as
+    # before, but through pytest.xfail raised outside the ``except`` (no chained traceback).
+    # Letting the check's exception reach pytest made it format the whole scikit-learn traceback
+    # for each of the ~330 of them: 0.25 s of CPU each, 95 % of this file's time.
+    try:
+        check(estimator)
+    except Exception as exc:  # noqa: BLE001 - any failure is the expected one
+        failure = f"{type(exc).__name__}: {str(exc)[:200]}"
+    else:
+        return  # passes after all: XPASS, as the xfail mark reports it
+    pytest.xfail(f"{reason} ({failure})")
 
 
 def _estimator_classes() -> set[type]:

@@ -109,3 +109,18 @@ def test_a_real_sequence_maps_from_stereo():
     r = map_starloc(DATA / "data" / "grid_s3", "range-bearing")
     assert r.mapped >= 0.9 and r.n_scored >= 20
     assert r.mpe < 0.12  # measured 0.09 m (issue 34's goal, 0.05 m, is not met yet)
+
+
+def test_disparity_offset_lengthens_the_ranges(tmp_path):
+    pts = np.array([[0.5, -0.2, 2.0], [-1.0, 0.3, 4.0]])
+    write_sequence(tmp_path / "s", pts, [1, 2], [0.0, 0.0])
+    plain = read_starloc(tmp_path / "s")
+    shifted = read_starloc(tmp_path / "s", disparity_offset=0.5)
+    disparity = CALIB["fu"] * CALIB["b"] / pts[:, 2]
+    np.testing.assert_allclose(shifted["range"] / plain["range"], disparity / (disparity - 0.5))
+    pd.testing.assert_frame_equal(plain[["ray_x", "ray_y", "ray_z"]],
+                                  shifted[["ray_x", "ray_y", "ray_z"]])
+    with pytest.raises(StarlocError, match="disparity_offset"):
+        read_starloc(tmp_path / "s", disparity_offset=disparity.min() + 1.0)
+    with pytest.raises(StarlocError, match="finite"):
+        read_starloc(tmp_path / "s", disparity_offset=float("nan"))

@@ -71,6 +71,20 @@ def test_covariance_columns_when_the_map_has_them(tmp_path):
     assert rows[3]["cov_xx"] == ""
 
 
+def test_covariance_columns_of_a_3d_map(tmp_path):
+    pos = np.column_stack([POSITIONS, [0.0, 0.0, 0.5, np.nan, 1.0]])
+    cov = np.tile(np.array([[4.0, 0.5, 0.1], [0.5, 9.0, 0.2], [0.1, 0.2, 1.0]]), (5, 1, 1))
+    cov[3] = np.nan
+    m = SimpleNamespace(positions=pos, warnings=(), covariances=cov)
+    write_map_files(tmp_path, m, IDS, ANCHORS, np.column_stack([ANCHOR_POS, [0.0, 0.0, 1.0]]),
+                    plot=False)
+    rows = _read_csv(tmp_path / "map.csv")
+    names = ["cov_xx", "cov_xy", "cov_xz", "cov_yy", "cov_yz", "cov_zz"]
+    assert sorted(list(rows[0])[-6:]) == sorted(names)
+    assert [float(rows[2][c]) for c in names] == [4.0, 0.5, 0.1, 9.0, 0.2, 1.0]
+    assert rows[3]["cov_zz"] == ""
+
+
 def test_covariances_of_the_wrong_shape_are_refused(tmp_path):
     with pytest.raises(ValueError, match="covariances have shape"):
         write_map_files(tmp_path, _map(covariances=np.zeros((4, 2, 2))), IDS, ANCHORS,

@@ -149,9 +149,13 @@ def test_even_relocalises_a_whole_episode_and_drifts_without_the_walls():
     env.close()
 
 
-def test_even_covers_the_room_more_evenly_than_the_random_walk():
+@pytest.mark.parametrize("seeds", [(12,), pytest.param((11, 12, 13), marks=pytest.mark.slow)],
+                         ids=["one-layout", "three-layouts"])
+def test_even_covers_the_room_more_evenly_than_the_random_walk(seeds):
     # the variance of a kernel coverage of the room at the true poses (what the policy
-    # minimises, measured from outside): 0.11-0.24 of the random walk's on these layouts
+    # minimises, measured from outside): 0.23, 0.11 and 0.24 of the random walk's on layouts
+    # 11, 12 and 13. An episode of the policy costs about 10 s of CPU: the default run checks
+    # one layout, -m slow all three
     env = gym.make("LFMDR-Visibility-v0", max_episode_steps=300)
     half = env.unwrapped.world.arena_half - env.unwrapped.world.robot_radius
     g = np.linspace(-half, half, 50)
@@ -162,7 +166,7 @@ def test_even_covers_the_room_more_evenly_than_the_random_walk():
         return float(np.exp(-d2 / (2 * 0.1 ** 2)).sum(axis=1).var())
 
     ratios = []
-    for seed in (11, 12, 13):
+    for seed in seeds:
         even = collect(env, POLICIES["even"](env), 300, seed=seed).robot_poses
         walk = collect(env, POLICIES["random-walk"](env), 300, seed=seed).robot_poses
         ratios.append(unevenness(even) / unevenness(walk))

@@ -53,6 +53,19 @@ def _histories() -> dict[str, History]:
 HISTORIES = _histories()
 
 
+DEFAULT_AND_MANY = pytest.mark.parametrize(
+    "slow", [False, pytest.param(True, marks=pytest.mark.slow)], ids=["default", "many"])
+"""A fuzz test's default run, and its many-cases run under ``-m slow``."""
+
+
+def _read_checked(paths: list, expected: dict, slow: bool) -> tuple[list, dict]:
+    """``(paths, outcomes)``: every file read in a child process (:func:`read_all`), each
+    outcome checked against ``expected`` (:func:`_check`)."""
+    outcomes = read_all(paths, READER, ERRORS, time_limit=600.0 if slow else 120.0)
+    _check(outcomes, expected)
+    return paths, outcomes
+
+
 def _check(outcomes: dict, expected: dict) -> None:
     """Every file gave HistoryFileError, or read back as ``expected[path]`` (None: any history
     the reader accepted)."""
@@ -85,12 +98,9 @@ def _damaged(tmp_path, slow: bool) -> tuple[list, dict]:
     return paths, expected
 
 
-@pytest.mark.parametrize("slow", [False, pytest.param(True, marks=pytest.mark.slow)],
-                         ids=["default", "many"])
+@DEFAULT_AND_MANY
 def test_truncated_and_bit_flipped_files(tmp_path, slow):
-    paths, expected = _damaged(tmp_path, slow)
-    outcomes = read_all(paths, READER, ERRORS, time_limit=600.0 if slow else 120.0)
-    _check(outcomes, expected)
+    paths, outcomes = _read_checked(*_damaged(tmp_path, slow), slow)
     errors = sum("error" in o for o in outcomes.values())
     assert errors > 0.8 * len(paths)  # the damage is real: most files are refused
 
@@ -135,12 +145,9 @@ _CHECKED = ("format_version", "sensors", "meta", "mask_shape", "matrix_shape")
 """The fields :func:`test_mislabelled_fields` checks by name: given every wrong value."""
 
 
-@pytest.mark.parametrize("slow", [False, pytest.param(True, marks=pytest.mark.slow)],
-                         ids=["default", "many"])
+@DEFAULT_AND_MANY
 def test_mislabelled_fields(tmp_path, slow):
-    paths, expected = _mislabelled(tmp_path, slow)
-    outcomes = read_all(paths, READER, ERRORS, time_limit=600.0 if slow else 120.0)
-    _check(outcomes, expected)
+    paths, outcomes = _read_checked(*_mislabelled(tmp_path, slow), slow)
     read = [p for p, o in outcomes.items() if "read" in o]
     assert len(read) < 0.05 * len(paths)  # nearly every such file is refused
     # each of these is a history of another shape or kind: refused, never read half-way

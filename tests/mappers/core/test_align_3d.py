@@ -51,6 +51,16 @@ def test_two_d_anchor_shape_refused():
         check_anchors_3d([0, 1, 2], np.zeros((3, 2)), 10)
 
 
+def test_anchor_positions_checked_as_in_2d():
+    """Not numeric, or NaN/inf: refused naming anchor_positions (the check the 2-D anchors use)."""
+    with pytest.raises(ValueError, match=r"anchor_positions must be a numeric \(A, 3\) array"):
+        check_anchors_3d([0, 1, 2], [["a", "b", "c"]] * 3, 10)
+    bad = np.eye(3)
+    bad[1, 2] = np.nan
+    with pytest.raises(ValueError, match="anchor_positions contain NaN or inf"):
+        check_anchors_3d([0, 1, 2], bad, 10)
+
+
 def test_scores_3d():
     P = RNG.normal(size=(12, 3))
     assert mean_position_error_3d(P + [0.0, 0.0, 0.1], P) == pytest.approx(0.1)

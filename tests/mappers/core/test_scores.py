@@ -42,6 +42,24 @@ def test_mpe_bad_input(est, truth, exclude, match):
         mean_position_error(est, truth, exclude=exclude)
 
 
+@pytest.mark.parametrize(
+    "exclude, match",
+    [([5], "out of range"), ([0.5], "integer"), (None, "NaN/inf rows")],
+)
+def test_mpe_3d_checks_its_input_as_the_2d_score_does(exclude, match):
+    """The 3-D score refuses what the 2-D one does (one shared check, scores.check_scored_pair)."""
+    from mappers.core.scores_3d import mean_position_error_3d
+
+    truth = np.zeros((3, 3))
+    est = truth.copy()
+    est[1] = np.nan
+    with pytest.raises(ValueError, match=match):
+        mean_position_error_3d(est, truth, exclude=exclude)
+    with pytest.raises(ValueError, match=r"\(M, 3\)"):
+        mean_position_error_3d(np.zeros((3, 2)), np.zeros((3, 2)))
+    assert mean_position_error_3d(est + [3.0, 4.0, 0.0], truth, exclude=[1]) == pytest.approx(5.0)
+
+
 def test_moe_hand_examples():
     tri = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
     assert mean_orientation_error(tri, tri) == 0.0
@@ -183,8 +201,10 @@ def moe_settings(request, monkeypatch):
         monkeypatch.setattr(scores, "_BATCH", 150)
 
 
-@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("seed", [0, 1, *(pytest.param(s, marks=pytest.mark.slow) for s in (2, 3))])
 def test_moe_fast_equals_bruteforce(seed, moe_settings):
+    """The fast MOE equals the brute force on 70 layouts per seed (every degenerate kind of
+    :func:`_layouts` ten times): two seeds in the default run, two more with ``-m slow``."""
     for est, truth in _layouts(seed, 70):
         assert _moe_fast(est, truth) == _moe_bruteforce(est, truth)
         assert _moe_fast(truth, est) == _moe_bruteforce(truth, est)

@@ -108,6 +108,19 @@ def test_range_bearing_adjustment_is_exact_on_perfect_readings_and_keeps_unplace
     np.testing.assert_allclose(Y[keep], P[keep], atol=1e-5)
 
 
+def test_range_bearing_adjustment_on_the_sparse_engine_maps_as_the_dense_one():
+    """Issue 34: the joint step through the sparse Schur engine (forced) gives the dense map."""
+    P, anchors, _, R, B, seen = _walk(fov_deg=120.0, max_range=1.5, noise_deg=2.0, noise_r=0.02,
+                                      n_steps=600, seed=6)
+    H, masks = {"range": R, "bearing": B}, {"range": seen, "bearing": np.repeat(seen, 2, axis=1)}
+    start = P + np.random.default_rng(1).normal(0.0, 0.05, P.shape)
+    fix = dict(anchor_ids=anchors, anchor_positions=P[anchors], start_positions=start)
+    dense = RangeBearingAdjustment().fit(H, masks=masks, **fix)
+    sparse = RangeBearingAdjustment(dense_coupling_bytes=0).fit(H, masks=masks, **fix)
+    assert dense.refined_ and _mpe(dense.embedding_, P, anchors) < 0.5 * _mpe(start, P, anchors)
+    np.testing.assert_allclose(sparse.embedding_, dense.embedding_, rtol=0, atol=1e-7)
+
+
 @pytest.mark.parametrize("params, match", [({"refine": "range"}, "refine"),
                                             ({"refine": True}, "refine")])
 def test_loc_sma_refuses_a_bad_refine(params, match):

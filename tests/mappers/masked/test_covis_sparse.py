@@ -69,10 +69,27 @@ def test_covis_sparse_maps_as_well_as_the_dense_default(limited):
     assert np.median(gap) < 0.1, np.median(gap)
 
 
-def test_large_masked_bearing_default_is_covis_sparse():
+def test_large_masked_bearing_default_is_bearing_ba_from_covis_sparse():
     spec = mappers.catalog.resolve_method(None, "bearing", masked=True, n_objects=1000)
-    assert spec.label == "COVIS-SPARSE" and spec.sparse
+    assert spec.label == "BEARING-BA" and spec.sparse  # issue 34: it takes compact histories
+    assert spec.defaults["start"] == "COVIS-SPARSE" and spec.defaults["schur_solver"] == "cg"
     assert mappers.catalog.resolve_method(None, "bearing", masked=True, n_objects=50).label == "BEARING-BA"
+
+
+def test_the_large_default_maps_a_compact_history_as_a_dense_one(limited):
+    """The large default's pipeline (BEARING-BA from COVIS-SPARSE, sparse Schur engine forced)
+    on the compact history equals its map of the dense history, and refines its start."""
+    dense, small = limited
+    ids, pos, truth = dense.anchor_ids, dense.anchor_positions, dense.object_positions
+    params = {**mappers.catalog.resolve_method(None, "bearing", masked=True, n_objects=1000).defaults,
+              "dense_coupling_bytes": 0}
+    got = mappers.build_map(small, ids, pos, method="BEARING-BA", **params)
+    again = mappers.build_map(dense, ids, pos, method="BEARING-BA", **params)
+    start = mappers.build_map(small, ids, pos, method="COVIS-SPARSE")
+    np.testing.assert_allclose(got.positions, again.positions, rtol=0, atol=1e-9)
+    ex = sorted({*ids.tolist(), *got.unmapped, *start.unmapped})
+    err = mean_position_error(got.positions, truth, exclude=ex)
+    assert err < 0.1 * mean_position_error(start.positions, truth, exclude=ex), err
 
 
 def test_a_dense_masked_method_gets_the_sparse_history_densified(limited):

@@ -116,8 +116,8 @@ def test_online_bearing_keeps_cal_sma_when_refinement_fails(monkeypatch):
 
     real = BearingAdjustment._refine
 
-    def refuse(self, theta, seen, P0, ids):
-        real(self, theta, seen, P0, ids)
+    def refuse(self, obs, n, m, P0, ids):
+        real(self, obs, n, m, P0, ids)
         self.refined_ = False
         return P0
 

@@ -40,6 +40,16 @@ def test_rays_and_ranges_map_exactly():
     assert mean_position_error_3d(m.positions, P, [*m.unmapped, *ANCHORS]) < 1e-6
 
 
+def test_an_unplaced_object_is_named_by_its_id_as_in_2d():
+    """Map.warnings names the unmapped objects by id, in the 2-D notes' words ("objects [...]
+    could not be placed"), so a caller that renames object ids (MRCLAM's subjects) reads both."""
+    P, X, Rg = camera_world()
+    X[[7, 12]], Rg[[7, 12]] = 0.0, 0.0  # never seen
+    m = build_map({"bearing": X, "range": Rg}, ANCHORS, P[ANCHORS])
+    assert {7, 12} <= set(m.unmapped)
+    assert f"objects {list(m.unmapped)} could not be placed from their histories" in m.warnings
+
+
 def test_rays_alone_map_closely():
     # exact rays: the adjustment from the resection-and-intersection start comes within a
     # centimetre (it stalls there: bearing-only converges slowly; 60 iterations as 200)
@@ -86,7 +96,76 @@ def test_coplanar_anchors_refused_for_sightings():
         build_map(vis, ANCHORS, flat)
 
 
-def test_uncertainty_of_a_3d_map_is_refused_not_dropped():
+def test_the_sparse_engine_maps_as_the_dense_one():
+    """Issue 34: the 6-DoF adjustment through the sparse Schur step (forced) gives the dense
+    step's map, to rounding."""
+    P, X, Rg = camera_world(noise_deg=1.0, range_noise=0.02)
+    dense = build_map({"bearing": X, "range": Rg}, ANCHORS, P[ANCHORS], method="SPATIAL-BA")
+    sparse = build_map({"bearing": X, "range": Rg}, ANCHORS, P[ANCHORS], method="SPATIAL-BA",
+                       dense_coupling_bytes=0)
+    assert mean_position_error_3d(dense.positions, P, [*dense.unmapped, *ANCHORS]) < 0.05
+    assert dense.unmapped == sparse.unmapped
+    np.testing.assert_allclose(sparse.positions, dense.positions, rtol=0, atol=1e-7)
+
+
+def test_spatial_ba_model_covariances_shapes_anchors_and_coverage():
+    # noisy rays and ranges (1 degree, 2 cm: the adjustment's own noise model): (M, 3, 3) in the
+    # map's frame, zero for the anchors, symmetric positive semi-definite, and the truth inside
+    # the 95 % ellipsoid of most objects (3 worlds pooled; a calibrated model gives 0.95)
+    from mappers.core.uncertainty import chi2_quantile, mahalanobis_squared
+
+    q = []
+    for seed in range(3):
+        P, X, Rg = camera_world(seed=seed, noise_deg=1.0, range_noise=0.02)
+        plain = build_map({"bearing": X, "range": Rg}, ANCHORS, P[ANCHORS])
+        m = build_map({"bearing": X, "range": Rg}, ANCHORS, P[ANCHORS], uncertainty=True)
+        assert np.array_equal(m.positions, plain.positions, equal_nan=True)
+        assert m.covariances.shape == (len(P), 3, 3)
+        assert np.all(m.covariances[ANCHORS] == 0.0)
+        free = np.setdiff1d(np.arange(len(P)), [*ANCHORS, *m.unmapped])
+        cov = m.covariances[free]
+        assert np.allclose(cov, cov.transpose(0, 2, 1))
+        assert np.all(np.linalg.eigvalsh(cov) > 0)
+        q.append(mahalanobis_squared(m.positions[free] - P[free], cov))
+    share = np.mean(np.concatenate(q) <= chi2_quantile(3))
+    assert 0.7 <= share <= 1.0
+
+
+def test_spatial_ba_covariances_nan_for_unmapped_and_carried_by_the_similarity():
+    # anchor_noise places the adjusted map on the anchors by a similarity: the covariances are
+    # carried by it (the same objects' ellipsoids as without it, up to the map's change); an
+    # object never seen is unmapped and its covariance NaN
+    P, X, Rg = camera_world(seed=4, noise_deg=1.0, range_noise=0.02)
+    X[-1], Rg[-1] = 0.0, 0.0
+    m = build_map({"bearing": X, "range": Rg}, ANCHORS, P[ANCHORS], uncertainty="model",
+                  anchor_noise=0.03)
+    assert len(P) - 1 in m.unmapped
+    assert np.all(np.isnan(m.covariances[list(m.unmapped)]))
+    assert np.all(m.covariances[ANCHORS] == 0.0)
+    fixed = build_map({"bearing": X, "range": Rg}, ANCHORS, P[ANCHORS], uncertainty="model")
+    free = np.setdiff1d(np.arange(len(P)), [*ANCHORS, *m.unmapped, *fixed.unmapped])
+    ratio = np.trace(m.covariances[free], axis1=1, axis2=2) / np.trace(
+        fixed.covariances[free], axis1=1, axis2=2)
+    assert 0.3 < np.median(ratio) < 3.0
+
+
+@pytest.mark.slow  # 21 COVIS-3D maps: about 50 s on a loaded machine
+def test_covis_3d_bootstrap_covariances():
+    P, X, _ = camera_world(m=30, n=300, seed=2)
+    vis = (np.abs(X[:, 0::3]) + np.abs(X[:, 2::3]) > 0).astype(float)
+    m = build_map(vis, ANCHORS, P[ANCHORS], uncertainty=True, max_iter=50)
+    assert m.method == "COVIS-3D" and m.covariances.shape == (len(P), 3, 3)
+    assert np.all(m.covariances[ANCHORS] == 0.0)
+    free = np.setdiff1d(np.arange(len(P)), [*ANCHORS, *m.unmapped])
+    assert np.all(np.linalg.eigvalsh(m.covariances[free]) > 0)
+    with pytest.raises(ValueError, match="model"):
+        build_map(vis, ANCHORS, P[ANCHORS], uncertainty="model")
+
+
+
+
+def test_model_covariances_beyond_the_dense_coupling_are_refused():
     P, X, Rg = camera_world()
-    with pytest.raises(ValueError, match="3-D maps"):
-        build_map({"bearing": X, "range": Rg}, ANCHORS, P[ANCHORS], uncertainty=True)
+    with pytest.raises(ValueError, match="dense_coupling_bytes"):
+        build_map({"bearing": X, "range": Rg}, ANCHORS, P[ANCHORS], uncertainty="model",
+                  dense_coupling_bytes=0)

@@ -40,7 +40,8 @@ def test_it_is_the_bearing_default_below_the_scalable_size():
     P, X, mask, ids = _camera(fov_deg=90, n_steps=200)
     assert DEFAULT_METHODS[("bearing", False)] == DEFAULT_METHODS[("bearing", True)] == "BEARING-BA"
     assert default_method(X, sensor="bearing", mask=mask) == "BEARING-BA"
-    assert resolve_method(None, "bearing", masked=True, n_objects=1000).label == "COVIS-SPARSE"
+    large_masked = resolve_method(None, "bearing", masked=True, n_objects=1000)
+    assert large_masked.label == "BEARING-BA" and large_masked.defaults["start"] == "COVIS-SPARSE"
     large = resolve_method(None, "bearing", n_objects=1000)
     assert large.label == "CAL-SMA" and large.defaults["sparse"] is True
 

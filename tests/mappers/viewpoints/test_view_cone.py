@@ -118,6 +118,25 @@ def test_view_ba_moves_a_perturbed_map_towards_the_truth_and_finds_the_viewpoint
     assert 0.4 < va.radius_ < 0.8  # the bits' radius, 0.6
 
 
+def test_a_second_pass_is_one_more_adjustment_from_the_first_pass_map():
+    """passes=2 runs a second adjustment from the first's map (viewpoints found
+    afresh) and keeps it if it lowers the loss of its own start; else the first's map stands."""
+    P, _, X, mask = _camera(90, n_steps=500, m=24, seed=8)
+    start = P + np.random.default_rng(9).normal(0, 0.1, P.shape)
+    fit = dict(mask=mask, anchor_ids=ANCHORS, anchor_positions=P[ANCHORS], start_positions=start)
+    one = ViewAdjustment(fov_deg=90, passes=1).fit(X, **fit)
+    two = ViewAdjustment(fov_deg=90, passes=2).fit(X, **fit)
+    assert ViewAdjustment().passes == 1 and one.refined_ and two.refined_
+    assert np.array_equal(two.start_, one.start_)  # the start map is the first pass's
+    again = ViewAdjustment(fov_deg=90, passes=1).fit(X, **{**fit, "start_positions": one.embedding_})
+    if again.refined_:  # the second pass is one more adjustment from the first's map
+        assert np.allclose(two.embedding_, again.embedding_)
+    else:  # it did not lower the loss: the first pass's map stands
+        assert np.array_equal(two.embedding_, one.embedding_)
+    with pytest.raises(ValueError, match="passes"):
+        ViewAdjustment(passes=0).fit(X, **fit)
+
+
 def test_a_wide_view_keeps_the_start_map():
     P, _, X, mask = _camera(90, n_steps=200, seed=5)
     start = P + 0.01

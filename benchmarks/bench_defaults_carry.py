@@ -1,0 +1,158 @@
+"""Do the defaults carry to data nobody tuned them on? The figures of issue 35's goals.
+
+Two parts (``--parts``):
+
+- ``view``: the masked visibility default (``build_map`` with ``method=None``: ``VIEW-BA``)
+  through a 90-degree view on fresh layouts of the project's world (the random walk of
+  ``bench_masked_goals.py``, seeds from 1000) and of a second, independent simulator
+  (``bench_view_other_sim.py``: its own layouts, walk and no occlusion, seeds from 0), and the
+  same histories read as a log of sightings (the mask set to the sightings, as a table of
+  detections gives it: what was in view but not seen is not said). Goal: mean non-anchor MPE
+  <= 0.05 m on both simulators.
+- ``mrclam``: each MRCLAM run's range and visibility maps with no setting given, the way a user
+  would get them: ``lfmdr mrclam RUN`` (the defaults for logged runs, ``logged=True``) and ``lfmdr
+  map`` of the run's observation table as ``lfmdr convert mrclam`` writes it (the library
+  defaults: one step per camera frame, ``build_map``'s choice for the History). Goals: range
+  <= 0.30 m, visibility <= 0.70 m (mean over the runs). The leave-one-run-out figures (each
+  run's setting chosen on the other runs) are ``bench_mrclam.py``'s.
+
+It prints the mean non-anchor MPE [m] (largest run in brackets) per body of data.
+
+    python benchmarks/bench_defaults_carry.py                       # both parts (~15 min)
+    python benchmarks/bench_defaults_carry.py --parts view --runs 10
+    python benchmarks/bench_defaults_carry.py --parts mrclam        # ~3 min
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_masked_goals import episode  # noqa: E402
+from bench_view_other_sim import ANCHORS, other_sim  # noqa: E402
+
+import mappers  # noqa: E402
+
+VIEW_GOAL = 0.05
+MRCLAM_GOALS = {"range": 0.30, "visibility": 0.70}
+
+
+def _mpe(X, mask, ids, apos, truth, passes: int = 1) -> tuple[float, str]:
+    """(non-anchor MPE [m], the label build_map chose) of the default map; ``passes`` > 1:
+    VIEW-BA with that many passes instead."""
+    method, params = (None, {}) if passes == 1 else ("VIEW-BA", {"passes": passes})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = mappers.build_map(X, ids, apos, method, sensor="visibility", mask=mask, **params)
+    keep = np.setdiff1d(np.arange(len(truth)), ids)
+    return mappers.mean_position_error(m.positions[keep], truth[keep]), m.method
+
+
+def _world(seed: int):
+    h = episode("visibility", seed, 2000, fov_deg=90)
+    return (np.asarray(h.matrix, dtype=float), np.asarray(h.mask, dtype=bool),
+            np.asarray(h.anchor_ids), np.asarray(h.anchor_positions),
+            np.asarray(h.object_positions))
+
+
+def _other(seed: int):
+    P, X, mask = other_sim(seed)
+    return X, mask, ANCHORS, P[ANCHORS], P
+
+
+def view_part(runs: int, passes: int = 1) -> None:
+    print(f"## VIEW-BA's 90-degree view: default map, {runs} fresh layouts per simulator; "
+          f"MPE [m] mean (largest run), goal <= {VIEW_GOAL}")
+    for name, make, seed0 in (("project's world", _world, 1000), ("other simulator", _other, 0)):
+        rows: dict[str, list[float]] = {"view mask": [], "log of sightings": []}
+        labels: dict[str, set[str]] = {k: set() for k in rows}
+        for seed in range(seed0, seed0 + runs):
+            X, mask, ids, apos, P = make(seed)
+            for kind, m in (("view mask", mask), ("log of sightings", mask & (X > 0.5))):
+                e, label = _mpe(X, m, ids, apos, P, passes if kind == "view mask" else 1)
+                rows[kind].append(e)
+                labels[kind].add(label)
+            print(f"  {name} seed {seed}: " + "  ".join(f"{k} {v[-1]:.4f}" for k, v in rows.items()),
+                  flush=True)
+        for kind, v in rows.items():
+            a = np.array(v)
+            verdict = ("met" if a.mean() <= VIEW_GOAL else "NOT met") if kind == "view mask" else ""
+            print(f"{name:16s} {kind:17s} {a.mean():.4f} ({a.max():.4f})  "
+                  f"[{', '.join(sorted(labels[kind]))}] {verdict}")
+
+
+def mrclam_part(data: Path) -> None:
+    from lfmdr_gym.datasets.mrclam import read_run
+    from lfmdr_gym.datasets.mrclam_table import (
+        mrclam_anchors,
+        mrclam_landmarks,
+        mrclam_observations,
+    )
+    from lfmdr_gym.experiments.map_log import map_observation_log
+    from lfmdr_gym.experiments.mrclam import map_mrclam_run
+
+    runs = sorted(p for p in data.glob("MRCLAM_Dataset*") if p.is_dir())
+    if not runs:
+        raise SystemExit(f"no MRCLAM_Dataset* directories under {data}")
+    print("\n## MRCLAM with no setting given: non-anchor MPE [m] per run")
+    with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tables = {}
+        for run in runs:
+            r, stem = read_run(run), Path(tmp) / run.name
+            tables[run.name] = (stem.with_suffix(".csv"), Path(f"{stem}-anchors.csv"),
+                                Path(f"{stem}-truth.csv"))
+            mrclam_observations(r).to_csv(tables[run.name][0], index=False)
+            mrclam_anchors(r).to_csv(tables[run.name][1], index=False)
+            mrclam_landmarks(r).to_csv(tables[run.name][2], index=False)
+        for sensor, goal in MRCLAM_GOALS.items():
+            cols: dict[str, list[float]] = {"lfmdr mrclam": [], "lfmdr map": []}
+            used: dict[str, set[str]] = {k: set() for k in cols}
+            for run in runs:
+                t0 = time.perf_counter()
+                a = map_mrclam_run(run, sensor)
+                cols["lfmdr mrclam"].append(a.mpe)
+                used["lfmdr mrclam"].add(a.method)
+                log, anchors, truth = tables[run.name]
+                lm = map_observation_log(log, anchors, truth=truth, sensor=sensor,
+                                         out=Path(tmp) / f"out-{sensor}-{run.name}", plot=False)
+                cols["lfmdr map"].append(lm.files.scores["mpe_nonanchor"])
+                used["lfmdr map"].add(lm.method)
+                print(f"  {sensor:10s} {run.name}: " + "  ".join(
+                    f"{k} {v[-1]:.3f}" for k, v in cols.items())
+                    + f"  [{time.perf_counter() - t0:.0f} s]", flush=True)
+            for k, v in cols.items():
+                a = np.array(v)
+                print(f"{sensor:10s} {k:13s} mean {a.mean():.3f} (largest {a.max():.3f})  "
+                      f"[{', '.join(sorted(used[k]))}]  goal <= {goal}: "
+                      f"{'met' if a.mean() <= goal else 'NOT met'}")
+
+
+def main(argv=None) -> None:
+    here = Path(__file__).resolve().parents[1]
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--parts", nargs="*", default=["view", "mrclam"], choices=["view", "mrclam"])
+    ap.add_argument("--runs", type=int, default=25, help="layouts per simulator (default 25)")
+    ap.add_argument("--data", type=Path, default=here.parent / "shared" / "data" / "mrclam")
+    ap.add_argument("--view-passes", type=int, default=1,
+                    help="with > 1: the view masks mapped by VIEW-BA(passes=N) instead of the "
+                         "default (docs/dead-ends.md, 'Defaults that carry')")
+    args = ap.parse_args(argv)
+    with threadpool_limits(limits=1):
+        if "view" in args.parts:
+            view_part(args.runs, args.view_passes)
+        if "mrclam" in args.parts:
+            mrclam_part(args.data)
+
+
+if __name__ == "__main__":
+    main()

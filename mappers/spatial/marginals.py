@@ -1,0 +1,91 @@
+"""Marginal covariances of the objects of the 6-DoF adjustment (``SPATIAL-BA``), the viewpoints
+eliminated: the 3-D form of :mod:`mappers.viewpoints.marginals`.
+
+At the adjustment's solution (before the similarity onto the anchors, when ``anchor_noise`` is
+set) the Gauss-Newton normal blocks of the steps' poses (6 x 6: rotation vector and position)
+and of the free objects (3 x 3) are built once more, undamped, with the robust loss's weights
+at the final residuals (:func:`mappers.spatial.adjustment._normal_blocks`, the adjustment's own).
+The poses are eliminated by the Schur complement
+(:func:`mappers.viewpoints.marginals.schur_information`) and the (3, 3) diagonal blocks of the
+inverse, times the robustly weighted residuals' variance ``sum(w |e|²) / (K - p)`` (K residual
+rows: two angles per sighting and one per range; p unknowns: 6 per posed step, 3 per free
+object), are the objects' marginal covariances (Triggs et al., *Bundle Adjustment — A Modern
+Synthesis*, 2000, §9; Hartley & Zisserman, *Multiple View Geometry*, 2nd ed., §5.2.3). As in
+2-D, each object gets the wider (by trace) of that and the cluster-robust ("sandwich")
+covariance over blocks of ``ceil(sqrt(N))`` consecutive steps (Huber 1967; White 1980; Liang &
+Zeger 1986; :func:`mappers.viewpoints.marginals.model_covariances`).
+
+*Gauge*: the anchors are held fixed (zero covariance) — with ``anchor_noise`` too: their prior
+is what places the map on them, and ``build_map`` takes the anchors' positions as exact. The
+covariances are then carried to the output frame by the similarity ``s R`` (``s² R C Rᵀ``).
+Objects the adjustment placed but :class:`~mappers.spatial.spatial_ba.SpatialAdjustment` left
+out as inconsistent get NaN, like its positions.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mappers.spatial.adjustment import _normal_blocks, _Problem
+from mappers.viewpoints import (
+    DENSE_COUPLING_MAX_BYTES,
+    model_covariances,
+    robust_weights,
+    schur_information,
+    step_blocks,
+    use_sparse_coupling,
+)
+
+__all__ = ["spatial_covariances"]
+
+
+def spatial_covariances(est) -> np.ndarray:
+    """(M, 3, 3) model covariances of a fitted :class:`~mappers.spatial.spatial_ba.SpatialAdjustment`
+    ``est`` in its output frame (module docstring): zero for the anchors, NaN for the objects it
+    did not place. ValueError for an estimator that was not fitted."""
+    if not hasattr(est, "adjusted_"):
+        raise ValueError(f"{type(est).__name__} is not fitted: no model covariances")
+    obs, res, ids = est.observations_, est.adjusted_, est.anchor_ids_
+    P, R, C = res.points, res.rotations, res.positions
+    placed = np.all(np.isfinite(P), axis=1)
+    posed = np.all(np.isfinite(C), axis=1)
+    keep = placed[obs.obj] & posed[obs.step]
+    prob = _Problem(obs, keep, est.bearing_noise, est.range_noise, est.range_growth)
+    free = placed.copy()
+    free[np.asarray(ids, dtype=int)] = False
+    free_index = np.full(len(P), -1)
+    free_index[free] = np.arange(free.sum())
+    steps = np.flatnonzero(posed)
+    step_index = np.full(len(C), -1)
+    step_index[steps] = np.arange(steps.size)
+    Pz = np.where(placed[:, None], P, 0.0)
+    e, v, nv, vh = prob.residuals(Pz, R, C)
+    w = robust_weights(np.linalg.norm(e, axis=1), est.loss_scale, est.loss)
+    Jc, Jp = prob.jacobians(R, v, nv, vh)
+    t = step_index[prob.t]
+    limit = getattr(est, "dense_coupling_bytes", DENSE_COUPLING_MAX_BYTES)
+    if use_sparse_coupling(steps.size, 6, 3, int(free.sum()), limit):
+        raise ValueError(
+            f"model covariances of SPATIAL-BA hold the dense (N, 6, 3F) coupling, "
+            f"{8 * 18 * steps.size * int(free.sum()) / 2**30:.2f} GiB for N = {steps.size} steps "
+            f"and F = {int(free.sum())} free objects (above its dense_coupling_bytes, "
+            f"{limit:.3g}); use fewer steps")
+    U, V, Wf, _, _ = _normal_blocks(prob, e, w, Jc, Jp, t, free_index, steps.size,
+                                    int(free.sum()))
+    S = schur_information(U, V, Wf)
+    we = w[:, None] * e
+    g_pose = np.einsum("kri,kr->ki", Jc, we)
+    g_obj = np.einsum("kri,kr->ki", Jp, we)
+    blocks = np.unique(step_blocks(obs.n_steps)[steps], return_inverse=True)[1].ravel()
+    n_rows = 2 * len(e) + int(prob.has_r.sum())
+    cov = model_covariances(S, U, Wf, (t, free_index[prob.i], g_pose, g_obj, blocks),
+                            float(np.sum(w * np.sum(e * e, axis=1))), n_rows,
+                            6 * steps.size + 3 * int(free.sum()), np.where(
+                                placed[:, None], P, np.nan), free)
+    Rs, scale, _ = est.similarity_
+    A = scale * np.asarray(Rs)
+    finite = np.all(np.isfinite(cov), axis=(1, 2))
+    cov[finite] = np.einsum("ij,mjk,lk->mil", A, cov[finite], A)
+    cov[np.any(np.isinf(cov), axis=(1, 2))] = np.inf  # unbounded in some direction: in any frame
+    cov[~np.all(np.isfinite(est.embedding_), axis=1)] = np.nan
+    return cov
