@@ -111,7 +111,7 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
         if np.isfinite(obs.range).any():
             refine = {"bearing_noise": self.bearing_noise, "range_noise": self.range_noise,
                       "range_growth": self.range_growth, "loss": self.loss,
-                      "loss_scale": self.loss_scale, "max_iter": self.max_iter,
+                      "loss_scale": self.loss_scale, "max_iter": self.max_iter, "tol": self.tol,
                       "dense_coupling_bytes": self.dense_coupling_bytes}
             start = register_rays(obs, ids, pos, start=register_points(obs, ids, pos, refine))
         else:
