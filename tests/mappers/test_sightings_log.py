@@ -2,34 +2,24 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 import scipy.sparse as sp
 
 from mappers import build_map, default_method
 from mappers.defaults import choose_for_history, is_sightings_log
+from tests.mappers.viewpoints.test_view_cone import _camera
 
 pytestmark = pytest.mark.usefixtures("one_blas_thread")
 
 ANCHORS = np.arange(4)
 
 
-def _view(n_steps: int = 250, m: int = 14, seed: int = 0, fov_deg: float = 90.0,
-          radius: float = 1.0):
-    """Objects in a 2.5 m square seen through a view cone from random poses: ``(objects, X,
-    mask)``, observed = in the cone, visible = observed and nearer than ``radius``."""
-    rng = np.random.default_rng(seed)
-    P = rng.uniform(-1.25, 1.25, (m, 2))
-    P[ANCHORS] = [[-1.2, -1.2], [1.2, -1.2], [1.2, 1.2], [-1.2, 1.2]]
-    C = np.column_stack([rng.uniform(-1.1, 1.1, (n_steps, 2)),
-                         rng.uniform(-math.pi, math.pi, n_steps)])
-    rel = P[None] - C[:, None, :2]
-    off = np.angle(np.exp(1j * (np.arctan2(rel[..., 1], rel[..., 0]) - C[:, 2:3])))
-    mask = np.abs(off) <= math.radians(fov_deg) / 2
-    X = (mask & (np.hypot(rel[..., 0], rel[..., 1]) < radius)).astype(float)
-    return P, X.T, mask.T
+def _view(n_steps: int = 250, m: int = 14, seed: int = 0):
+    """Objects in a 2.5 m square seen through a 90-degree view cone from random poses:
+    ``(objects, X, mask)``, observed = in the cone, visible = observed and nearer than 1 m."""
+    P, _, X, mask = _camera(90.0, n_steps=n_steps, m=m, seed=seed, radius=1.0)
+    return P, X, mask
 
 
 def test_a_log_of_sightings_is_told_from_a_view_mask():
