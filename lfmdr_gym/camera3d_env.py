@@ -175,6 +175,16 @@ class Camera3DEnv(WorldEnv):
         self._set_proximity(n_proximity_rays, proximity_range)
         self._set_render_mode(render_mode)
 
+        self.observation_space = self._observation_space()
+        self._tags = np.zeros((0, 3))
+        self._hosts = np.zeros(0, dtype=np.int64)
+        self._anchor_ids = np.zeros(0, dtype=np.int64)
+        self._noise: np.random.Generator | None = None
+
+    def _observation_space(self) -> spaces.Dict:
+        """The observation space: each sensor's readings of the tags (and which were observed,
+        for the masked sensors), the proximity ring; sets ``range_high``, the largest range
+        a reading can take (the camera's reach plus ten noise deviations), and ``_masked``."""
         a = self.world.arena_half
         reach = self.camera.max_range
         if reach is None:
@@ -190,14 +200,10 @@ class Camera3DEnv(WorldEnv):
             entries["range"] = spaces.Box(0.0, self.range_high, (m,), np.float32)
         entries["proximity"] = spaces.Box(0.0, self.proximity_range, (self.n_proximity_rays,),
                                           np.float32)
-        self._masked = sensor != "visibility"
+        self._masked = self.sensor != "visibility"
         if self._masked:
             entries["observed"] = spaces.MultiBinary(m)
-        self.observation_space = spaces.Dict(entries)
-        self._tags = np.zeros((0, 3))
-        self._hosts = np.zeros(0, dtype=np.int64)
-        self._anchor_ids = np.zeros(0, dtype=np.int64)
-        self._noise: np.random.Generator | None = None
+        return spaces.Dict(entries)
 
     # ------------------------------------------------------------------ episodes
     def reset(self, *, seed: int | None = None,
