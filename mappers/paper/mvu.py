@@ -31,6 +31,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.extmath import svd_flip
 from sklearn.utils.validation import check_symmetric, validate_data
 
+from mappers.core.estimator_params import store_params
 from mappers.core.graph import connected_knn_graph, warn_if_repaired
 
 __all__ = ["MaximumVarianceUnfolding", "mvu_constraint_matrix"]
@@ -91,14 +92,7 @@ class MaximumVarianceUnfolding(TransformerMixin, BaseEstimator):
         penalty: float = 1e3,
         dissimilarity: str = "euclidean",
     ) -> None:
-        self.n_neighbors = n_neighbors
-        self.n_components = n_components
-        self.solver = solver
-        self.tol = tol
-        self.max_iters = max_iters
-        self.n_basis = n_basis
-        self.penalty = penalty
-        self.dissimilarity = dissimilarity
+        store_params(self, locals())
 
     def _solve(self, problem: cp.Problem) -> None:
         solver = self.solver.upper()

@@ -26,6 +26,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.extmath import svd_flip
 from sklearn.utils.validation import check_symmetric, validate_data
 
+from mappers.core.estimator_params import store_params
 from mappers.core.graph import connected_knn_graph, warn_if_repaired
 
 __all__ = [
@@ -270,14 +271,7 @@ class WeightedSMACOF(TransformerMixin, BaseEstimator):
         n_components: int = 2,
         random_state=None,
     ) -> None:
-        self.n_neighbors = n_neighbors
-        self.init = init
-        self.n_init = n_init
-        self.max_iter = max_iter
-        self.tol = tol
-        self.dissimilarity = dissimilarity
-        self.n_components = n_components
-        self.random_state = random_state
+        store_params(self, locals())
 
     def _weights(self, delta: np.ndarray) -> np.ndarray:
         n = len(delta)

@@ -37,6 +37,7 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval, StrOptions
 
+from mappers.core.estimator_params import store_params
 from mappers.core.validation import check_fused_input
 from mappers.viewpoints.bearing import BearingAdjustmentWarning
 from mappers.viewpoints.engine import (
@@ -123,13 +124,7 @@ class RangeBearingAdjustment(TransformerMixin, BaseEstimator):
                  max_rounds: int = 8, passes: int = 2, tol: float = 1e-7,
                  min_views: int = 3,
                  dense_coupling_bytes: float = DENSE_COUPLING_MAX_BYTES) -> None:
-        self.loss = loss
-        self.robust_scale = robust_scale
-        self.max_rounds = max_rounds
-        self.passes = passes
-        self.tol = tol
-        self.min_views = min_views
-        self.dense_coupling_bytes = dense_coupling_bytes
+        store_params(self, locals())
 
     def fit(self, X, y=None, *, masks=None, anchor_ids=None, anchor_positions=None,
             start_positions=None):

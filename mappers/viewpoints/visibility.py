@@ -67,6 +67,7 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval
 
+from mappers.core.estimator_params import store_params
 from mappers.core.flicker import step_runs
 from mappers.core.validation import check_views
 from mappers.defaults import choose_for_history, localisation_free
@@ -237,22 +238,7 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
                  occlusion: bool = True, prior_blur: float = 2.0, continuity: bool = False,
                  step_sigma: float | None = None, align: bool = False, overrelax: float = 0.0,
                  model_rounds: int | None = None, random_state=0) -> None:
-        self.start = start
-        self.max_rounds = max_rounds
-        self.inner_iters = inner_iters
-        self.tol = tol
-        self.min_step_objects = min_step_objects
-        self.min_views = min_views
-        self.grid_cells = grid_cells
-        self.prior_iters = prior_iters
-        self.occlusion = occlusion
-        self.prior_blur = prior_blur
-        self.continuity = continuity
-        self.step_sigma = step_sigma
-        self.align = align
-        self.overrelax = overrelax
-        self.model_rounds = model_rounds
-        self.random_state = random_state
+        store_params(self, locals())
 
     def _start_map(self, X, mask, ids, pos, timeline) -> np.ndarray:
         if self.start is not None and self.start.strip().upper() in ("VIS-BA", "VIS-BA-WALK"):
