@@ -69,6 +69,7 @@ from sklearn.utils._param_validation import Interval
 
 from mappers.core.estimator_params import store_params
 from mappers.core.flicker import step_runs
+from mappers.core.sensors import check_matrix
 from mappers.core.validation import check_views
 from mappers.defaults import choose_for_history, localisation_free
 from mappers.fitting import check_inputs
@@ -99,13 +100,7 @@ def visibility_bits(X, mask=None) -> tuple[np.ndarray, np.ndarray]:
     """``(seen, observed)``, both (N, M) bool: whether each object was visible at each step, and
     whether the sensor measured that entry (the mask; all True without one). ValueError when
     ``X`` is not a 0/1 history or ``mask`` does not fit it."""
-    try:
-        X = np.asarray(X, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"a visibility history is a numeric (M, N) array of 0/1: {exc}") from exc
-    if X.ndim != 2 or X.shape[0] < 3 or X.shape[1] < 1:
-        raise ValueError(f"a visibility history is an (M, N) array with M >= 3 objects and N >= 1 "
-                         f"steps, got shape {X.shape}")
+    X = check_matrix(X, "a visibility history", copy=False)
     if mask is None:
         observed = np.ones(X.shape, dtype=bool)
     else:
