@@ -214,8 +214,9 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         obs = (t, i, th[keep])
         P = np.where(placed[:, None], P0, 0.0)
         self.kept_ = np.array([], dtype=int)
-        C, phi, ok0 = initial_poses(P, obs, n)
+        # a problem beyond the dense coupling sums its systems by compiled loops (the same sums)
         large = use_sparse_coupling(n, 3, 2, int(free.sum()), self.dense_coupling_bytes)
+        C, phi, ok0 = initial_poses(P, obs, n, compiled=large)
         C, phi, ok = resect(P, C, phi, obs, np.ones(len(t)), 3, compiled=large)
         ok &= ok0
         lo, hi = P[placed].min(0), P[placed].max(0)

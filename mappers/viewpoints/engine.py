@@ -168,18 +168,25 @@ def pose_jacobian(d):
     return np.column_stack([d[:, 1] / r2, -d[:, 0] / r2, -np.ones_like(r2)])
 
 
-def initial_poses(P, obs, n):
+def initial_poses(P, obs, n, compiled: bool = False):
     """Each step's pose from the start map in closed form. In the robot's frame an object is at
     ``e = R(phi)^T p - s`` with ``s = R(phi)^T c``, and its bearing ``v`` is parallel to ``e``:
     ``a (p x v) + b (p . v) - s1 v_y + s2 v_x = 0`` with ``(a, b) = (cos phi, sin phi)``, linear
     in ``(a, b, s1, s2)``; the least-squares solution is the normal matrix's eigenvector of the
     smallest eigenvalue, scaled to ``a^2 + b^2 = 1`` and signed so that the objects lie ahead
-    along their rays. Returns the poses and which steps gave one."""
+    along their rays. Returns the poses and which steps gave one. ``compiled``: the normal
+    matrices summed by a compiled loop
+    (:func:`mappers.viewpoints.sparse_schur_kernels.outer_sums`, the same sums in the same
+    order), for large problems (it imports numba)."""
     t, i, th = obs
     vx, vy = np.cos(th), np.sin(th)
     px, py = P[i, 0], P[i, 1]
     rows = np.column_stack([px * vy - py * vx, py * vy + px * vx, -vy, vx])
-    A = scatter_sum(t, rows[:, :, None] * rows[:, None, :], n)
+    if compiled:
+        A = np.zeros((n, 4, 4))
+        kernels.outer_sums(rows, np.ascontiguousarray(t, dtype=np.int64), A)
+    else:
+        A = scatter_sum(t, rows[:, :, None] * rows[:, None, :], n)
     ev, vec = np.linalg.eigh(A)
     z = vec[:, :, 0]
     norm = np.hypot(z[:, 0], z[:, 1])

@@ -22,8 +22,8 @@ import numpy as np
 
 from mappers.core.jit import compiled_on_first_use
 
-__all__ = ["bearing_blocks", "couple", "couple_transpose", "pose_blocks",  # noqa: F822
-           "schur_diagonal", "schur_matvec"]
+__all__ = ["bearing_blocks", "couple", "couple_transpose", "outer_sums",  # noqa: F822
+           "pose_blocks", "schur_diagonal", "schur_matvec"]
 
 __getattr__ = compiled_on_first_use(globals(), __all__)
 
@@ -181,3 +181,15 @@ def _pose_blocks(d, res, w, t, U, g):  # pragma: no cover - compiled
             g[tk, r] += wr * a[r]
             for c in range(3):
                 U[tk, r, c] += wk * a[r] * a[c]
+
+
+def _outer_sums(rows, t, out):  # pragma: no cover - compiled
+    """Adds each row's outer product ``rows[k] rows[k]^T`` into ``out[t[k]]`` (N, q, q): the
+    normal matrices of the closed-form resection
+    (:func:`mappers.viewpoints.engine.initial_poses`)."""
+    q = rows.shape[1]
+    for k in range(rows.shape[0]):
+        tk = t[k]
+        for r in range(q):
+            for c in range(q):
+                out[tk, r, c] += rows[k, r] * rows[k, c]

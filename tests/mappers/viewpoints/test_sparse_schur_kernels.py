@@ -34,9 +34,12 @@ def test_the_compiled_normal_equations_are_the_numpy_ones_bit_for_bit():
     assert W.blocks.shape[0] == np.count_nonzero(free_index[obs[1]] >= 0)
 
 
-def test_the_compiled_resection_is_the_numpy_one_bit_for_bit():
+def test_the_compiled_resections_are_the_numpy_ones_bit_for_bit():
     P, C, phi, obs, w, _, _ = _bearing_problem(seed=1)
-    C0, phi0, _ = initial_poses(P + 0.01, obs, len(C))
+    C0, phi0, ok0 = initial_poses(P + 0.01, obs, len(C))
+    for a, b in zip(initial_poses(P + 0.01, obs, len(C), compiled=True), (C0, phi0, ok0),
+                    strict=True):
+        assert np.array_equal(a, b)
     want = resect(P, C0, phi0, obs, w, 2)
     got = resect(P, C0, phi0, obs, w, 2, compiled=True)
     assert not np.allclose(want[0], C0)  # the resection moved the poses
