@@ -45,6 +45,7 @@ and its Schur complement; Huber & Ronchetti, *Robust Statistics* (2009), for the
 from __future__ import annotations
 
 import warnings
+from collections.abc import Mapping
 from numbers import Integral, Real
 
 import numpy as np
@@ -91,6 +92,8 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
     Parameters:
         start: label of the method that draws the start map (None: the bearing default before
             this method, CAL-SMA for a complete history and ``COVIS-AUTO`` for a masked one).
+        start_params: parameters of the start method (None: its defaults), e.g. fewer rounds
+            of ``COVIS-SPARSE`` when the adjustment refines its map anyway.
         loss: ``"huber"``, ``"cauchy"`` or None (least squares) on the angle residuals.
         robust_scale: the loss's scale in robust standard deviations of the residuals (1.4826
             times their median absolute value).
@@ -125,6 +128,7 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
 
     _parameter_constraints: dict = {
         "start": [str, None],
+        "start_params": [Mapping, None],
         "loss": [StrOptions({"huber", "cauchy"}), None],
         "robust_scale": [Interval(Real, 0, None, closed="neither")],
         "max_rounds": [Interval(Integral, 1, None, closed="left")],
@@ -147,8 +151,9 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
                  min_spread: float = 1e-3, solver: str = "joint", random_state=0,
                  dense_coupling_bytes: float = DENSE_COUPLING_MAX_BYTES,
                  schur_solver: str = "lu", schur_rtol: float = CG_RTOL,
-                 gain_tol: float = 0.0) -> None:
+                 gain_tol: float = 0.0, start_params: Mapping | None = None) -> None:
         self.start = start
+        self.start_params = start_params
         self.loss = loss
         self.robust_scale = robust_scale
         self.max_rounds = max_rounds
@@ -176,7 +181,8 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         if label.strip().upper() == "BEARING-BA":
             raise ValueError("start must name another method than 'BEARING-BA'")
         return fit_start(label, X, ids, pos, sensor="bearing", mask=mask if masked else None,
-                         random_state=self.random_state, category=BearingAdjustmentWarning)[0]
+                         random_state=self.random_state, category=BearingAdjustmentWarning,
+                         params=self.start_params)[0]
 
     def fit(self, X, y=None, *, mask=None, sensor: str = "bearing", anchor_ids=None,
             anchor_positions=None, start_positions=None):
