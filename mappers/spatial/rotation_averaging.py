@@ -9,7 +9,7 @@ in multiview reconstruction*, CVPR 2007; Arie-Nachimson et al., *Global motion e
 point matches*, 3DIMPVT 2012). The relaxation is then refined by iteratively reweighted least
 squares in the tangent space, each edge weighted by a Cauchy weight of its residual angle, so
 that wrong relative rotations lose their pull (Chatterjee & Govindu, *Efficient and robust
-large-scale rotation averaging*, ICCV 2013). SciPy's sparse eigensolver and sparse least
+large-scale rotation averaging*, ICCV 2013). SciPy's sparse matrices, spanning tree and sparse least
 squares do the linear algebra; the result is defined up to one rotation of the world.
 """
 
@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 from scipy import sparse
-from scipy.sparse.csgraph import connected_components
-from scipy.sparse.linalg import eigsh, lsqr
+from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
+from scipy.sparse.linalg import lsqr
 from scipy.spatial.transform import Rotation
 
 __all__ = ["average_rotations", "largest_component"]
@@ -59,7 +59,7 @@ def _spectral(a, b, rel, w, n):
     rows = (3 * b[:, None, None] + np.arange(3)[None, :, None]) * np.ones((1, 1, 3), int)
     cols = (3 * a[:, None, None] + np.arange(3)[None, None, :]) * np.ones((1, 3, 1), int)
     vals = w[:, None, None] * rel
-    H = sparse.coo_matrix((np.concatenate([vals.ravel(), vals.transpose(0, 2, 1).ravel()]),
+    H = sparse.coo_matrix((np.concatenate([vals.ravel(), vals.ravel()]),
                            (np.concatenate([rows.ravel(), cols.ravel()]),
                             np.concatenate([cols.ravel(), rows.ravel()]))),
                           shape=(3 * n, 3 * n)).tocsr()
@@ -68,8 +68,15 @@ def _spectral(a, b, rel, w, n):
     # the nodes' blocks: keep those with edges (an isolated node has a zero block)
     idx = np.flatnonzero(np.repeat(has, 3))
     Hs = H[idx][:, idx]
-    # deterministic start vector: eigsh's default is random
-    _, vec = eigsh(Hs, k=3, which="LA", v0=np.ones(idx.size) / np.sqrt(idx.size))
+    # the leading eigenvalue has multiplicity three, which a single-vector Lanczos (eigsh)
+    # cannot resolve: block power iteration on H + c I (c bounds H's spectrum from below, so the
+    # leading eigenvalues stay leading), started from the rotations chained along the graph's
+    # maximum spanning tree (already near the leading space, and deterministic)
+    Rt0 = _tree_chain(a, b, rel, w, n)[has].transpose(0, 2, 1).reshape(-1, 3)
+    c = float(np.abs(Hs).sum(axis=1).max())
+    vec = np.linalg.qr(Rt0)[0]
+    for _ in range(_POWER_ITER):
+        vec = np.linalg.qr(Hs @ vec + c * vec)[0]
     Q = vec.reshape(-1, 3, 3)  # block i ~ R_i^T (times a common 3 x 3 orthogonal matrix)
     if np.sum(np.linalg.det(Q) < 0) > len(Q) / 2:
         Q[:, :, 0] *= -1.0
@@ -79,6 +86,33 @@ def _spectral(a, b, rel, w, n):
     Rt = (U * D[:, None, :]) @ Vt
     R = np.full((n, 3, 3), np.nan)
     R[has] = Rt.transpose(0, 2, 1)
+    return R
+
+
+_POWER_ITER = 50
+"""Block power iterations of the spectral relaxation from the tree's start."""
+
+
+def _tree_chain(a, b, rel, w, n):
+    """Rotations chained from the first node of the graph along its maximum spanning tree by
+    weight ``w`` (``R_a = R_b rel``), NaN for nodes without an edge."""
+    G = sparse.coo_matrix((1.0 / w, (a, b)), shape=(n, n)).tocsr()
+    tree = minimum_spanning_tree(G)
+    tree = tree + tree.T
+    R = np.full((n, 3, 3), np.nan)
+    edge = {(int(i), int(j)): k for k, (i, j) in enumerate(zip(a, b, strict=True))}
+    for root in np.unique(np.concatenate([a, b])):
+        if np.isfinite(R[root, 0, 0]):
+            continue
+        order, pred = breadth_first_order(tree, int(root), directed=False,
+                                          return_predecessors=True)
+        R[root] = np.eye(3)
+        for node in order[1:]:  # by hand: a walk down the tree, one product per node
+            p = int(pred[node])
+            if (node, p) in edge:
+                R[node] = R[p] @ rel[edge[(node, p)]]
+            else:
+                R[node] = R[p] @ rel[edge[(p, node)]].T
     return R
 
 

@@ -39,11 +39,10 @@ from sklearn.utils._param_validation import Interval, StrOptions
 
 from mappers.core.estimator_params import store_params
 from mappers.core.validation import check_fused_input
-from mappers.viewpoints.bearing import BearingAdjustmentWarning
+from mappers.viewpoints.bearing import DAMPING, BearingAdjustmentWarning
 from mappers.viewpoints.engine import (
     DENSE_COUPLING_MAX_BYTES,
     Coupling,
-    Damping,
     bearing_angles,
     damped_step,
     joint_step,
@@ -57,9 +56,7 @@ from mappers.viewpoints.engine import (
 from mappers.viewpoints.start_map import anchored_start, keep_if_better
 
 __all__ = ["DAMPING", "RangeBearingAdjustment"]
-
-DAMPING = Damping(up=10.0, down=10.0, floor=1e-9, tries=12, accept_equal=True)
-"""The range-bearing adjustment's Levenberg-Marquardt damping rule (BEARING-BA's)."""
+# DAMPING: the Levenberg-Marquardt damping rule, BEARING-BA's (handed on from bearing.py)
 
 
 def _procrustes_poses(P, obs, n):
