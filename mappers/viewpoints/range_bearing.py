@@ -31,15 +31,15 @@ the rigid fit; Huber & Ronchetti, *Robust Statistics* (2009), for the weights an
 from __future__ import annotations
 
 import warnings
-from numbers import Integral, Real
+from numbers import Integral
 
 import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
-from sklearn.utils._param_validation import Interval, StrOptions
+from sklearn.utils._param_validation import Interval
 
 from mappers.core.estimator_params import store_params
 from mappers.core.validation import check_fused_input
-from mappers.viewpoints.bearing import DAMPING, BearingAdjustmentWarning
+from mappers.viewpoints.bearing import DAMPING, BearingAdjustment, BearingAdjustmentWarning
 from mappers.viewpoints.engine import (
     DENSE_COUPLING_MAX_BYTES,
     Coupling,
@@ -107,14 +107,12 @@ class RangeBearingAdjustment(TransformerMixin, BaseEstimator):
         refined_ whether the adjustment was kept.
     """
 
+    # the parameters it shares with BEARING-BA are checked as BEARING-BA checks them
     _parameter_constraints: dict = {
-        "loss": [StrOptions({"huber", "cauchy"}), None],
-        "robust_scale": [Interval(Real, 0, None, closed="neither")],
-        "max_rounds": [Interval(Integral, 1, None, closed="left")],
+        **{name: BearingAdjustment._parameter_constraints[name]
+           for name in ("loss", "robust_scale", "max_rounds", "tol", "min_views",
+                        "dense_coupling_bytes")},
         "passes": [Interval(Integral, 1, None, closed="left")],
-        "tol": [Interval(Real, 0, None, closed="left")],
-        "min_views": [Interval(Integral, 2, None, closed="left")],
-        "dense_coupling_bytes": [Interval(Real, 0, None, closed="left")],
     }
 
     def __init__(self, *, loss: str | None = "huber", robust_scale: float = 2.0,
