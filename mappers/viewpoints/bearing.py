@@ -287,37 +287,40 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         """Levenberg-Marquardt on the poses and the free objects together, robust weights
         renewed at every step (IRLS), the poses eliminated per step (Schur complement)."""
 
-        def cost(P, C, phi):
-            return float(np.sum(wb * robust_cost(bearing_residuals(P, C, phi, obs)[0], scale, self.loss)))
+        def cost(res):
+            return float(np.sum(wb * robust_cost(res, scale, self.loss)))
 
         free_index = np.full(len(P), -1)
         free_index[free] = np.arange(free.sum())
         sparse = use_sparse_coupling(len(C), 3, 2, int(free.sum()), self.dense_coupling_bytes)
-        lam, current, rounds = 1e-4, cost(P, C, phi), 0
+        # the residuals (and offsets) at the current poses and objects, kept from the accepted
+        # trial: the weights and the normal equations of the next round read them
+        res_d = bearing_residuals(P, C, phi, obs)
+        lam, current, rounds = 1e-4, cost(res_d[0]), 0
         first = current
         for rounds in range(1, self.max_rounds + 1):  # noqa: B007 - the count is returned
-            res, _ = bearing_residuals(P, C, phi, obs)
-            blocks = normal_blocks(P, C, phi, obs, wb * robust_weights(res, scale, self.loss),
-                                    free_index, int(free.sum()), sparse=sparse)
+            blocks = normal_blocks(P, C, phi, obs, wb * robust_weights(res_d[0], scale, self.loss),
+                                   free_index, int(free.sum()), sparse=sparse, residuals=res_d)
 
             def trial(lam, blocks=blocks, P=P, C=C, phi=phi, cost=cost):
                 dc, dp = joint_step(*blocks, lam, solver=self.schur_solver, rtol=self.schur_rtol)
                 P2 = P.copy()
                 P2[free] += dp
                 C2, phi2 = C + dc[:, :2], wrap_angles(phi + dc[:, 2])
-                return (P2, C2, phi2, dp), cost(P2, C2, phi2)
+                res_d2 = bearing_residuals(P2, C2, phi2, obs)
+                return (P2, C2, phi2, dp, res_d2), cost(res_d2[0])
 
             state, new, lam, accepted = damped_step(trial, current, lam, DAMPING)
             if not accepted:
                 break  # no step lowers the cost: converged (or stuck)
-            P, C, phi, dp = state
+            P, C, phi, dp, res_d = state
             done = (current - new <= 1e-6 * current or not dp.size or np.abs(dp).max() <= self.tol
                     or current - new <= self.gain_tol * first)
             current = new
             out = ~self._inside(C)
             if out.any():  # drifting viewpoints leave the problem
                 wb = wb * ~out[obs[0]]
-                current = cost(P, C, phi)
+                current = cost(res_d[0])
                 done = False
             if done:
                 break

@@ -259,14 +259,15 @@ def ray_spread(phi, obs, used, m):
     return np.where(tr > 0, (tr / 2 - disc) / np.maximum(tr / 2 + disc, 1e-300), 0.0)
 
 
-def normal_blocks(P, C, phi, obs, w, free_index, n_free, sparse: bool = False):
+def normal_blocks(P, C, phi, obs, w, free_index, n_free, sparse: bool = False, residuals=None):
     """The blocks of the Gauss-Newton normal equations of the joint problem (poses and free
     objects): ``U`` (N, 3, 3), ``V`` (F, 2, 2), ``Wf`` (N, 3, 2F), gradients ``g`` (N, 3) and
     ``h`` (F, 2), for weighted residuals ``w * res**2 / 2``. ``sparse``: the coupling ``Wf`` as a
-    :class:`Coupling` (one block per observation) instead of the dense array."""
+    :class:`Coupling` (one block per observation) instead of the dense array. ``residuals``:
+    :func:`bearing_residuals` of these poses and objects if the caller has them already."""
     t, i, _ = obs
     n = len(C)
-    res, d = bearing_residuals(P, C, phi, obs)
+    res, d = bearing_residuals(P, C, phi, obs) if residuals is None else residuals
     if sparse:  # one compiled pass over the observations (large problems only)
         return _sparse_normal_blocks(res, d, w, t, free_index[i], n, n_free)
     a = pose_jacobian(d)
