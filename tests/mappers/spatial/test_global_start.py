@@ -146,3 +146,12 @@ def test_spatial_ba_refuses_an_unknown_start():
     with pytest.raises(ValueError, match="start must be 'anchors' or 'global'"):
         SpatialAdjustment(start="auto").fit(_history(obs), anchor_ids=np.arange(4),
                                             anchor_positions=X[:4])
+
+
+def test_spans_batch_agrees_with_spans():
+    from mappers.spatial.registration import _spans, _spans_batch
+    rng = np.random.default_rng(3)
+    pts = [rng.normal(size=(5, 3)), np.outer(np.arange(4.0), [1.0, 2.0, 0.5]), rng.normal(size=(2, 3))]
+    step = np.concatenate([np.full(len(p), k) for k, p in enumerate(pts)])
+    got = _spans_batch(step, np.vstack(pts), 3)
+    assert got.tolist() == [_spans(p) for p in pts] == [True, False, False]
