@@ -15,13 +15,16 @@ reflection; ranges carry their own scale). Its start:
 - a masked one (a range limit, a field of view): what was ranged together is near (the
   co-observation map of the sightings, :class:`mappers.spatial.covisibility_3d.CoVisibility3D`).
 
-Each step's position is then fitted to its ranges from the start map (Gauss-Newton, from the
-mean of the objects it ranged pushed towards the map's centre: when those objects lie on one
-plane, as the tags of one wall do, the step and its mirror image in that plane fit equally, and
-the side of the map's centre is taken), and the objects and positions are adjusted jointly
-(:func:`scipy.optimize.least_squares`, trust-region reflective on the sparse Jacobian). Steps
-that ranged fewer than ``min_ranges`` objects are left out: 3 ranges leave a point of space two
-mirror images, fewer a circle or a sphere.
+Then ``n_rounds`` rounds: each step's position is fitted to its ranges from the current map
+(:func:`fit_steps`: multilateration, then Levenberg-Marquardt), and the objects and positions
+are adjusted jointly (Levenberg-Marquardt with each step's 3 x 3 block eliminated by the Schur
+complement, :func:`mappers.viewpoints.schur_step`; Triggs et al., *Bundle Adjustment — A Modern
+Synthesis*, 2000) under a Cauchy loss. A round uses the steps that ranged at least
+``min_ranges`` objects spread at least ``min_spread`` across space in the current map: 3 ranges
+leave a point of space two mirror images, and a step whose objects lie on one plane (the tags of
+one wall) fits its ranges as well from its mirror image in that plane, where it pulls the map
+the wrong way. A fresh fit each round lets a step cross to the right side, which the adjustment
+alone cannot.
 
 What ranges cannot tell: when the viewpoints all lie on one plane (a camera on a planar robot),
 an object and its mirror image in that plane have the same ranges from every step. A complete
@@ -220,9 +223,9 @@ class Range3D(TransformerMixin, BaseEstimator):
             one), ``"unfold"`` or ``"sightings"``.
         min_ranges: steps that ranged fewer objects are left out of the adjustment (at least 4
             fix a point of space).
-        min_spread: steps whose objects (in the start map) lie nearly on one plane are left
-            out: the smallest standard deviation of their positions across space below this [m]
-            (0: keep them). Such a step and its mirror image in that plane fit its ranges
+        min_spread: steps whose objects (in the map of the round before) lie nearly on one
+            plane are left out of a round: the smallest standard deviation of their positions
+            across space below this [m] (0: keep them). Such a step and its mirror image in that plane fit its ranges
             alike, and a step on the wrong side pulls the map.
         n_rounds: rounds of (fit every step to the current map, adjust jointly): a fresh fit
             lets a step cross to its mirror image, which the adjustment alone cannot.
@@ -250,8 +253,8 @@ class Range3D(TransformerMixin, BaseEstimator):
         "loss_scale": [Interval(Real, 0, None, closed="neither")],
     }
 
-    def __init__(self, *, start: str = "auto", min_ranges: int = 4, min_spread: float = 0.05, n_rounds: int = 2,
-                 max_iter: int = 40, tol: float = 1e-8, loss: str | None = "cauchy",
+    def __init__(self, *, start: str = "auto", min_ranges: int = 4, min_spread: float = 0.1,
+                 n_rounds: int = 2, max_iter: int = 40, tol: float = 1e-8, loss: str | None = "cauchy",
                  loss_scale: float = 0.05):
         self.start = start
         self.min_ranges = min_ranges
@@ -296,25 +299,19 @@ class Range3D(TransformerMixin, BaseEstimator):
         Y0[ids] = pos
         keep = seen & (seen.sum(axis=0) >= self.min_ranges)[None, :]
         keep &= np.all(np.isfinite(Y0), axis=1)[:, None]
-        rows, cols = np.nonzero(keep)
-        if self.min_spread > 0:  # leave out the steps whose objects lie (nearly) on one plane
-            spans = _spread(np.where(np.isfinite(Y0), Y0, 0.0), rows, cols, X.shape[1])
-            rows, cols = rows[spans[cols] >= self.min_spread], cols[spans[cols] >= self.min_spread]
-        step_ids = np.unique(cols)
-        if step_ids.size == 0:
-            raise ValueError(f"no step ranged {self.min_ranges} or more mapped objects: RANGE-3D "
-                             "cannot place a viewpoint")
-        local = np.searchsorted(step_ids, cols)
-        r = X[rows, cols]
-        placed = np.zeros(X.shape[0], dtype=bool)
-        placed[rows] = True
-        free = np.setdiff1d(np.flatnonzero(placed), ids)
         Y = np.where(np.isfinite(Y0), Y0, 0.0)
         for _ in range(self.n_rounds):
+            rows, cols = _kept_observations(keep, Y, self.min_spread, self.min_ranges)
+            step_ids = np.unique(cols)
+            local = np.searchsorted(step_ids, cols)
+            r = X[rows, cols]
+            free = np.setdiff1d(rows, ids)
             steps = fit_steps(Y, rows, local, r, step_ids.size)
             Y, P, cost, _ = _adjust(Y, free, steps, rows, local, r, loss=self.loss,
                                     loss_scale=self.loss_scale, max_iter=self.max_iter,
                                     tol=self.tol)
+        placed = np.zeros(X.shape[0], dtype=bool)
+        placed[rows] = True
         Y[~placed] = np.nan
         Y[ids] = pos
         self.start_ = Y0
@@ -324,6 +321,19 @@ class Range3D(TransformerMixin, BaseEstimator):
         self.notes_ = _plane_notes(P, start)
         self.embedding_ = Y
         return self
+
+
+def _kept_observations(keep, Y, min_spread, min_ranges):
+    """``(rows, cols)`` of the observations ``keep`` (M, N) of the steps whose objects, placed at
+    ``Y``, spread at least ``min_spread`` [m] across space (:func:`_spread`)."""
+    rows, cols = np.nonzero(keep)
+    if min_spread > 0:
+        spans = _spread(Y, rows, cols, keep.shape[1])
+        rows, cols = rows[spans[cols] >= min_spread], cols[spans[cols] >= min_spread]
+    if rows.size == 0:
+        raise ValueError(f"no step ranged {min_ranges} or more mapped objects spread "
+                         f"{min_spread} m or more across space: RANGE-3D cannot place a viewpoint")
+    return rows, cols
 
 
 def _spread(points: np.ndarray, rows: np.ndarray, cols: np.ndarray, n_steps: int) -> np.ndarray:
