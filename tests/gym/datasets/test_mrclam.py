@@ -26,11 +26,6 @@ from lfmdr_gym.datasets import (
 from lfmdr_gym.experiments.mrclam import map_mrclam_run
 
 DATA = SHARED_DATA / "mrclam"
-SMALL_ENSEMBLE = {"bin_widths": (1.0, 2.0), "min_co": (3,)}
-"""COVIS-ENSEMBLE of 2 members, not the default 12 (6 bin widths x 2 min_co), for the tests
-of what a map warns or leaves unmapped, which do not depend on the members' count: the
-default's members cost about 1 s of CPU each. The default itself is checked in
-test_map_synthetic_run_writes_csv_and_png and test_real_run_end_to_end."""
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"MRCLAM data not found at {DATA}")
 
 HEADER = (
@@ -241,8 +236,7 @@ def test_map_png_keeps_its_title_and_every_warning_inside_the_figure(tmp_path, m
                      _simulate_rows(truth, n_images=1200, max_range=4.0, seed=5))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MRCLAMDataWarning)
-        res = map_mrclam_run(run, "visibility", robots=(1, 2, 3), out=tmp_path / "o",
-                             **SMALL_ENSEMBLE)
+        res = map_mrclam_run(run, "visibility", robots=(1, 2, 3), out=tmp_path / "o")
     assert len(res.warnings) >= 2 and res.png_path.is_file()
     fig = drawn["fig"]
     renderer = fig.canvas.get_renderer()
@@ -339,13 +333,13 @@ def test_clustered_layout_warns_and_map_says_so(tmp_path):
         h = load_mrclam(run, "visibility", robots=(1, 2, 3))
     assert len(h.meta["co_observation_groups"]) == 2
     with pytest.warns(MRCLAMDataWarning):
-        res = map_mrclam_run(run, "visibility", robots=(1, 2, 3), **SMALL_ENSEMBLE)
+        res = map_mrclam_run(run, "visibility", robots=(1, 2, 3))
     assert any("falls apart" in w for w in res.warnings)
     # anchors 3 + 1: the group held by one anchor is unmapped (empty in map.csv), not guessed
     anchors = [6, 7, 8, 12]
     with pytest.warns(MRCLAMDataWarning, match="unmapped"):
         res = map_mrclam_run(run, "visibility", robots=(1, 2, 3), anchors=anchors, out=tmp_path / "o",
-                             plot=False, **SMALL_ENSEMBLE)
+                             plot=False)
     lost = [s for s in range(13, 18)]
     assert np.isnan(res.positions[np.isin(res.subjects, lost)]).all()
     assert np.isfinite(res.positions[~np.isin(res.subjects, lost)]).all()
@@ -403,7 +397,7 @@ def test_real_run_end_to_end(tmp_path):
 @needs_data
 def test_real_clustered_run_warns():
     with pytest.warns(MRCLAMDataWarning, match="falls apart"):
-        res = map_mrclam_run(DATA / "MRCLAM_Dataset6", "visibility", **SMALL_ENSEMBLE)
+        res = map_mrclam_run(DATA / "MRCLAM_Dataset6", "visibility")
     assert any("falls apart" in w for w in res.warnings)
 
 
