@@ -17,14 +17,20 @@ import numpy as np
 from mappers.defaults import choose_method
 from mappers.fitting import Map
 from mappers.spatial.covisibility_3d import CoVisibility3D
+from mappers.spatial.frustum import FrustumAdjustment
 from mappers.spatial.rays import RAY_COLUMNS
 from mappers.spatial.spatial_ba import SpatialAdjustment
 
 __all__ = ["METHODS_3D", "anchor_dimension", "build_map_3d", "default_for_histories_3d",
            "default_method_3d", "fit_map_3d", "step_columns_3d"]
 
-METHODS_3D = {"SPATIAL-BA": SpatialAdjustment, "COVIS-3D": CoVisibility3D}
-"""The 3-D methods by label: rays (and ranges) -> SPATIAL-BA, sightings -> COVIS-3D."""
+METHODS_3D = {"SPATIAL-BA": SpatialAdjustment, "COVIS-3D": CoVisibility3D,
+              "FRUSTUM-BA": FrustumAdjustment}
+"""The 3-D methods by label: rays (and ranges) -> SPATIAL-BA, sightings -> COVIS-3D, or
+FRUSTUM-BA given a planar robot's camera calibration (``method="FRUSTUM-BA"``)."""
+
+VISIBILITY_3D = frozenset({"COVIS-3D", "FRUSTUM-BA"})
+"""The 3-D methods that map sightings."""
 
 
 def anchor_dimension(anchor_positions: Any) -> int | None:
@@ -81,7 +87,7 @@ def build_map_3d(histories, anchor_ids, anchor_positions, method: str | None = N
                  sensor: str | None = None, mask=None, **params) -> Map:
     """The 3-D map of the objects (see the module's docstring): a :class:`mappers.Map` whose
     ``positions`` and ``embedding`` are (M, 3), NaN rows for the objects listed in
-    ``unmapped``. ``method``: ``"SPATIAL-BA"`` or ``"COVIS-3D"`` (None: by the sensor);
+    ``unmapped``. ``method``: ``"SPATIAL-BA"``, ``"COVIS-3D"`` or ``"FRUSTUM-BA"`` (None: by the sensor);
     ``params`` go to the method."""
     return fit_map_3d(histories, anchor_ids, anchor_positions, method, sensor=sensor, mask=mask,
                       **params)[0]
@@ -95,7 +101,7 @@ def fit_map_3d(histories, anchor_ids, anchor_positions, method: str | None = Non
     label = method.upper() if isinstance(method, str) else default_method_3d(sensor)
     if label not in METHODS_3D:
         raise ValueError(f"method {method!r} does not map in 3-D; 3-D methods: {list(METHODS_3D)}")
-    if (label == "COVIS-3D") != (sensor == "visibility"):
+    if (label in VISIBILITY_3D) != (sensor == "visibility"):
         raise ValueError(f"method {label!r} does not map {sensor} histories")
     est = METHODS_3D[label](**params)
     inputs = {"masks": mask} if isinstance(X, Mapping) else {"mask": mask}
