@@ -106,3 +106,19 @@ def test_bad_input_is_refused():
         warnings.simplefilter("error")
         with pytest.raises(ValueError, match="hfov_deg"):
             FrustumAdjustment(**{**CAMERA, "hfov_deg": 190.0}).fit(X, **kw)
+
+
+def test_build_map_takes_it_by_name_and_the_default_stays_covis_3d():
+    from mappers import build_map
+    from mappers.spatial.pipeline_3d import default_method_3d
+
+    P, _, X = frustum_world(m=10, n=60)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = build_map(X, ANCHORS, P[ANCHORS], "FRUSTUM-BA", **CAMERA, rounds=2, grid=4,
+                      headings=8)
+    assert m.method == "FRUSTUM-BA" and m.positions.shape == (10, 3)
+    assert m.params["hfov_deg"] == 90.0
+    assert default_method_3d("visibility") == "COVIS-3D"
+    with pytest.raises(ValueError, match="calibration"):
+        build_map(X, ANCHORS, P[ANCHORS], "FRUSTUM-BA")
