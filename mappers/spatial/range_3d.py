@@ -29,7 +29,9 @@ alone cannot.
 What ranges cannot tell: when the viewpoints all lie on one plane (a camera on a planar robot),
 an object and its mirror image in that plane have the same ranges from every step. A complete
 history then unfolds to rank 2 and is refused (ValueError naming it); in a masked one the
-sightings' start picks each object's side and the ranges its distance from the plane.
+sightings' start picks each object's side (an object the adjustment carried across the plane is
+reflected back at the end: the two fit the ranges alike) and the ranges its distance
+from the plane.
 """
 
 from __future__ import annotations
@@ -57,7 +59,7 @@ from mappers.viewpoints import (
     use_sparse_coupling,
 )
 
-__all__ = ["PLANAR_SHARE", "Range3D", "fit_steps", "unfold_3d"]
+__all__ = ["PLANAR_SHARE", "Range3D", "fit_steps", "same_side", "unfold_3d", "viewpoint_plane"]
 
 PLANAR_SHARE = 0.1
 """The fitted viewpoints lie on one plane when their median distance from it is below this share
@@ -310,6 +312,9 @@ class Range3D(TransformerMixin, BaseEstimator):
             Y, P, cost, _ = _adjust(Y, free, steps, rows, local, r, loss=self.loss,
                                     loss_scale=self.loss_scale, max_iter=self.max_iter,
                                     tol=self.tol)
+        plane = viewpoint_plane(P)
+        if plane is not None and start == "sightings":
+            Y = same_side(Y, Y0, plane, free)
         placed = np.zeros(X.shape[0], dtype=bool)
         placed[rows] = True
         Y[~placed] = np.nan
@@ -318,7 +323,7 @@ class Range3D(TransformerMixin, BaseEstimator):
         self.step_positions_ = np.full((X.shape[1], 3), np.nan)
         self.step_positions_[step_ids] = P
         self.cost_ = float(cost)
-        self.notes_ = _plane_notes(P, start)
+        self.notes_ = _plane_notes(plane, start)
         self.embedding_ = Y
         return self
 
@@ -348,25 +353,41 @@ def _spread(points: np.ndarray, rows: np.ndarray, cols: np.ndarray, n_steps: int
     return np.sqrt(np.maximum(np.linalg.eigvalsh(cov / counts[:, None, None])[:, 0], 0.0))
 
 
-def _plane_notes(steps: np.ndarray, start: str) -> tuple[str, ...]:
-    """A note when most fitted ``steps`` (S, 3) lie on one plane: their median distance from the
-    plane through most of them is below :data:`PLANAR_SHARE` of their spread along it (the
-    plane is refitted on the steps within 3 median distances of a first fit, so that a few steps
-    stuck at a mirror image do not hide it). Each object's side of that plane is then not
-    measured by the ranges."""
+def viewpoint_plane(steps: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(centre, normal)`` of the plane the fitted ``steps`` (S, 3) lie on, or None when they
+    span space: most of them lie on it when their median distance from it is below
+    :data:`PLANAR_SHARE` of their spread along it (the plane is refitted on the steps within 3
+    median distances of a first fit, so that a few steps stuck at a mirror image do not hide
+    it)."""
     if len(steps) < 4:
-        return ()
+        return None
     inliers = steps
     for _ in range(2):
         centre = inliers.mean(axis=0)
         _, s, vt = np.linalg.svd(inliers - centre, full_matrices=False)
         dist = np.abs((steps - centre) @ vt[2])
         inliers = steps[dist <= 3.0 * np.median(dist) + 1e-12]
-    spread = s[0] / np.sqrt(len(inliers))
-    offset = float(np.median(dist))
-    if not offset < PLANAR_SHARE * spread:
+    if not np.median(dist) < PLANAR_SHARE * s[0] / np.sqrt(len(inliers)):
+        return None
+    return centre, vt[2]
+
+
+def same_side(Y: np.ndarray, start: np.ndarray, plane, rows: np.ndarray) -> np.ndarray:
+    """``Y`` with each of the objects ``rows`` reflected in ``plane`` (centre, normal) when it is
+    on the other side of it from its ``start``: ranges from the plane's points cannot tell the two
+    apart, so the start's side is kept (the adjustment may carry an object across)."""
+    centre, normal = plane
+    flip = rows[np.sign((Y[rows] - centre) @ normal) * np.sign((start[rows] - centre) @ normal) < 0]
+    Y = Y.copy()
+    Y[flip] -= 2.0 * ((Y[flip] - centre) @ normal)[:, None] * normal
+    return Y
+
+
+def _plane_notes(plane, start: str) -> tuple[str, ...]:
+    """A note when the viewpoints lie on one ``plane`` (None: they span space): each object's
+    side of that plane is not measured by the ranges."""
+    if plane is None:
         return ()
-    return (f"RANGE-3D: the viewpoints lie on one plane (median distance {offset:.3g} m from it, "
-            f"spread {spread:.3g} m along it): ranges cannot tell an object from its mirror image "
-            f"in that plane, so each object's side of it comes from the "
-            f"{'sightings' if start == 'sightings' else 'start map'}, not from the ranges",)
+    return ("RANGE-3D: the viewpoints lie on one plane: ranges cannot tell an object from its "
+            "mirror image in that plane, so each object's side of it is the one it has in the "
+            f"{'sightings' if start == 'sightings' else 'start'} map, not measured by the ranges",)

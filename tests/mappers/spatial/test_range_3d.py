@@ -5,7 +5,7 @@ import pytest
 
 from mappers import build_map
 from mappers.spatial import METHODS_3D, Range3D
-from mappers.spatial.range_3d import fit_steps
+from mappers.spatial.range_3d import fit_steps, same_side, viewpoint_plane
 
 ANCHORS = np.arange(5)
 
@@ -102,3 +102,17 @@ def test_bad_input_is_refused_naming_the_problem():
         Range3D(start="unfold").fit(np.where(R < 2, R, 0), mask=R < 2, anchor_ids=ANCHORS,
                                     anchor_positions=P[ANCHORS])
     assert METHODS_3D["RANGE-3D"] is Range3D
+
+
+def test_an_object_carried_across_the_viewpoints_plane_goes_back_to_its_start_side():
+    rng = np.random.default_rng(6)
+    steps = np.column_stack([rng.uniform(0, 2, (50, 2)), np.full(50, 0.3)])
+    steps[:3, 2] = 1.5  # a few steps stuck at a mirror image do not hide the plane
+    centre, normal = viewpoint_plane(steps)
+    assert abs(abs(normal[2]) - 1.0) < 1e-9 and centre[2] == pytest.approx(0.3, abs=0.1)
+    start = np.array([[1.0, 1.0, 1.2], [0.5, 0.5, 0.1], [1.5, 0.2, 0.9]])
+    Y = np.array([[1.0, 1.0, -0.5], [0.5, 0.5, 0.45], [1.5, 0.2, 0.8]])
+    out = same_side(Y, start, (np.array([0.0, 0.0, 0.3]), normal), np.arange(3))
+    np.testing.assert_allclose(out, [[1.0, 1.0, 1.1], [0.5, 0.5, 0.15], [1.5, 0.2, 0.8]])
+    spread = np.column_stack([rng.uniform(0, 2, (50, 2)), rng.uniform(0.2, 1.8, 50)])
+    assert viewpoint_plane(spread) is None
