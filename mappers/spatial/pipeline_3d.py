@@ -18,8 +18,8 @@ import numpy as np
 from mappers.defaults import choose_method
 from mappers.fitting import Map
 from mappers.spatial.covisibility_3d import CoVisibility3D
-from mappers.spatial.range_3d import Range3D
 from mappers.spatial.frustum import FrustumAdjustment
+from mappers.spatial.range_3d import Range3D
 from mappers.spatial.rays import RAY_COLUMNS
 from mappers.spatial.spatial_ba import SpatialAdjustment
 
