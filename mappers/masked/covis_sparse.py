@@ -36,6 +36,7 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval
 
 from mappers.calibrated import SparseCalibratedSMACOF
+from mappers.core.estimator_params import store_params
 from mappers.core.sensors import COLUMNS_PER_STEP
 from mappers.core.validation import check_fit
 
@@ -198,11 +199,7 @@ class SparseCovis(TransformerMixin, BaseEstimator):
 
     def __init__(self, *, min_co: int = 3, n_neighbors: int | None = 12, n_rounds: int = 10,
                  position_degree: int = 2, random_state=0) -> None:
-        self.min_co = min_co
-        self.n_neighbors = n_neighbors
-        self.n_rounds = n_rounds
-        self.position_degree = position_degree
-        self.random_state = random_state
+        store_params(self, locals())
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
