@@ -204,16 +204,15 @@ def resect(P, C, phi, obs, w, iters: int, compiled: bool = False):
     """Gauss-Newton on each step's pose (batched 3 x 3 systems), the objects fixed; returns the
     poses and which steps have a well-conditioned system. ``compiled``: the systems summed by
     one compiled loop over the observations
-    (:func:`mappers.viewpoints.sparse_schur_kernels.pose_blocks`, the same sums in the same
-    order), for large problems (it imports numba)."""
+    (:func:`mappers.viewpoints.sparse_schur_kernels.bearing_blocks` with no free object: the
+    same sums in the same order), for large problems (it imports numba)."""
     n, t = len(C), obs[0]
     ok = np.ones(n, dtype=bool)
     for _ in range(iters):
         res, d = bearing_residuals(P, C, phi, obs)
         if compiled:
-            H, g = np.zeros((n, 3, 3)), np.zeros((n, 3))
-            kernels.pose_blocks(d, res, np.ascontiguousarray(w, dtype=np.float64),
-                                np.ascontiguousarray(t, dtype=np.int64), H, g)
+            # no free object: the poses' part of the normal equations alone
+            H, _, _, g, _ = _sparse_normal_blocks(res, d, w, t, np.full(len(res), -1), n, 0)
         else:
             a = pose_jacobian(d)
             H = scatter_sum(t, w[:, None, None] * a[:, :, None] * a[:, None, :], n)

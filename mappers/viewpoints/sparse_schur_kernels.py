@@ -23,7 +23,7 @@ import numpy as np
 from mappers.core.jit import compiled_on_first_use
 
 __all__ = ["bearing_blocks", "couple", "couple_transpose", "outer_sums",  # noqa: F822
-           "pose_blocks", "schur_diagonal", "schur_matvec"]
+           "schur_diagonal", "schur_matvec"]
 
 __getattr__ = compiled_on_first_use(globals(), __all__)
 
@@ -139,7 +139,9 @@ def _bearing_blocks(d, res, w, t, f, U, g, V, h, blocks, bstep, bfree):  # pragm
     ``f[k]`` or -1) the pose Jacobian ``a = (dy, -dx, -r^2) / r^2``, the object's ``b = -a[:2]``;
     adds ``w a a^T`` into ``U`` (N, 3, 3), ``w res a`` into ``g`` (N, 3), and for a free object
     ``w b b^T`` into ``V`` (F, 2, 2), ``w res b`` into ``h`` (F, 2) and writes ``w a b^T`` as the
-    next of ``blocks`` (K_free, 3, 2) with its step and object in ``bstep``, ``bfree``."""
+    next of ``blocks`` (K_free, 3, 2) with its step and object in ``bstep``, ``bfree``. With
+    every ``f[k] = -1`` (and empty object arrays) it sums the poses' part alone: the resection's
+    Gauss-Newton system (:func:`mappers.viewpoints.engine.resect`)."""
     kk = 0
     a = np.array([0.0, 0.0, -1.0])
     for k in range(d.shape[0]):
@@ -164,23 +166,6 @@ def _bearing_blocks(d, res, w, t, f, U, g, V, h, blocks, bstep, bfree):  # pragm
                 blocks[kk, r, c] = -wk * a[r] * a[c]
         bstep[kk], bfree[kk] = tk, j
         kk += 1
-
-
-def _pose_blocks(d, res, w, t, U, g):  # pragma: no cover - compiled
-    """The poses' part of :func:`_bearing_blocks` (the Gauss-Newton system of the resection,
-    :func:`mappers.viewpoints.engine.resect`): adds ``w a a^T`` into ``U`` (N, 3, 3) and
-    ``w res a`` into ``g`` (N, 3)."""
-    a = np.array([0.0, 0.0, -1.0])
-    for k in range(d.shape[0]):
-        dx, dy = d[k, 0], d[k, 1]
-        r2 = max(dx * dx + dy * dy, 1e-12)
-        a[0], a[1] = dy / r2, -dx / r2
-        wk, tk = w[k], t[k]
-        wr = wk * res[k]
-        for r in range(3):
-            g[tk, r] += wr * a[r]
-            for c in range(3):
-                U[tk, r, c] += wk * a[r] * a[c]
 
 
 def _outer_sums(rows, t, out):  # pragma: no cover - compiled
