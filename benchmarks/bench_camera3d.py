@@ -22,6 +22,9 @@ issue sets no goal for ranges alone (``--sensors range``: RANGE-3D); from the ca
 they cannot tell a tag from its mirror image in it (docs/guide/3d.md).
 
 ``--env-kw`` sets an env keyword beyond the noise (e.g. ``max_range=1.5``), for every sensor.
+``--visibility-method FRUSTUM-BA`` maps the sightings by the frustum adjustment instead of the
+default, given the env's camera calibration (height, pitch, fields of view, range limit: the
+sensor's known mounting, as a user would give it; never a pose).
 
 Writes one row per layout and sensor to ``--out`` (atomically, again after every row) and prints mean / median / max
 MPE, the mapped share and the median CPU time per sensor.
@@ -91,9 +94,24 @@ def env_kwargs(pairs: list[str]) -> dict[str, Any]:
     return out
 
 
+def camera_calibration(extra: dict[str, Any] | None = None) -> dict[str, Any]:
+    """FRUSTUM-BA's camera parameters: the mounting and view of the env's camera (its
+    calibration) under the env keywords ``extra``."""
+    import gymnasium
+
+    env = gymnasium.make(ENV_ID, sensor="visibility", **(extra or {}))
+    cam = env.unwrapped.camera
+    env.close()
+    return {"camera_height": cam.height, "pitch_deg": cam.pitch_deg, "hfov_deg": cam.hfov_deg,
+            "vfov_deg": cam.vfov_deg, "max_range": cam.max_range}
+
+
 def run_one(seed: int, sensor: str, steps: int, bearing_noise_deg: float,
-            range_noise: float, extra: dict[str, Any] | None = None) -> dict[str, Any]:
-    """One layout's map for one sensor: a row of the CSV."""
+            range_noise: float, extra: dict[str, Any] | None = None,
+            visibility_method: str | None = None) -> dict[str, Any]:
+    """One layout's map for one sensor: a row of the CSV (``visibility_method``: a 3-D
+    sightings method by label instead of the default; FRUSTUM-BA gets the camera's
+    calibration)."""
     kwargs = {"sensor": sensor, **noise_kwargs(sensor, bearing_noise_deg, range_noise),
               **(extra or {})}
     history = collect(ENV_ID, RandomWalkPolicy(), steps, seed=seed, make_kwargs=kwargs)
@@ -104,11 +122,17 @@ def run_one(seed: int, sensor: str, steps: int, bearing_noise_deg: float,
                            "env_kwargs": json.dumps(extra or {}, sort_keys=True),
                            "mpe": float("nan"), "mapped": 0.0, "cpu_seconds": float("nan"),
                            "error": ""}
+    method, params = None, {}
+    if sensor == "visibility" and visibility_method:
+        method = row["method"] = visibility_method
+        if visibility_method.upper() == "FRUSTUM-BA":
+            params = camera_calibration(extra)
     cpu = time.process_time()
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            result = build_map(history, history.anchor_ids, history.anchor_positions)
+            result = build_map(history, history.anchor_ids, history.anchor_positions, method,
+                               **params)
     except ValueError as exc:  # a method's refusal is a result too: recorded, not hidden
         row["cpu_seconds"] = time.process_time() - cpu
         row["error"] = f"{type(exc).__name__}: {exc}"[:300]
@@ -156,6 +180,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--range-noise", type=float, default=0.02)
     ap.add_argument("--sensors", default="range-bearing,bearing,visibility")
     ap.add_argument("--env-kw", action="append", default=[], metavar="NAME=VALUE")
+    ap.add_argument("--visibility-method", default=None, metavar="LABEL",
+                    help="a 3-D sightings method instead of the default (e.g. FRUSTUM-BA)")
     ap.add_argument("--out", type=Path, default=Path("docs/results/camera3d/camera3d.csv"))
     args = ap.parse_args(argv)
     sensors = [s for s in args.sensors.split(",") if s]
@@ -170,7 +196,7 @@ def main(argv: list[str] | None = None) -> None:
     for k in range(args.layouts):
         for sensor in sensors:
             row = run_one(args.seed0 + k, sensor, args.steps, args.bearing_noise_deg,
-                          args.range_noise, extra)
+                          args.range_noise, extra, args.visibility_method)
             rows.append(row)
             write_csv(rows, args.out)  # after every row: a long run stopped early keeps its rows
             print(f"seed {row['layout_seed']} {sensor:<14} {row['method'] or '-':<16} "
