@@ -68,7 +68,7 @@ def build_map(
         anchor_ids: (A,) ids of the anchor objects, A >= 3, distinct, in [0, M).
         anchor_positions: (A, 2) their known positions [m]; not collinear. (A, 3) positions
             make a 3-D map (:func:`mappers.spatial.pipeline_3d.build_map_3d`: 3-D rays, rays
-            and ranges, or sightings; ``Map.positions`` is then (M, 3)).
+            and ranges, ranges alone, or sightings; ``Map.positions`` is then (M, 3)).
         method: a label of :data:`mappers.METHODS` (case-insensitive) that maps this kind of
             history; None = the default for the sensor and for complete or masked histories
             (:func:`mappers.defaults.choose_method`, from :data:`mappers.defaults.DEFAULTS`,
@@ -195,7 +195,8 @@ def default_method(histories: Any, *, sensor: str | None = None, mask: np.ndarra
     ``return_params=True``: ``(label, params)``, with the parameters the default is chosen with
     (``("CAL-SMA", {"sparse": True})`` above 500 objects). ``anchor_positions`` of shape
     (A, 3): the 3-D default ``build_map`` uses with such anchors (the table's ``spatial``
-    column: ``COVIS-3D`` for sightings, ``SPATIAL-BA`` for 3-D rays, with or without ranges)."""
+    column: ``COVIS-3D`` for sightings, ``SPATIAL-BA`` for 3-D rays, with or without ranges,
+    ``RANGE-3D`` for ranges alone)."""
     if anchor_dimension(anchor_positions) == 3:
         label = default_for_histories_3d(histories, sensor, mask)
         return (label, {}) if return_params else label
