@@ -39,8 +39,10 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
 import warnings
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -50,6 +52,10 @@ from lfmdr_gym import collect
 from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
 from lfmdr_gym.sim.sensors import visibility
 from mappers import build_map, mean_position_error
+
+# the geometry of a camera on known poses is the tests' synthetic walk's (tests/synthetic_walk.py)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from synthetic_walk import sensed  # noqa: E402
 
 
 def simulate_camera(history, fov_deg: float, max_range: float | None, sigma_bearing_deg: float,
@@ -63,12 +69,7 @@ def simulate_camera(history, fov_deg: float, max_range: float | None, sigma_bear
     layout of :mod:`mappers.core.sensors` (unsensed entries 0 and False).
     """
     P, poses = history.object_positions, history.robot_poses
-    rel = P[:, None, :] - poses[None, :, :2]
-    r = np.hypot(rel[..., 0], rel[..., 1])
-    theta = np.angle(np.exp(1j * (np.arctan2(rel[..., 1], rel[..., 0]) - poses[None, :, 2])))
-    seen = np.abs(theta) <= math.radians(fov_deg) / 2
-    if max_range is not None:
-        seen &= r <= max_range
+    r, theta, seen = sensed(P, poses, fov_deg, max_range)
     r = np.abs(r + rng.normal(0.0, sigma_range, r.shape))  # a range is a distance
     theta = theta + rng.normal(0.0, math.radians(sigma_bearing_deg), theta.shape)
     R = np.where(seen, r, 0.0)

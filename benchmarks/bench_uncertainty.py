@@ -59,7 +59,6 @@ import argparse
 import csv
 import io
 import math
-import statistics
 import time
 import warnings
 from pathlib import Path
@@ -68,6 +67,7 @@ import gymnasium as gym
 import numpy as np
 from bench_fusion_sim import simulate_camera, visibility_history
 from bench_view_other_sim import other_sim
+from report import pool_uncertainty
 
 import lfmdr_gym  # noqa: F401  (registers the env ids)
 from lfmdr_gym import collect
@@ -240,28 +240,10 @@ def mrclam_rows(data: Path, name: str = "mrclam") -> list[dict]:
 
 
 def summary(rows: list[dict]) -> list[dict]:
-    """Per set: layouts, coverage, sharpness and the CPU-time ratio (module docstring)."""
-    out = []
-    for name in dict.fromkeys(r["set"] for r in rows):
-        rs = [r for r in rows if r["set"] == name]
-        n = sum(int(r["n_scored"]) for r in rs)
-        radius = sum(float(r["rms_radius"]) * int(r["n_scored"]) for r in rs) / n
-        err = sum(float(r["mpe"]) * int(r["n_scored"]) for r in rs) / n
-        kept = [(int(r["n_scored"]) - int(r["n_wide"]), float(r["rms_radius_informative"]),
-                 float(r["mpe_informative"])) for r in rs if r.get("n_wide", "") != ""]
-        kept = [k for k in kept if k[0] > 0]
-        m = sum(k[0] for k in kept)
-        out.append({
-            "set": name, "layouts": len(rs), "method": rs[0]["method"],
-            "coverage": sum(int(r["inside"]) for r in rs) / n,
-            "sharpness": radius / err, "mpe": err,
-            "wide": sum(int(r["n_wide"]) for r in rs if r.get("n_wide", "") != ""),
-            "sharpness_informative": (sum(k[0] * k[1] for k in kept)
-                                      / sum(k[0] * k[2] for k in kept)) if m else math.nan,
-            "time_ratio": (statistics.median(float(r["cpu_uncertainty"]) for r in rs)
-                           / statistics.median(float(r["cpu_map"]) for r in rs)),
-        })
-    return out
+    """Per set: layouts, coverage, sharpness and the CPU-time ratio (module docstring), pooled
+    as the benchmarks page pools them (``report.pool_uncertainty``)."""
+    return [{"set": name, "layouts": len(rs), "method": rs[0]["method"], **figures}
+            for name, rs, figures in pool_uncertainty(rows)]
 
 
 def write_csv(path: Path, rows: list[dict]) -> None:

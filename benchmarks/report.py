@@ -341,16 +341,37 @@ UNCERTAINTY_GOALS = {"mrclam": "≥ 0.80", "mrclam-inflated": "≥ 0.80", "mrcla
                      "starloc": "≥ 0.80", "starloc-anchors": "≥ 0.80"}
 
 
-def _informative(rs: list[dict[str, str]]) -> list[str]:
-    """The landmarks whose region is wider than the anchors' extent and the sharpness of the
-    others (``bench_uncertainty.informative``), or dashes for a CSV without those columns."""
-    if any(not r.get("n_wide") for r in rs):
-        return ["—", "—"]
-    kept = [(int(r["n_scored"]) - int(r["n_wide"]), number(r["rms_radius_informative"]),
-             number(r["mpe_informative"])) for r in rs]
-    kept = [k for k in kept if k[0] > 0]
-    sharp = (sum(k[0] * k[1] for k in kept) / sum(k[0] * k[2] for k in kept)) if kept else math.nan
-    return [str(sum(int(r["n_wide"]) for r in rs)), f"{sharp:.2f}"]
+def pool_uncertainty(rows: Iterable[dict]) -> list[tuple[str, list[dict], dict[str, float]]]:
+    """Per set of ``bench_uncertainty.py``'s rows (CSV cells or its own values), in first-seen
+    order: ``(set, its rows, figures)``, the figures pooled over the set's scored landmarks --
+    ``coverage`` (share inside their 95 % region), ``sharpness`` (mean RMS radius of the 95 %
+    ellipses over the mean position error ``mpe``), ``time_ratio`` (median CPU time of the map
+    with its uncertainty over that of the map alone), ``wide`` (landmarks whose region is wider
+    than the anchors' extent) and ``sharpness_informative`` (the sharpness of the others; NaN
+    when none), the last two over the rows that have them. The benchmark prints these and the
+    page shows them: one definition for both."""
+    rows = list(rows)
+    out = []
+    for name in dict.fromkeys(r["set"] for r in rows):
+        rs = [r for r in rows if r["set"] == name]
+        n = sum(int(r["n_scored"]) for r in rs)
+        radius = sum(number(r["rms_radius"]) * int(r["n_scored"]) for r in rs) / n
+        err = sum(number(r["mpe"]) * int(r["n_scored"]) for r in rs) / n
+        with_wide = [r for r in rs if r.get("n_wide", "") != ""]
+        kept = [(int(r["n_scored"]) - int(r["n_wide"]), number(r["rms_radius_informative"]),
+                 number(r["mpe_informative"])) for r in with_wide]
+        kept = [k for k in kept if k[0] > 0]
+        out.append((name, rs, {
+            "coverage": sum(int(r["inside"]) for r in rs) / n,
+            "sharpness": radius / err,
+            "mpe": err,
+            "time_ratio": (statistics.median(number(r["cpu_uncertainty"]) for r in rs)
+                           / statistics.median(number(r["cpu_map"]) for r in rs)),
+            "wide": sum(int(r["n_wide"]) for r in with_wide),
+            "sharpness_informative": (sum(k[0] * k[1] for k in kept)
+                                      / sum(k[0] * k[2] for k in kept)) if kept else math.nan,
+        }))
+    return out
 
 
 def uncertainty_section(root: Path) -> list[str]:
@@ -369,19 +390,14 @@ def uncertainty_section(root: Path) -> list[str]:
         "",
     ]
     for source in UNCERTAINTY:
-        rows = read_rows(root, source)
         body = []
-        for name in dict.fromkeys(r["set"] for r in rows):
-            rs = [r for r in rows if r["set"] == name]
-            n = sum(int(r["n_scored"]) for r in rs)
-            radius = sum(number(r["rms_radius"]) * int(r["n_scored"]) for r in rs) / n
-            err = sum(number(r["mpe"]) * int(r["n_scored"]) for r in rs) / n
-            ratio = (statistics.median(number(r["cpu_uncertainty"]) for r in rs)
-                     / statistics.median(number(r["cpu_map"]) for r in rs))
-            body.append([name, rs[0]["method"], str(len(rs)),
-                         f"{sum(int(r['inside']) for r in rs) / n:.3f}",
-                         UNCERTAINTY_GOALS.get(name, "0.88-0.99"), f"{radius / err:.2f}",
-                         *_informative(rs), f"{err:.4f}", f"{ratio:.2f}"])
+        for name, rs, f in pool_uncertainty(read_rows(root, source)):
+            # the landmarks' spread beside the anchors', or dashes for a CSV without those columns
+            informative = (["—", "—"] if any(not r.get("n_wide") for r in rs)
+                           else [str(f["wide"]), f"{f['sharpness_informative']:.2f}"])
+            body.append([name, rs[0]["method"], str(len(rs)), f"{f['coverage']:.3f}",
+                         UNCERTAINTY_GOALS.get(name, "0.88-0.99"), f"{f['sharpness']:.2f}",
+                         *informative, f"{f['mpe']:.4f}", f"{f['time_ratio']:.2f}"])
         out += [UNCERTAINTY_NOTES[source.path], "", *command(source), "",
                 *table(["set", "method", "maps", "coverage", "goal", "sharpness",
                         "wide", "sharpness of the rest", "MPE [m]", "time ×"], body), ""]

@@ -51,8 +51,9 @@ class LevyWalkPolicy(RandomWalkPolicy):
     """Straight runs of heavy-tailed length with random re-orientation; collision-checked steps.
 
     Args:
-        max_turn, step_length, robot_radius, margin, obstacle_radius, plan_ahead, n_tries, seed:
-            as for :class:`~lfmdr_gym.exploration.random_walk.RandomWalkPolicy` (its collision check
+        args, kwargs: ``max_turn``, ``step_length``, ``robot_radius``, ``margin``,
+            ``obstacle_radius``, ``plan_ahead``, ``n_tries``, ``seed``: as for
+            :class:`~lfmdr_gym.exploration.random_walk.RandomWalkPolicy` (its collision check
             is used here unchanged; ``n_tries`` random fallback draws are tried when the run is
             blocked).
         jitter: largest random heading change on a straight run [rad], in [0, max_turn].
@@ -64,17 +65,15 @@ class LevyWalkPolicy(RandomWalkPolicy):
 
     def __init__(
         self,
-        max_turn: float = math.pi / 4,
-        step_length: float = 0.2,
-        robot_radius: float = 0.05,
-        *,
+        *args: Any,
         jitter: float = 0.05,
         mu: float = 2.0,
         min_run: int = 2,
         max_run: int = 100,
         **kwargs: Any,
     ) -> None:
-        super().__init__(max_turn, step_length, robot_radius, **kwargs)
+        # the random walk's own arguments, its defaults included, pass through unchanged
+        super().__init__(*args, **kwargs)
         if not (isinstance(jitter, int | float) and 0.0 <= jitter <= self.max_turn):
             raise ValueError(f"jitter must lie in [0, max_turn={self.max_turn:.4g}], got {jitter!r}")
         if not (isinstance(mu, int | float) and math.isfinite(mu) and mu > 1.0):

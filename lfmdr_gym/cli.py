@@ -29,8 +29,6 @@ from lfmdr_gym.cli_map import add_convert, add_map
 _POLICY_HELP = ("exploration policy, a name of lfmdr_gym.POLICIES (random-walk, coverage, "
                 "coverage-scan, rl, spread, even)")
 
-_WALK_SEED_HELP = "seed of layout, start pose and walk"
-
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 
@@ -104,7 +102,12 @@ def _add_seed_option(p: argparse.ArgumentParser, what: str) -> None:
     p.add_argument("--seed", type=int, default=0, help=what)
 
 
-def _add_policy_option(p: argparse.ArgumentParser) -> None:
+def _add_walk_options(p: argparse.ArgumentParser, env_help: str) -> None:
+    """The episode of a command that walks one policy through one env: ``--env`` (an env id),
+    ``--steps``, ``--seed``, ``--env-kw`` and ``--policy``."""
+    _add_episode_options(p, env_help)
+    _add_seed_option(p, "seed of layout, start pose and walk")
+    _add_env_keywords(p)
     p.add_argument("--policy", default="random-walk", metavar="NAME", help=_POLICY_HELP)
 
 
@@ -179,11 +182,9 @@ def _add_run(sub: Any) -> None:
         "Collect one random-walk episode, map it with one method at every checkpoint, print "
         "MPE and MOE, and write history.npz, scores.csv, map.csv and map.png into --out."
     )
-    _add_episode_options(p, _ENV_ID_HELP)
+    _add_walk_options(p, _ENV_ID_HELP)
     add_method_options(p, "the default for the env's histories, as build_map chooses")
-    _add_seed_option(p, _WALK_SEED_HELP)
     _add_every_option(p, "200 otherwise, plus N itself")
-    _add_env_keywords(p)
     p.add_argument("--out", default="lfmdr-run", metavar="DIR", help="output directory")
     p.add_argument("--online", action="store_true",
                    help="map online as the robot moves (mappers.OnlineMapper, updated every 10 "
@@ -191,7 +192,6 @@ def _add_run(sub: Any) -> None:
                         "update), map.csv and map.png (the final online map) and live.gif (the "
                         "growing map beside the robot; needs matplotlib: pip install "
                         "'lfmdr[plots]')")
-    _add_policy_option(p)
     p.set_defaults(handler=_cmd_run)
 
 
@@ -202,12 +202,9 @@ def _add_collect(sub: Any) -> None:
         "save what the robot sensed (and the ground truth for scoring) as a History .npz; "
         "print a summary."
     )
-    _add_episode_options(p, _ENV_ID_HELP + "; a fused one (LFMDR-RangeBearing-v0, "
-                         "LFMDR-VisibilityBearing-v0, LFMDR-Camera-v0) records a fused history")
-    _add_seed_option(p, _WALK_SEED_HELP)
-    _add_env_keywords(p)
+    _add_walk_options(p, _ENV_ID_HELP + "; a fused one (LFMDR-RangeBearing-v0, "
+                      "LFMDR-VisibilityBearing-v0, LFMDR-Camera-v0) records a fused history")
     p.add_argument("--out", required=True, metavar="FILE.npz", help="history file to write")
-    _add_policy_option(p)
     p.set_defaults(handler=_cmd_collect)
 
 

@@ -17,7 +17,8 @@ fused history's sensors) and whether the history is masked, and says
   (``benchmarks/bench_mrclam.py``);
 - ``spatial``: the default when the anchors are 3-D, (A, 3) positions (a label of
   :data:`mappers.spatial.METHODS_3D`; None: no 3-D path for such histories): ``COVIS-3D`` for
-  sightings, ``SPATIAL-BA`` for 3-D rays with or without ranges (issue 34). A 3-D history's
+  sightings, ``SPATIAL-BA`` for 3-D rays with or without ranges, ``RANGE-3D`` for ranges alone
+  (issue 34). A 3-D history's
   unseen entries are zeros or masked alike, so both rows of a sensor name the same method.
 
 Each choice is a label with its parameters, ``(label, params)``. The figures behind each choice are
@@ -78,27 +79,31 @@ _RB = frozenset({"range", "bearing"})
 _VB = frozenset({"visibility", "bearing"})
 _SPARSE: Mapping[str, Any] = MappingProxyType({"sparse": True})
 _LARGE_BEARING_BA: Mapping[str, Any] = MappingProxyType(
-    {"start": "COVIS-SPARSE", "schur_solver": "cg", "max_rounds": 3})
-_COVIS_3D, _SPATIAL_BA = "COVIS-3D", "SPATIAL-BA"
+    {"start": "COVIS-SPARSE", "start_params": MappingProxyType({"n_rounds": 5}),
+     "schur_solver": "cg", "schur_rtol": 1e-3, "gain_tol": 1e-2, "max_rounds": 6})
+_COVIS_3D, _SPATIAL_BA, _RANGE_3D = "COVIS-3D", "SPATIAL-BA", "RANGE-3D"
 
 DEFAULTS: Mapping[tuple[str | frozenset[str], bool], Choice] = MappingProxyType({
     ("visibility", False): Choice("CAL-SMA", "CAL-SMA", large="CAL-SMA", large_params=_SPARSE,
                                   dropouts="VIS-BA-WALK", spatial=_COVIS_3D),
     ("bearing", False): Choice("BEARING-BA", "CAL-SMA", large="CAL-SMA", large_params=_SPARSE,
                                spatial=_SPATIAL_BA),
-    ("range", False): Choice("UNFOLD", "UNFOLD"),
+    ("range", False): Choice("UNFOLD", "UNFOLD", spatial=_RANGE_3D),
     # VIEW-BA's joint step solves a (2F, 2F) system of the F free objects: above the size
     # threshold masked visibility keeps VIEW-BA's start. On logged runs (MRCLAM) the pattern of
     # what was seen is mapped, for bearing too: no bearing-only statistic measured better on
     # them (docs/bearing-on-real-data.md).
     ("visibility", True): Choice("VIEW-BA", "DROPOUT-BLEND", large="DROPOUT-BLEND",
                                  logged="COVIS-ENSEMBLE", spatial=_COVIS_3D),
-    # Above the size threshold masked bearing is BEARING-BA started from COVIS-SPARSE, its joint
-    # step on the sparse Schur engine (conjugate gradients), three rounds (issue 34's goal:
-    # M = 1,000, N = 20,000 in <= 10 s, docs/guide/scale.md).
+    # Above the size threshold masked bearing is BEARING-BA started from COVIS-SPARSE (five
+    # calibration rounds instead of ten: the adjustment refines its map to the same error), its
+    # joint step on the sparse Schur engine (conjugate gradients to a relative residual of
+    # 1e-3), until a round lowers the cost by at most 1 % of the start's (two rounds at
+    # M = 1,000), at most six (issue 34's goal: M = 1,000, N = 20,000 in <= 10 s,
+    # docs/guide/scale.md).
     ("bearing", True): Choice("BEARING-BA", "COVIS-AUTO", large="BEARING-BA",
                               large_params=_LARGE_BEARING_BA, logged="COVIS-ENSEMBLE", spatial=_SPATIAL_BA),
-    ("range", True): Choice("RANGE-QUANTILE", "RANGE-QUANTILE"),
+    ("range", True): Choice("RANGE-QUANTILE", "RANGE-QUANTILE", spatial=_RANGE_3D),
     (_RB, False): Choice("LOC-SMA", "LOC-SMA", {"refine": None}, spatial=_SPATIAL_BA),
     (_RB, True): Choice("LOC-SMA", "LOC-SMA", {"refine": None}, spatial=_SPATIAL_BA),
     (_VB, False): Choice("VB-SMA", "VB-SMA", {"refine": False}),

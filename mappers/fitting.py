@@ -19,7 +19,7 @@ from threadpoolctl import ThreadpoolController
 from mappers.catalog import MethodSpec, check_size
 from mappers.core.align import apply_affine, check_anchors, check_not_collinear, fit_affine
 from mappers.core.errors import MappingError
-from mappers.core.sensors import COLUMNS_PER_STEP, check_values, sensor_name
+from mappers.core.sensors import COLUMNS_PER_STEP, check_matrix, check_values, sensor_name
 
 __all__ = ["Map", "check_inputs", "fit_checked", "fit_fused_method"]
 
@@ -72,18 +72,6 @@ class Map:
     affine: np.ndarray | None = None
     anchor_ids: tuple[int, ...] = field(default=())
     covariances: np.ndarray | None = None
-
-
-def _check_histories(histories: Any) -> np.ndarray:
-    try:
-        X = np.array(histories, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"histories must be a numeric (M, D) array: {exc}") from exc
-    if X.ndim != 2:
-        raise ValueError(f"histories must be a 2-D (objects x columns) array, got shape {X.shape}")
-    if X.shape[0] < 3 or X.shape[1] < 1:
-        raise ValueError(f"histories need at least 3 objects and 1 column, got shape {X.shape}")
-    return X
 
 
 def _check_mask(mask: Any, shape: tuple[int, int]) -> np.ndarray | None:
@@ -140,7 +128,7 @@ def check_inputs(histories, sensor=None, mask=None, timeline=None):
     if sp.issparse(histories):
         X, mask, sensor = _sparse_inputs(histories, sensor, mask)
         return X, mask, sensor, timeline
-    X = _check_histories(histories)
+    X = check_matrix(histories, "histories")
     mask = _check_mask(mask, X.shape)
     observed = X if mask is None else X[mask]
     if not np.all(np.isfinite(observed)):

@@ -2,6 +2,7 @@
 field of view, range and noise reads of known objects from known poses."""
 
 import numpy as np
+from synthetic_walk import sensed
 
 
 def camera_bearings(P, poses, fov_deg, max_range, noise_deg, rng):
@@ -9,11 +10,7 @@ def camera_bearings(P, poses, fov_deg, max_range, noise_deg, rng):
     objects ``P`` (M, 2) from ``poses`` (N, 3: x, y, heading), and the (M, N) seen flags. An
     object is seen within ``fov_deg`` of the heading and ``max_range`` (None: any range); its
     bearing gets Gaussian noise of ``noise_deg``, drawn from ``rng``."""
-    d = P[:, None, :] - poses[None, :, :2]
-    b = np.angle(np.exp(1j * (np.arctan2(d[..., 1], d[..., 0]) - poses[None, :, 2])))
-    seen = np.abs(b) <= np.radians(fov_deg) / 2
-    if max_range is not None:
-        seen &= np.hypot(d[..., 0], d[..., 1]) <= max_range
+    _, b, seen = sensed(P, poses, fov_deg, max_range)
     b = b + np.radians(noise_deg) * rng.standard_normal(b.shape)
     X = (np.stack([np.cos(b), np.sin(b)], -1) * seen[..., None]).reshape(len(P), -1)
     return X, seen

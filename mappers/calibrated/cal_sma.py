@@ -60,6 +60,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import validate_data
 
 from mappers.core.align import apply_affine, check_anchors, fit_affine
+from mappers.core.estimator_params import store_params
 from mappers.core.graph import informative_pairs, knn_mask
 from mappers.smacof import classical_mds, euclidean_distance_matrix, weighted_smacof
 
@@ -299,19 +300,7 @@ class CalibratedSMACOF(TransformerMixin, BaseEstimator):
         tol: float = 1e-6,
         random_state=None,
     ) -> None:
-        self.n_neighbors = n_neighbors
-        self.dissimilarity = dissimilarity
-        self.n_rounds = n_rounds
-        self.position_degree = position_degree
-        self.dissimilarity_degree = dissimilarity_degree
-        self.far_weight = far_weight
-        self.far_factor = far_factor
-        self.n_init = n_init
-        self.fold_threshold = fold_threshold
-        self.init = init
-        self.max_iter = max_iter
-        self.tol = tol
-        self.random_state = random_state
+        store_params(self, locals())
 
     # ------------------------------------------------------------------ inputs
     @staticmethod

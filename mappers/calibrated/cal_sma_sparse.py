@@ -31,6 +31,7 @@ from sklearn.utils.validation import validate_data
 
 from mappers.calibrated.cal_sma import CALIBRATION_CONSTRAINTS, fit_calibration
 from mappers.core.align import apply_affine, check_anchors, fit_affine
+from mappers.core.estimator_params import store_params
 from mappers.smacof import candidate_pairs, knn_pairs, landmark_mds, sparse_smacof
 
 __all__ = ["SparseCalibratedSMACOF"]
@@ -74,18 +75,7 @@ class SparseCalibratedSMACOF(TransformerMixin, BaseEstimator):
     def __init__(self, *, n_neighbors=None, dissimilarity="auto", n_rounds=10, position_degree=2,
                  dissimilarity_degree=2, far_weight=0.02, far_factor=0.7, n_far=8,
                  n_landmarks=40, max_iter=50, tol=1e-5, random_state=None) -> None:
-        self.n_neighbors = n_neighbors
-        self.dissimilarity = dissimilarity
-        self.n_rounds = n_rounds
-        self.position_degree = position_degree
-        self.dissimilarity_degree = dissimilarity_degree
-        self.far_weight = far_weight
-        self.far_factor = far_factor
-        self.n_far = n_far
-        self.n_landmarks = n_landmarks
-        self.max_iter = max_iter
-        self.tol = tol
-        self.random_state = random_state
+        store_params(self, locals())
 
     def _calibrate(self, ld, X, i, j):
         """Fit log map distance on log delta and midpoint (neighbour pairs); the targets."""

@@ -35,6 +35,7 @@ from sklearn.utils.extmath import svd_flip
 from sklearn.utils.validation import check_non_negative, validate_data
 
 from mappers.core.errors import MappingError
+from mappers.core.estimator_params import store_params
 
 __all__ = ["ClassicalUnfolding"]
 
@@ -65,8 +66,7 @@ class ClassicalUnfolding(TransformerMixin, BaseEstimator):
     }
 
     def __init__(self, *, n_components: int = 2, zero_is_missing: bool = False) -> None:
-        self.n_components = n_components
-        self.zero_is_missing = zero_is_missing
+        store_params(self, locals())
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()

@@ -14,7 +14,13 @@ from typing import Any
 
 import numpy as np
 
-from mappers.core.sensors import COLUMNS_PER_STEP, check_sensor_set, check_timeline, check_values
+from mappers.core.sensors import (
+    COLUMNS_PER_STEP,
+    check_matrix,
+    check_sensor_set,
+    check_timeline,
+    check_values,
+)
 
 __all__ = ["check_fused"]
 
@@ -27,13 +33,7 @@ def _matrix(sensor: str, value: Any) -> tuple[np.ndarray, Any]:
         if given != sensor:
             raise ValueError(f"histories[{sensor!r}] holds {given} histories")
         own_mask, value = getattr(value, "mask", None), value.matrix
-    try:
-        X = np.array(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"histories[{sensor!r}] must be a numeric (M, D) array: {exc}") from exc
-    if X.ndim != 2 or X.shape[0] < 3 or X.shape[1] < 1:
-        raise ValueError(f"histories[{sensor!r}] must be a 2-D (objects x columns) array with at "
-                         f"least 3 objects, got shape {X.shape}")
+    X = check_matrix(value, f"histories[{sensor!r}]")
     if X.shape[1] % COLUMNS_PER_STEP[sensor]:
         raise ValueError(f"histories[{sensor!r}] has {X.shape[1]} columns, not a multiple of "
                          f"{COLUMNS_PER_STEP[sensor]} (columns per step of {sensor})")

@@ -23,6 +23,7 @@ __all__ = [
     "COLUMNS_PER_STEP",
     "FUSED_SENSORS",
     "SENSORS",
+    "check_matrix",
     "check_sensor",
     "check_sensor_set",
     "check_values",
@@ -101,6 +102,20 @@ def sensor_name(key: str | frozenset[str]) -> str:
         return key
     named = {v: k for k, v in FUSED_SENSORS.items()}
     return named.get(frozenset(key), "+".join(s for s in SENSORS if s in key))
+
+
+def check_matrix(value: Any, name: str, *, copy: bool = True) -> np.ndarray:
+    """``value`` as a float (M, D) history matrix, M >= 3 objects by D >= 1 columns (a new array
+    when ``copy``, else ``value`` itself if it already is one); a ValueError naming ``name``
+    (``"histories"``, say) when it is not numeric or not of that shape."""
+    try:
+        X = np.array(value, dtype=float) if copy else np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be a numeric (M, D) array: {exc}") from exc
+    if X.ndim != 2 or X.shape[0] < 3 or X.shape[1] < 1:
+        raise ValueError(f"{name} must be a 2-D (objects x columns) array with at least 3 objects "
+                         f"and 1 column, got shape {X.shape}")
+    return X
 
 
 def check_timeline(timeline: Any, n_steps: int) -> np.ndarray | None:

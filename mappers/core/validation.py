@@ -13,11 +13,18 @@ from collections.abc import Iterable, Mapping
 
 import numpy as np
 import scipy.sparse as sp
-from sklearn.utils.validation import validate_data
+from sklearn.utils.validation import check_symmetric, validate_data
 
 from mappers.core.sensors import SENSORS, check_sensor, infer_sensor
 
-__all__ = ["check_fit", "check_fused_input", "check_history", "check_no_bools", "check_views"]
+__all__ = [
+    "check_fit",
+    "check_fused_input",
+    "check_history",
+    "check_no_bools",
+    "check_points_or_dissimilarities",
+    "check_views",
+]
 
 
 def check_history(estimator, X, y=None, *, mask=None, sensor: str | None = None,
@@ -97,3 +104,18 @@ def check_views(estimator, X, mask=None) -> np.ndarray:
     anything (NaN), without one every entry must be finite."""
     return validate_data(estimator, X, dtype=np.float64, ensure_min_samples=3,
                          ensure_all_finite=mask is None)
+
+
+def check_points_or_dissimilarities(estimator, X) -> np.ndarray:
+    """The preamble of the ``fit`` of an embedding with a ``dissimilarity`` parameter: its
+    parameters (``estimator._validate_params()``), then ``X`` as a float (n, d) array of n >= 2
+    points (:func:`sklearn.utils.validation.validate_data`) or, when ``estimator.dissimilarity``
+    is ``"precomputed"``, a symmetric (:func:`sklearn.utils.validation.check_symmetric`, which
+    returns it symmetrised) and non-negative (n, n) matrix of dissimilarities."""
+    estimator._validate_params()
+    X = validate_data(estimator, X, ensure_min_samples=2, dtype=float)
+    if estimator.dissimilarity == "precomputed":
+        X = check_symmetric(X, raise_exception=True)
+        if np.any(X < 0):
+            raise ValueError("precomputed dissimilarities must be non-negative")
+    return X

@@ -36,6 +36,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from mappers.core.align import check_anchors
+from mappers.core.estimator_params import store_params
 from mappers.core.validation import check_fused_input
 from mappers.fused.law_of_cosines import (
     frame_triangles,
@@ -136,16 +137,7 @@ class LawOfCosinesSMACOF(TransformerMixin, BaseEstimator):
                  trim: float | None = 3.0, outlier: float = 4.0, max_rounds: int = 10, n_init: int = 4,
                  max_iter: int = 500, tol: float = 1e-7, refine: str | None = "range-bearing",
                  random_state=None) -> None:
-        self.min_count = min_count
-        self.max_range = max_range
-        self.trim = trim
-        self.outlier = outlier
-        self.max_rounds = max_rounds
-        self.n_init = n_init
-        self.random_state = random_state
-        self.max_iter = max_iter
-        self.tol = tol
-        self.refine = refine
+        store_params(self, locals())
 
     def fit(self, X, y=None, *, masks=None, anchor_ids=None, anchor_positions=None):
         """Map the fused histories ``X`` ({"range": (M, N), "bearing": (M, 2N)}; ``masks`` keyed

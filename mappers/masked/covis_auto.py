@@ -39,6 +39,7 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval
 
 from mappers.calibrated import CalibratedSMACOF
+from mappers.core.estimator_params import store_params
 from mappers.core.sensors import step_observations
 from mappers.core.validation import check_fit
 from mappers.masked.coobservation import (
@@ -102,10 +103,7 @@ class CovisCalibrated(TransformerMixin, BaseEstimator):
 
     def __init__(self, *, min_co: int = 3, n_neighbors: int | None = 12,
                  links: tuple[str, ...] = ("linear", "log"), random_state=0) -> None:
-        self.min_co = min_co
-        self.n_neighbors = n_neighbors
-        self.links = links
-        self.random_state = random_state
+        store_params(self, locals())
 
     def fit(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
             anchor_positions=None):
@@ -170,11 +168,7 @@ class CovisAuto(TransformerMixin, BaseEstimator):
 
     def __init__(self, *, min_co: int = 3, local_share: float = 0.1, n_neighbors: int | None = None,
                  max_iter: int = 300, random_state=0) -> None:
-        self.min_co = min_co
-        self.local_share = local_share
-        self.n_neighbors = n_neighbors
-        self.max_iter = max_iter
-        self.random_state = random_state
+        store_params(self, locals())
 
     def fit(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
             anchor_positions=None):

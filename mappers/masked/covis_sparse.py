@@ -36,6 +36,7 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval
 
 from mappers.calibrated import SparseCalibratedSMACOF
+from mappers.core.estimator_params import store_params
 from mappers.core.sensors import COLUMNS_PER_STEP
 from mappers.core.validation import check_fit
 
@@ -50,7 +51,12 @@ def _steps(X, mask, sensor: str) -> tuple[sp.csr_array, sp.csr_array | None, sp.
     bearing, all (M, N) sparse; the per-step view of :func:`mappers.core.sensors.step_observations`
     (a visibility 0 and a bearing pair (0, 0) are not sensed; a masked entry is not sensed)."""
     c = COLUMNS_PER_STEP[sensor]
-    Xc = sp.coo_array(sp.csr_array(X, dtype=np.float64))
+    Xr = sp.csr_array(X, dtype=np.float64)
+    Mr = None if mask is None else sp.csr_array(mask, dtype=bool)
+    if (sensor == "bearing" and Xr.shape[1] % 2 == 0 and Xr.has_canonical_format
+            and (Mr is None or (Mr.shape == Xr.shape and Mr.has_canonical_format))):
+        return _bearing_steps(Xr, Mr)
+    Xc = sp.coo_array(Xr)
     m, d = Xc.shape
     if d % c:
         raise ValueError(f"X must be (M, N*{c}) for {sensor!r}, got {Xc.shape}")
@@ -85,6 +91,59 @@ def _steps(X, mask, sensor: str) -> tuple[sp.csr_array, sp.csr_array | None, sp.
     U = sp.csr_array((np.cos(angle), sensed.indices, sensed.indptr), shape=(m, n))
     V = sp.csr_array((np.sin(angle), sensed.indices, sensed.indptr), shape=(m, n))
     return sensed, U, V
+
+
+def _bearing_steps(X: sp.csr_array, mask: sp.csr_array | None):
+    """:func:`_steps` of a bearing history whose CSR arrays (and the mask's) are canonical
+    (sorted, no duplicates; as ``collect`` records them), read off the CSR arrays in row-major
+    order: the same matrices, value for value, without scipy's element look-ups and COO-to-CSR
+    conversions (most of the time of :func:`_steps` at M = 1,000, N = 20,000)."""
+    m, n = X.shape[0], X.shape[1] // 2
+    row = np.repeat(np.arange(m, dtype=np.int64), np.diff(X.indptr))
+    col = X.indices.astype(np.int64)
+    keep = np.isfinite(X.data) & (X.data != 0)
+    if mask is not None:
+        mrow = np.repeat(np.arange(m, dtype=np.int64), np.diff(mask.indptr))
+        mcol = mask.indices.astype(np.int64)
+        if np.array_equal(mask.indptr, X.indptr) and np.array_equal(mask.indices, X.indices):
+            keep &= mask.data
+        else:  # the mask's value at each reading (False where it stores none)
+            mfull = mrow * (2 * n) + mcol
+            keep &= _found(mfull, row * (2 * n) + col) & mask.data[
+                np.minimum(np.searchsorted(mfull, row * (2 * n) + col), max(mfull.size - 1, 0))]
+    row, col, val = row[keep], col[keep], X.data[keep]
+    grp, keys, _ = _group(row * n + col // 2)  # (object, step), row-major: never falling
+    cos, sin = np.zeros(keys.size), np.zeros(keys.size)
+    even = col % 2 == 0
+    cos[grp[even]], sin[grp[~even]] = val[even], val[~even]
+    if mask is not None:  # both columns of the pair stored in the mask (collect masks them together)
+        _, mkeys, count = _group(mrow * n + mcol // 2)
+        both = _found(mkeys[count >= 2], keys)
+        keys, cos, sin = keys[both], cos[both], sin[both]
+    indptr = np.zeros(m + 1, dtype=np.int64)
+    np.cumsum(np.bincount(keys // n, minlength=m), out=indptr[1:])
+    cols = keys % n
+    angle = np.arctan2(sin, cos)
+    S = sp.csr_array((np.ones(keys.size), cols, indptr), shape=(m, n))
+    U = sp.csr_array((np.cos(angle), cols, indptr), shape=(m, n))
+    V = sp.csr_array((np.sin(angle), cols, indptr), shape=(m, n))
+    return S, U, V
+
+
+def _group(key: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For a non-decreasing ``key``: each entry's group, the distinct keys and their counts."""
+    first = np.ones(key.size, dtype=bool)
+    first[1:] = key[1:] != key[:-1]
+    starts = np.flatnonzero(first)
+    return np.cumsum(first) - 1, key[starts], np.diff(np.append(starts, key.size))
+
+
+def _found(sorted_keys: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Whether each of ``at`` is among the (sorted, distinct) ``sorted_keys``."""
+    if not sorted_keys.size:
+        return np.zeros(at.size, dtype=bool)
+    idx = np.minimum(np.searchsorted(sorted_keys, at), sorted_keys.size - 1)
+    return sorted_keys[idx] == at
 
 
 def _on_pattern(A: sp.csr_array, P: sp.csr_array) -> np.ndarray:
@@ -140,11 +199,7 @@ class SparseCovis(TransformerMixin, BaseEstimator):
 
     def __init__(self, *, min_co: int = 3, n_neighbors: int | None = 12, n_rounds: int = 10,
                  position_degree: int = 2, random_state=0) -> None:
-        self.min_co = min_co
-        self.n_neighbors = n_neighbors
-        self.n_rounds = n_rounds
-        self.position_degree = position_degree
-        self.random_state = random_state
+        store_params(self, locals())
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()

@@ -46,6 +46,7 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval
 
 from mappers.calibrated import CalibratedSMACOF
+from mappers.core.estimator_params import store_params
 from mappers.core.flicker import persistence, step_runs
 from mappers.core.validation import check_fit
 from mappers.masked.pair_maps import MaskedMapper, MaskedMapWarning
@@ -104,12 +105,7 @@ class DropoutBlend(TransformerMixin, BaseEstimator):
     def __init__(self, *, window: int = 3, n_neighbors: int | None = None, min_co: int = 3,
                  max_iter: int = 300, max_disagreement: float | None = 0.25,
                  random_state=0) -> None:
-        self.window = window
-        self.n_neighbors = n_neighbors
-        self.min_co = min_co
-        self.max_iter = max_iter
-        self.max_disagreement = max_disagreement
-        self.random_state = random_state
+        store_params(self, locals())
 
     def fit(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
             anchor_positions=None, timeline=None):

@@ -27,6 +27,7 @@ from scipy.sparse import csr_matrix
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval, StrOptions
 
+from mappers.core.estimator_params import store_params
 from mappers.core.sensors import check_timeline, step_observations
 from mappers.core.validation import check_history
 from mappers.masked.pair_maps import MaskedMap, MaskedMapWarning, masked_embedding
@@ -137,11 +138,7 @@ class CovisEnsemble(TransformerMixin, BaseEstimator):
     def __init__(self, *, windows: Sequence[int] = (2, 3, 4, 6, 8, 10),
                  min_co: Sequence[int] = (3, 5), member: str = "covis-power",
                  power: float | None = None, max_iter: int = 300) -> None:
-        self.windows = windows
-        self.min_co = min_co
-        self.member = member
-        self.power = power
-        self.max_iter = max_iter
+        store_params(self, locals())
 
     def fit(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
             anchor_positions=None, timeline=None):

@@ -78,6 +78,7 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from mappers.core.align import apply_affine, check_anchors, fit_affine
+from mappers.core.estimator_params import store_params
 from mappers.core.sensors import step_observations
 from mappers.core.validation import check_fit
 from mappers.masked.coobservation import (
@@ -390,17 +391,7 @@ class MaskedMapper(TransformerMixin, BaseEstimator):
                  weight_cap: float = 50, slack: float = 1.0, fov: float = 1.22,
                  upper_quantile: float = 0.02, min_co: int = 3, power: float = 0.5,
                  n_rounds: int = 60, max_iter: int = 300) -> None:
-        self.method = method
-        self.quantile = quantile
-        self.min_pairs = min_pairs
-        self.weight_cap = weight_cap
-        self.slack = slack
-        self.fov = fov
-        self.upper_quantile = upper_quantile
-        self.min_co = min_co
-        self.power = power
-        self.n_rounds = n_rounds
-        self.max_iter = max_iter
+        store_params(self, locals())
 
     def fit(self, X, y=None, *, mask=None, sensor: str | None = None, anchor_ids=None,
             anchor_positions=None):

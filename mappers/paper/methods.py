@@ -20,6 +20,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.extmath import svd_flip
 from sklearn.utils.validation import validate_data
 
+from mappers.core.estimator_params import store_params
 from mappers.core.graph import connected_knn_graph, warn_if_repaired
 from mappers.smacof import WeightedSMACOF
 
@@ -63,11 +64,7 @@ class LocallyLinear(TransformerMixin, BaseEstimator):
         reg: float = 1e-3,
         random_state=None,
     ) -> None:
-        self.n_neighbors = n_neighbors
-        self.method = method
-        self.n_components = n_components
-        self.reg = reg
-        self.random_state = random_state
+        store_params(self, locals())
 
     def fit(self, X, y=None):
         """Compute the embedding of ``X``."""
@@ -123,9 +120,7 @@ class LaplacianEigenmap(TransformerMixin, BaseEstimator):
     }
 
     def __init__(self, *, n_neighbors: int = 6, n_components: int = 2, random_state=None) -> None:
-        self.n_neighbors = n_neighbors
-        self.n_components = n_components
-        self.random_state = random_state
+        store_params(self, locals())
 
     def fit(self, X, y=None):
         """Compute the embedding of ``X``."""

@@ -29,9 +29,10 @@ from scipy.sparse.csgraph import laplacian
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.extmath import svd_flip
-from sklearn.utils.validation import check_symmetric, validate_data
 
+from mappers.core.estimator_params import store_params
 from mappers.core.graph import connected_knn_graph, warn_if_repaired
+from mappers.core.validation import check_points_or_dissimilarities
 
 __all__ = ["MaximumVarianceUnfolding", "mvu_constraint_matrix"]
 
@@ -91,14 +92,7 @@ class MaximumVarianceUnfolding(TransformerMixin, BaseEstimator):
         penalty: float = 1e3,
         dissimilarity: str = "euclidean",
     ) -> None:
-        self.n_neighbors = n_neighbors
-        self.n_components = n_components
-        self.solver = solver
-        self.tol = tol
-        self.max_iters = max_iters
-        self.n_basis = n_basis
-        self.penalty = penalty
-        self.dissimilarity = dissimilarity
+        store_params(self, locals())
 
     def _solve(self, problem: cp.Problem) -> None:
         solver = self.solver.upper()
@@ -137,12 +131,7 @@ class MaximumVarianceUnfolding(TransformerMixin, BaseEstimator):
 
     def fit(self, X, y=None):
         """Learn the kernel and the embedding of ``X`` (points, or distances if precomputed)."""
-        self._validate_params()
-        X = validate_data(self, X, ensure_min_samples=2, dtype=float)
-        if self.dissimilarity == "precomputed":
-            X = check_symmetric(X, raise_exception=True)
-            if np.any(X < 0):
-                raise ValueError("precomputed dissimilarities must be non-negative")
+        X = check_points_or_dissimilarities(self, X)
         n = X.shape[0]
         k = min(self.n_neighbors, n - 1)
         A, D, added = connected_knn_graph(X, k, precomputed=self.dissimilarity == "precomputed")

@@ -24,9 +24,10 @@ from sklearn.metrics import pairwise_distances
 from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.extmath import svd_flip
-from sklearn.utils.validation import check_symmetric, validate_data
 
+from mappers.core.estimator_params import store_params
 from mappers.core.graph import connected_knn_graph, warn_if_repaired
+from mappers.core.validation import check_points_or_dissimilarities
 
 __all__ = [
     "GuttmanTransform",
@@ -270,14 +271,7 @@ class WeightedSMACOF(TransformerMixin, BaseEstimator):
         n_components: int = 2,
         random_state=None,
     ) -> None:
-        self.n_neighbors = n_neighbors
-        self.init = init
-        self.n_init = n_init
-        self.max_iter = max_iter
-        self.tol = tol
-        self.dissimilarity = dissimilarity
-        self.n_components = n_components
-        self.random_state = random_state
+        store_params(self, locals())
 
     def _weights(self, delta: np.ndarray) -> np.ndarray:
         n = len(delta)
@@ -291,16 +285,10 @@ class WeightedSMACOF(TransformerMixin, BaseEstimator):
 
     def fit(self, X, y=None):
         """Compute the embedding of ``X`` (points or, if precomputed, distances)."""
-        self._validate_params()
-        X = validate_data(self, X, ensure_min_samples=2, dtype=float)
-        if self.dissimilarity == "precomputed":
-            delta = check_symmetric(X, raise_exception=True)
-            if np.any(delta < 0):
-                raise ValueError("precomputed dissimilarities must be non-negative")
-        else:
-            # n_jobs=1: under a parallel joblib backend (a Dask worker) sklearn would split the
-            # rows into chunks, whose BLAS rounding differs: the same map must come out anywhere.
-            delta = pairwise_distances(X, n_jobs=1)
+        X = check_points_or_dissimilarities(self, X)
+        # n_jobs=1: under a parallel joblib backend (a Dask worker) sklearn would split the
+        # rows into chunks, whose BLAS rounding differs: the same map must come out anywhere.
+        delta = X if self.dissimilarity == "precomputed" else pairwise_distances(X, n_jobs=1)
         n = len(delta)
         self.added_edges_ = []
         W = self._weights(delta)

@@ -29,6 +29,7 @@ from scipy.spatial.transform import Rotation
 from mappers.core.align_3d import umeyama
 from mappers.spatial.adjustment import adjust_viewpoints
 from mappers.spatial.rays import RayObservations
+from mappers.spatial.resection import orthogonal_iteration_batch
 
 __all__ = ["MIN_RAY_ANGLE", "orthogonal_iteration", "register_points", "register_rays", "triangulate"]
 
@@ -356,6 +357,21 @@ def triangulate(C: np.ndarray, d: np.ndarray):
     return p, bool(np.min(cosines) < np.cos(MIN_RAY_ANGLE))
 
 
+def _spans_batch(step, points, n):
+    """(n,) bool: per step 0..n-1, whether its ``points`` (one row per entry of ``step``)
+    are three or more not on one line (:func:`_spans` for each step at once)."""
+    cnt = np.bincount(step, minlength=n)
+    mean = np.stack([np.bincount(step, points[:, j], minlength=n) for j in range(3)], 1)
+    mean = mean / np.maximum(cnt, 1)[:, None]
+    a = points - mean[step]
+    S = np.zeros((n, 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            S[:, i, j] = S[:, j, i] = np.bincount(step, a[:, i] * a[:, j], minlength=n)
+    second = np.sqrt(np.maximum(np.linalg.eigvalsh(S)[:, 1], 0.0))
+    return (cnt >= 3) & (second > _MIN_SPAN)
+
+
 def register_rays(obs: RayObservations, anchor_ids: np.ndarray, anchor_positions: np.ndarray,
                   *, start=None, max_rms: float = np.deg2rad(5.0), rounds: int = 50):
     """``(P, R, C)`` from rays alone, started from the anchors (see the module's docstring): a
@@ -369,20 +385,24 @@ def register_rays(obs: RayObservations, anchor_ids: np.ndarray, anchor_positions
     else:
         P, R, C = (a.copy() for a in start)
     P[anchor_ids] = anchor_positions
-    groups = _groups(obs)
     tried = np.zeros(n, dtype=np.int64)  # the placed objects a step saw when last tried
     for _ in range(rounds):
         known = np.all(np.isfinite(P), axis=1)
         grew = False
-        for t in np.flatnonzero(np.isnan(C[:, 0])):
-            g = groups[t]
-            g = g[known[obs.obj[g]]]
-            if g.size < 3 or g.size == tried[t] or not _spans(P[obs.obj[g]]):
-                continue
-            tried[t] = g.size
-            Rt, ct, rms = orthogonal_iteration(P[obs.obj[g]], obs.ray[g])
-            if rms <= max_rms:
-                R[t], C[t], grew = Rt, ct, True
+        # every unposed step at once (orthogonal_iteration_batch): the same poses as one
+        # orthogonal_iteration per step, without a Python loop over thousands of steps
+        k = np.flatnonzero(np.isnan(C[obs.step, 0]) & known[obs.obj])
+        count = np.bincount(obs.step[k], minlength=n)
+        ready = (count >= 3) & (count != tried)
+        ready[ready] = _spans_batch(obs.step[k], P[obs.obj[k]], n)[ready]
+        k = k[ready[obs.step[k]]]
+        if k.size:
+            tried[ready] = count[ready]
+            steps, seg = np.unique(obs.step[k], return_inverse=True)
+            Rt, ct, rms = orthogonal_iteration_batch(seg, P[obs.obj[k]], obs.ray[k], steps.size)
+            ok = rms <= max_rms
+            R[steps[ok]], C[steps[ok]] = Rt[ok], ct[ok]
+            grew = bool(ok.any())
         seen_from = np.isfinite(C[obs.step, 0]) & ~known[obs.obj]
         for i in np.unique(obs.obj[seen_from]):
             k = np.flatnonzero(seen_from & (obs.obj == i))

@@ -22,6 +22,7 @@ from mappers.core.align_3d import check_anchors_3d, umeyama
 from mappers.core.validation import check_views
 from mappers.spatial.adjustment import adjust_viewpoints
 from mappers.spatial.covisibility_3d import CoVisibility3D
+from mappers.spatial.global_start import register_global
 from mappers.spatial.rays import ray_observations
 from mappers.spatial.registration import MIN_RAY_ANGLE, register_points, register_rays
 from mappers.spatial.regrow import intersect_by_consensus, step_ray_errors
@@ -59,6 +60,13 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
             reported where the adjustment left it.
         dense_coupling_bytes: the adjustment's pose-point coupling is dense up to this many
             bytes, sparse above (:func:`mappers.spatial.adjustment.adjust_viewpoints`).
+        start: rays alone, how the adjustment is started: ``"anchors"`` resection and
+            intersection grown from the anchors (:func:`~mappers.spatial.registration.register_rays`);
+            (default); ``"global"`` global structure from motion, the anchors only placing it
+            (:func:`mappers.spatial.global_start.register_global`), then grown as from the
+            anchors (from the anchors alone where its structure holds fewer than three). Rays
+            with ranges always start from the registered frames. Measured in
+            ``docs/guide/3d.md``: neither start wins everywhere, so the default stays.
 
     Attributes (after fit): ``embedding_`` (M, 3) world positions, NaN for objects it could not
     place or placed inconsistently (``inconsistent_``, see ``max_ray_error``); ``rotations_`` (N, 3, 3) and ``positions_`` (N, 3) the steps' poses (NaN: step not
@@ -73,7 +81,7 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
                  range_growth: float = 0.0, loss: str | None = "cauchy", loss_scale: float = 3.0,
                  max_iter: int = 200, tol: float = 1e-6, fit_range_scale: bool = False,
                  anchor_noise: float | None = None, max_ray_error: float = float(np.deg2rad(5.0)),
-                 dense_coupling_bytes: float = DENSE_COUPLING_MAX_BYTES):
+                 dense_coupling_bytes: float = DENSE_COUPLING_MAX_BYTES, start: str = "anchors"):
         self.bearing_noise = bearing_noise
         self.range_noise = range_noise
         self.range_growth = range_growth
@@ -85,6 +93,7 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
         self.anchor_noise = anchor_noise
         self.max_ray_error = max_ray_error
         self.dense_coupling_bytes = dense_coupling_bytes
+        self.start = start
 
     def fit(self, X, y=None, *, anchor_ids=None, anchor_positions=None, mask=None, masks=None):
         """Fit to a 3-D bearing history ``X`` (M, 3N) or fused histories ``{"bearing": rays,
@@ -106,6 +115,8 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
         if anchor_ids is None or anchor_positions is None:
             raise ValueError("SPATIAL-BA needs anchors: anchor_ids and anchor_positions (A, 3)")
         ids, pos = check_anchors_3d(anchor_ids, anchor_positions, obs.n_objects)
+        if self.start not in ("anchors", "global"):
+            raise ValueError(f"start must be 'anchors' or 'global', got {self.start!r}")
         if not (isinstance(self.tol, (int, float)) and self.tol >= 0):
             raise ValueError(f"tol must be a number >= 0, got {self.tol!r}")
         if np.isfinite(obs.range).any():
@@ -115,7 +126,7 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
                       "dense_coupling_bytes": self.dense_coupling_bytes}
             start = register_rays(obs, ids, pos, start=register_points(obs, ids, pos, refine))
         else:
-            start = self._rays_start(obs, ids, pos)
+            start = self._rays_start(obs, ids, pos, self.start, self.bearing_noise)
         if not np.isfinite(start[2][:, 0]).any():
             raise ValueError("SPATIAL-BA could not place any step: no step sees three placed "
                              "objects (anchors, or objects placed from them) not on one line")
@@ -151,13 +162,23 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
         return self
 
     @staticmethod
-    def _rays_start(obs, ids, pos):
-        """Rays alone: resection and intersection from the anchors; where that leaves steps
+    def _rays_start(obs, ids, pos, how, noise):
+        """Rays alone: ``how`` = "global": the global structure from motion
+        (:func:`~mappers.spatial.global_start.register_global`) grown by resection and
+        intersection; "anchors" or where the global one places nothing: resection and
+        intersection from the anchors; where that leaves steps
         unplaced, the sightings' 3-D map (COVIS-3D) stands in for the objects' positions to
         resect them roughly (their rays to it within 30 degrees), and the objects are intersected
         again from those steps."""
+        if how == "global":
+            P, R, C = register_global(obs, ids, pos, noise=noise)
+            if np.isfinite(C[:, 0]).any():
+                return register_rays(obs, ids, pos, start=(P, R, C))
         start = register_rays(obs, ids, pos)
-        if np.isfinite(start[2][:, 0]).mean() > 0.5:
+        # a step that sees fewer than three objects can never be resected: the share is of
+        # those that can
+        posable = np.bincount(obs.step, minlength=obs.n_steps) >= 3
+        if np.isfinite(start[2][posable, 0]).mean() > 0.5:
             return start
         seen = np.zeros((obs.n_objects, obs.n_steps))
         seen[obs.obj, obs.step] = 1.0
@@ -176,9 +197,10 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
         left out intersected by consensus within that angle, the steps resected again
         (:mod:`mappers.spatial.regrow`); until a round places nothing new."""
         P, R, C = start
+        posable = int((np.bincount(obs.step, minlength=obs.n_steps) >= 3).sum())
         for _ in range(REGROW_ROUNDS):
             placed, posed = np.isfinite(P[:, 0]).sum(), np.isfinite(C[:, 0]).sum()
-            if placed == obs.n_objects and posed == obs.n_steps:
+            if placed == obs.n_objects and posed >= posable:
                 break
             res = adjust_viewpoints(obs, P, R, C, fixed, bearing_noise=self.bearing_noise,
                                     loss=self.loss, loss_scale=self.loss_scale,

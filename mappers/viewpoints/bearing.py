@@ -21,8 +21,8 @@ viewpoint as a latent pose ``(x, y, heading)``:
    the scale read from the start's residuals (their median absolute value), so 30 degrees of
    noise or a wrong reading does not dominate;
 
-for at most ``max_rounds`` rounds, or until no object moves more than ``tol`` [m] or the cost
-stops falling.
+for at most ``max_rounds`` rounds, or until no object moves more than ``tol`` [m], the cost
+stops falling, or (``gain_tol``) a round lowers it by a negligible fraction of the start's.
 
 Guards: an object seen from fewer than ``min_views`` usable steps, or from nearly parallel rays
 (the smallest to largest eigenvalue of its rays' normal matrix below ``min_spread``), keeps its
@@ -45,6 +45,7 @@ and its Schur complement; Huber & Ronchetti, *Robust Statistics* (2009), for the
 from __future__ import annotations
 
 import warnings
+from collections.abc import Mapping
 from numbers import Integral, Real
 
 import numpy as np
@@ -55,6 +56,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from mappers.core.validation import check_views
 from mappers.defaults import localisation_free
 from mappers.viewpoints.engine import (
+    CG_RTOL,
     DENSE_COUPLING_MAX_BYTES,
     Damping,
     bearing_observations,
@@ -90,11 +92,16 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
     Parameters:
         start: label of the method that draws the start map (None: the bearing default before
             this method, CAL-SMA for a complete history and ``COVIS-AUTO`` for a masked one).
+        start_params: parameters of the start method (None: its defaults), e.g. fewer rounds
+            of ``COVIS-SPARSE`` when the adjustment refines its map anyway.
         loss: ``"huber"``, ``"cauchy"`` or None (least squares) on the angle residuals.
         robust_scale: the loss's scale in robust standard deviations of the residuals (1.4826
             times their median absolute value).
         max_rounds: rounds (Levenberg-Marquardt steps, or resection and intersection) at most.
         tol: stop when no object moves more than this [m].
+        gain_tol: (``"joint"``) stop when a round lowers the robust cost by at most this fraction
+            of the cost the adjustment started from (the readings explained no better: 0, the
+            default, stops only on ``tol``, ``max_rounds`` or a relative gain below 1e-6).
         pose_iters: Gauss-Newton iterations of the resection per round (``"alternate"``).
         min_step_objects: a step that observed fewer objects gives no pose (3 unknowns).
         min_views: an object observed from fewer usable steps keeps its start position.
@@ -108,6 +115,8 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
             step to rounding), so that thousands of objects and tens of thousands of steps fit.
         schur_solver: how the sparse step solves the objects' reduced system: ``"lu"`` (sparse
             LU) or ``"cg"`` (block-Jacobi preconditioned conjugate gradients).
+        schur_rtol: the relative residual at which the conjugate gradients stop (an inexact
+            Levenberg-Marquardt step: Agarwal et al., *Bundle Adjustment in the Large*, 2010).
 
     Attributes:
         embedding_ (M, 2) in world coordinates; start_ the start map; poses_ (N, 3) the
@@ -119,6 +128,7 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
 
     _parameter_constraints: dict = {
         "start": [str, None],
+        "start_params": [Mapping, None],
         "loss": [StrOptions({"huber", "cauchy"}), None],
         "robust_scale": [Interval(Real, 0, None, closed="neither")],
         "max_rounds": [Interval(Integral, 1, None, closed="left")],
@@ -131,6 +141,8 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         "random_state": ["random_state"],
         "dense_coupling_bytes": [Interval(Real, 0, None, closed="left")],
         "schur_solver": [StrOptions({"lu", "cg"})],
+        "schur_rtol": [Interval(Real, 0, 1, closed="neither")],
+        "gain_tol": [Interval(Real, 0, 1, closed="left")],
     }
 
     def __init__(self, *, start: str | None = None, loss: str | None = "huber",
@@ -138,8 +150,10 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
                  pose_iters: int = 2, min_step_objects: int = 3, min_views: int = 5,
                  min_spread: float = 1e-3, solver: str = "joint", random_state=0,
                  dense_coupling_bytes: float = DENSE_COUPLING_MAX_BYTES,
-                 schur_solver: str = "lu") -> None:
+                 schur_solver: str = "lu", schur_rtol: float = CG_RTOL,
+                 gain_tol: float = 0.0, start_params: Mapping | None = None) -> None:
         self.start = start
+        self.start_params = start_params
         self.loss = loss
         self.robust_scale = robust_scale
         self.max_rounds = max_rounds
@@ -152,6 +166,8 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         self.random_state = random_state
         self.dense_coupling_bytes = dense_coupling_bytes
         self.schur_solver = schur_solver
+        self.schur_rtol = schur_rtol
+        self.gain_tol = gain_tol
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
@@ -165,7 +181,8 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         if label.strip().upper() == "BEARING-BA":
             raise ValueError("start must name another method than 'BEARING-BA'")
         return fit_start(label, X, ids, pos, sensor="bearing", mask=mask if masked else None,
-                         random_state=self.random_state, category=BearingAdjustmentWarning)[0]
+                         random_state=self.random_state, category=BearingAdjustmentWarning,
+                         params=self.start_params)[0]
 
     def fit(self, X, y=None, *, mask=None, sensor: str = "bearing", anchor_ids=None,
             anchor_positions=None, start_positions=None):
@@ -203,8 +220,10 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         obs = (t, i, th[keep])
         P = np.where(placed[:, None], P0, 0.0)
         self.kept_ = np.array([], dtype=int)
-        C, phi, ok0 = initial_poses(P, obs, n)
-        C, phi, ok = resect(P, C, phi, obs, np.ones(len(t)), 3)
+        # a problem beyond the dense coupling sums its systems by compiled loops (the same sums)
+        large = use_sparse_coupling(n, 3, 2, int(free.sum()), self.dense_coupling_bytes)
+        C, phi, ok0 = initial_poses(P, obs, n, compiled=large)
+        C, phi, ok = resect(P, C, phi, obs, np.ones(len(t)), 3, compiled=large)
         ok &= ok0
         lo, hi = P[placed].min(0), P[placed].max(0)
         self._box = (lo - (hi - lo).max(), hi + (hi - lo).max())
@@ -268,35 +287,40 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         """Levenberg-Marquardt on the poses and the free objects together, robust weights
         renewed at every step (IRLS), the poses eliminated per step (Schur complement)."""
 
-        def cost(P, C, phi):
-            return float(np.sum(wb * robust_cost(bearing_residuals(P, C, phi, obs)[0], scale, self.loss)))
+        def cost(res):
+            return float(np.sum(wb * robust_cost(res, scale, self.loss)))
 
         free_index = np.full(len(P), -1)
         free_index[free] = np.arange(free.sum())
         sparse = use_sparse_coupling(len(C), 3, 2, int(free.sum()), self.dense_coupling_bytes)
-        lam, current, rounds = 1e-4, cost(P, C, phi), 0
+        # the residuals (and offsets) at the current poses and objects, kept from the accepted
+        # trial: the weights and the normal equations of the next round read them
+        res_d = bearing_residuals(P, C, phi, obs)
+        lam, current, rounds = 1e-4, cost(res_d[0]), 0
+        first = current
         for rounds in range(1, self.max_rounds + 1):  # noqa: B007 - the count is returned
-            res, _ = bearing_residuals(P, C, phi, obs)
-            blocks = normal_blocks(P, C, phi, obs, wb * robust_weights(res, scale, self.loss),
-                                    free_index, int(free.sum()), sparse=sparse)
+            blocks = normal_blocks(P, C, phi, obs, wb * robust_weights(res_d[0], scale, self.loss),
+                                   free_index, int(free.sum()), sparse=sparse, residuals=res_d)
 
             def trial(lam, blocks=blocks, P=P, C=C, phi=phi, cost=cost):
-                dc, dp = joint_step(*blocks, lam, solver=self.schur_solver)
+                dc, dp = joint_step(*blocks, lam, solver=self.schur_solver, rtol=self.schur_rtol)
                 P2 = P.copy()
                 P2[free] += dp
                 C2, phi2 = C + dc[:, :2], wrap_angles(phi + dc[:, 2])
-                return (P2, C2, phi2, dp), cost(P2, C2, phi2)
+                res_d2 = bearing_residuals(P2, C2, phi2, obs)
+                return (P2, C2, phi2, dp, res_d2), cost(res_d2[0])
 
             state, new, lam, accepted = damped_step(trial, current, lam, DAMPING)
             if not accepted:
                 break  # no step lowers the cost: converged (or stuck)
-            P, C, phi, dp = state
-            done = current - new <= 1e-6 * current or not dp.size or np.abs(dp).max() <= self.tol
+            P, C, phi, dp, res_d = state
+            done = (current - new <= 1e-6 * current or not dp.size or np.abs(dp).max() <= self.tol
+                    or current - new <= self.gain_tol * first)
             current = new
             out = ~self._inside(C)
             if out.any():  # drifting viewpoints leave the problem
                 wb = wb * ~out[obs[0]]
-                current = cost(P, C, phi)
+                current = cost(res_d[0])
                 done = False
             if done:
                 break

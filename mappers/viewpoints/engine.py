@@ -21,7 +21,9 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from mappers.viewpoints import sparse_schur_kernels as kernels
 from mappers.viewpoints.sparse_schur import (
+    CG_RTOL,
     DENSE_COUPLING_MAX_BYTES,
     Coupling,
     sparse_schur_step,
@@ -29,6 +31,7 @@ from mappers.viewpoints.sparse_schur import (
 )
 
 __all__ = [
+    "CG_RTOL",
     "DENSE_COUPLING_MAX_BYTES",
     "Coupling",
     "Damping",
@@ -165,18 +168,25 @@ def pose_jacobian(d):
     return np.column_stack([d[:, 1] / r2, -d[:, 0] / r2, -np.ones_like(r2)])
 
 
-def initial_poses(P, obs, n):
+def initial_poses(P, obs, n, compiled: bool = False):
     """Each step's pose from the start map in closed form. In the robot's frame an object is at
     ``e = R(phi)^T p - s`` with ``s = R(phi)^T c``, and its bearing ``v`` is parallel to ``e``:
     ``a (p x v) + b (p . v) - s1 v_y + s2 v_x = 0`` with ``(a, b) = (cos phi, sin phi)``, linear
     in ``(a, b, s1, s2)``; the least-squares solution is the normal matrix's eigenvector of the
     smallest eigenvalue, scaled to ``a^2 + b^2 = 1`` and signed so that the objects lie ahead
-    along their rays. Returns the poses and which steps gave one."""
+    along their rays. Returns the poses and which steps gave one. ``compiled``: the normal
+    matrices summed by a compiled loop
+    (:func:`mappers.viewpoints.sparse_schur_kernels.outer_sums`, the same sums in the same
+    order), for large problems (it imports numba)."""
     t, i, th = obs
     vx, vy = np.cos(th), np.sin(th)
     px, py = P[i, 0], P[i, 1]
     rows = np.column_stack([px * vy - py * vx, py * vy + px * vx, -vy, vx])
-    A = scatter_sum(t, rows[:, :, None] * rows[:, None, :], n)
+    if compiled:
+        A = np.zeros((n, 4, 4))
+        kernels.outer_sums(rows, np.ascontiguousarray(t, dtype=np.int64), A)
+    else:
+        A = scatter_sum(t, rows[:, :, None] * rows[:, None, :], n)
     ev, vec = np.linalg.eigh(A)
     z = vec[:, :, 0]
     norm = np.hypot(z[:, 0], z[:, 1])
@@ -190,16 +200,23 @@ def initial_poses(P, obs, n):
     return C, phi, ok
 
 
-def resect(P, C, phi, obs, w, iters: int):
+def resect(P, C, phi, obs, w, iters: int, compiled: bool = False):
     """Gauss-Newton on each step's pose (batched 3 x 3 systems), the objects fixed; returns the
-    poses and which steps have a well-conditioned system."""
+    poses and which steps have a well-conditioned system. ``compiled``: the systems summed by
+    one compiled loop over the observations
+    (:func:`mappers.viewpoints.sparse_schur_kernels.bearing_blocks` with no free object: the
+    same sums in the same order), for large problems (it imports numba)."""
     n, t = len(C), obs[0]
     ok = np.ones(n, dtype=bool)
     for _ in range(iters):
         res, d = bearing_residuals(P, C, phi, obs)
-        a = pose_jacobian(d)
-        H = scatter_sum(t, w[:, None, None] * a[:, :, None] * a[:, None, :], n)
-        g = scatter_sum(t, (w * res)[:, None] * a, n)
+        if compiled:
+            # no free object: the poses' part of the normal equations alone
+            H, _, _, g, _ = _sparse_normal_blocks(res, d, w, t, np.full(len(res), -1), n, 0)
+        else:
+            a = pose_jacobian(d)
+            H = scatter_sum(t, w[:, None, None] * a[:, :, None] * a[:, None, :], n)
+            g = scatter_sum(t, (w * res)[:, None] * a, n)
         ev = np.linalg.eigvalsh(H)
         ok = ev[:, 0] > 1e-8 * np.maximum(ev[:, -1], 1e-300)
         H[~ok] = np.eye(3)
@@ -241,14 +258,17 @@ def ray_spread(phi, obs, used, m):
     return np.where(tr > 0, (tr / 2 - disc) / np.maximum(tr / 2 + disc, 1e-300), 0.0)
 
 
-def normal_blocks(P, C, phi, obs, w, free_index, n_free, sparse: bool = False):
+def normal_blocks(P, C, phi, obs, w, free_index, n_free, sparse: bool = False, residuals=None):
     """The blocks of the Gauss-Newton normal equations of the joint problem (poses and free
     objects): ``U`` (N, 3, 3), ``V`` (F, 2, 2), ``Wf`` (N, 3, 2F), gradients ``g`` (N, 3) and
     ``h`` (F, 2), for weighted residuals ``w * res**2 / 2``. ``sparse``: the coupling ``Wf`` as a
-    :class:`Coupling` (one block per observation) instead of the dense array."""
+    :class:`Coupling` (one block per observation) instead of the dense array. ``residuals``:
+    :func:`bearing_residuals` of these poses and objects if the caller has them already."""
     t, i, _ = obs
     n = len(C)
-    res, d = bearing_residuals(P, C, phi, obs)
+    res, d = bearing_residuals(P, C, phi, obs) if residuals is None else residuals
+    if sparse:  # one compiled pass over the observations (large problems only)
+        return _sparse_normal_blocks(res, d, w, t, free_index[i], n, n_free)
     a = pose_jacobian(d)
     U = scatter_sum(t, w[:, None, None] * a[:, :, None] * a[:, None, :], n)
     g = scatter_sum(t, (w * res)[:, None] * a, n)
@@ -257,22 +277,35 @@ def normal_blocks(P, C, phi, obs, w, free_index, n_free, sparse: bool = False):
     tf, ff, wf, af, bf = t[k], f[k], w[k], a[k], -a[k, :2]
     V = scatter_sum(ff, wf[:, None, None] * bf[:, :, None] * bf[:, None, :], n_free)
     h = scatter_sum(ff, (wf * res[k])[:, None] * bf, n_free)
-    if sparse:
-        blocks = wf[:, None, None] * af[:, :, None] * bf[:, None, :]
-        return U, V, Coupling(blocks, tf, ff, n, n_free), g, h
     Wf = np.zeros((n, 3, n_free, 2))
     Wf[tf, :, ff, :] = wf[:, None, None] * af[:, :, None] * bf[:, None, :]
     return U, V, Wf.reshape(n, 3, 2 * n_free), g, h
 
 
-def joint_step(U, V, Wf, g, h, lam, solver: str = "lu"):
+def _sparse_normal_blocks(res, d, w, t, f, n, n_free):
+    """:func:`normal_blocks` with the coupling sparse, by the compiled loop
+    :func:`mappers.viewpoints.sparse_schur_kernels.bearing_blocks` (equal to rounding)."""
+    kf = int(np.count_nonzero(f >= 0))
+    U, g = np.zeros((n, 3, 3)), np.zeros((n, 3))
+    V, h = np.zeros((n_free, 2, 2)), np.zeros((n_free, 2))
+    blocks = np.empty((kf, 3, 2))
+    bstep, bfree = np.empty(kf, dtype=np.int64), np.empty(kf, dtype=np.int64)
+    kernels.bearing_blocks(np.ascontiguousarray(d, dtype=np.float64),
+                           np.ascontiguousarray(res, dtype=np.float64),
+                           np.ascontiguousarray(w, dtype=np.float64),
+                           np.ascontiguousarray(t, dtype=np.int64),
+                           np.ascontiguousarray(f, dtype=np.int64), U, g, V, h, blocks, bstep, bfree)
+    return U, V, Coupling(blocks, bstep, bfree, n, n_free), g, h
+
+
+def joint_step(U, V, Wf, g, h, lam, solver: str = "lu", rtol: float = CG_RTOL):
     """The damped Gauss-Newton step (Levenberg-Marquardt, ``diag *= 1 + lam``) of the poses and
     the free objects, the poses eliminated per step (Schur complement on the objects): the planar
     case of :func:`schur_step` (3 pose and 2 object parameters)."""
-    return schur_step(U, V, Wf, g, h, lam, solver)
+    return schur_step(U, V, Wf, g, h, lam, solver, rtol)
 
 
-def schur_step(U, V, Wf, g, h, lam, solver: str = "lu"):
+def schur_step(U, V, Wf, g, h, lam, solver: str = "lu", rtol: float = CG_RTOL):
     """The damped Gauss-Newton step (Levenberg-Marquardt, ``diag *= 1 + lam``) of the poses and
     the free objects, each pose's block eliminated (Schur complement on the objects), for any
     number of pose parameters ``p`` and object coordinates ``d``: ``U`` (N, p, p), ``V`` (F, d, d),
@@ -280,9 +313,9 @@ def schur_step(U, V, Wf, g, h, lam, solver: str = "lu"):
     steps (F, d). The planar adjustments use p = 3, d = 2; the 3-D ones
     (:mod:`mappers.spatial`) p = 6, d = 3. ``Wf`` a :class:`Coupling`: the sparse step
     (:func:`sparse_schur_step`, with ``solver``), for problems whose dense coupling would not
-    fit (:func:`use_sparse_coupling`)."""
+    fit (:func:`use_sparse_coupling`; ``rtol`` its conjugate gradients' relative residual)."""
     if isinstance(Wf, Coupling):
-        return sparse_schur_step(U, V, Wf, g, h, lam, solver)
+        return sparse_schur_step(U, V, Wf, g, h, lam, solver, rtol)
     n, p = U.shape[:2]
     f, d = V.shape[:2]
     diag = np.arange(p)

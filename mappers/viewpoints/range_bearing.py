@@ -31,18 +31,18 @@ the rigid fit; Huber & Ronchetti, *Robust Statistics* (2009), for the weights an
 from __future__ import annotations
 
 import warnings
-from numbers import Integral, Real
+from numbers import Integral
 
 import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
-from sklearn.utils._param_validation import Interval, StrOptions
+from sklearn.utils._param_validation import Interval
 
+from mappers.core.estimator_params import store_params
 from mappers.core.validation import check_fused_input
-from mappers.viewpoints.bearing import BearingAdjustmentWarning
+from mappers.viewpoints.bearing import DAMPING, BearingAdjustment, BearingAdjustmentWarning
 from mappers.viewpoints.engine import (
     DENSE_COUPLING_MAX_BYTES,
     Coupling,
-    Damping,
     bearing_angles,
     damped_step,
     joint_step,
@@ -56,9 +56,7 @@ from mappers.viewpoints.engine import (
 from mappers.viewpoints.start_map import anchored_start, keep_if_better
 
 __all__ = ["DAMPING", "RangeBearingAdjustment"]
-
-DAMPING = Damping(up=10.0, down=10.0, floor=1e-9, tries=12, accept_equal=True)
-"""The range-bearing adjustment's Levenberg-Marquardt damping rule (BEARING-BA's)."""
+# DAMPING: the Levenberg-Marquardt damping rule, BEARING-BA's (handed on from bearing.py)
 
 
 def _procrustes_poses(P, obs, n):
@@ -109,27 +107,19 @@ class RangeBearingAdjustment(TransformerMixin, BaseEstimator):
         refined_ whether the adjustment was kept.
     """
 
+    # the parameters it shares with BEARING-BA are checked as BEARING-BA checks them
     _parameter_constraints: dict = {
-        "loss": [StrOptions({"huber", "cauchy"}), None],
-        "robust_scale": [Interval(Real, 0, None, closed="neither")],
-        "max_rounds": [Interval(Integral, 1, None, closed="left")],
+        **{name: BearingAdjustment._parameter_constraints[name]
+           for name in ("loss", "robust_scale", "max_rounds", "tol", "min_views",
+                        "dense_coupling_bytes")},
         "passes": [Interval(Integral, 1, None, closed="left")],
-        "tol": [Interval(Real, 0, None, closed="left")],
-        "min_views": [Interval(Integral, 2, None, closed="left")],
-        "dense_coupling_bytes": [Interval(Real, 0, None, closed="left")],
     }
 
     def __init__(self, *, loss: str | None = "huber", robust_scale: float = 2.0,
                  max_rounds: int = 8, passes: int = 2, tol: float = 1e-7,
                  min_views: int = 3,
                  dense_coupling_bytes: float = DENSE_COUPLING_MAX_BYTES) -> None:
-        self.loss = loss
-        self.robust_scale = robust_scale
-        self.max_rounds = max_rounds
-        self.passes = passes
-        self.tol = tol
-        self.min_views = min_views
-        self.dense_coupling_bytes = dense_coupling_bytes
+        store_params(self, locals())
 
     def fit(self, X, y=None, *, masks=None, anchor_ids=None, anchor_positions=None,
             start_positions=None):

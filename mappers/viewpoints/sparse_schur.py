@@ -10,7 +10,8 @@ system of the objects,
 
 is a ``scipy.sparse`` matrix (step t couples only the objects it sees), solved by a sparse LU
 (:func:`scipy.sparse.linalg.spsolve`, SuperLU) or, ``solver="cg"``, by conjugate gradients on
-``S`` as an operator with a block-Jacobi preconditioner (the inexact step of large bundle
+``S`` as an operator (one compiled loop over the observations,
+:mod:`mappers.viewpoints.sparse_schur_kernels`) with a block-Jacobi preconditioner (the inexact step of large bundle
 adjusters: Agarwal et al., *Bundle Adjustment in the Large*, ECCV 2010; Triggs et al.,
 *Bundle Adjustment — A Modern Synthesis*, 2000, for the Schur complement). It is the same step as
 the dense one, summed in another order (equal to rounding; the tests compare them to 1e-9).
@@ -23,6 +24,8 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import LinearOperator, cg, spsolve
+
+from mappers.viewpoints import sparse_schur_kernels as kernels
 
 __all__ = ["CG_RTOL", "DENSE_COUPLING_MAX_BYTES", "Coupling", "sparse_schur_step", "use_sparse_coupling"]
 
@@ -98,26 +101,58 @@ def sparse_schur_step(U, V, W: Coupling, g, h, lam, solver: str = "lu", rtol: fl
     Vd = V.copy()
     Vd[:, dd, dd] *= 1.0 + lam
     Vd[:, dd, dd] += 1e-12
+    if solver == "cg":
+        return _cg_step(Ui, Vd, W, g, h, rtol)
     Wm, Uim, Vm = W.matrix(), _block_diagonal(Ui), _block_diagonal(Vd)
     WmT = Wm.T
     Uig = np.einsum("nij,nj->ni", Ui, g)
     rhs = -h.reshape(-1) + WmT @ Uig.reshape(-1)
     if not f:
         dp = np.zeros(0)
-    elif solver == "lu":
+    else:
         S = Vm.tocsr() - WmT.tocsr() @ (Uim @ Wm).tocsr()
         dp = spsolve(S.tocsc(), rhs)
-    else:
-        # the diagonal blocks of S: V_f - sum over the observations of f of W_k^T U_t^-1 W_k
-        Y = np.matmul(Ui[W.step], W.blocks)
-        own = np.einsum("kpi,kpj->kij", W.blocks, Y).reshape(-1, d * d)
-        diag = Vd - np.stack([np.bincount(W.free, weights=own[:, c], minlength=f)
-                              for c in range(d * d)], axis=1).reshape(f, d, d)
-        pre = _block_diagonal(np.linalg.inv(diag))
-        op = LinearOperator((d * f, d * f), matvec=lambda x: Vm @ x - WmT @ (Uim @ (Wm @ x)),
-                            dtype=float)
-        dp, info = cg(op, rhs, rtol=rtol, atol=0.0, maxiter=10 * d * f, M=pre)
-        if info != 0:
-            raise RuntimeError(f"conjugate gradients did not converge ({info} iterations)")
     dc = -Uig - (Uim @ (Wm @ dp)).reshape(n, p)
     return dc, np.asarray(dp).reshape(f, d)
+
+
+def _cg_step(Ui, Vd, W: Coupling, g, h, rtol: float):
+    """The ``"cg"`` step of :func:`sparse_schur_step` from the inverted (damped) pose blocks
+    ``Ui`` and the damped object blocks ``Vd``: the reduced system applied by one compiled loop
+    over the observations (:mod:`mappers.viewpoints.sparse_schur_kernels`), never formed, and
+    solved by conjugate gradients with a block-Jacobi preconditioner."""
+    n, p = Ui.shape[:2]
+    f, d = Vd.shape[:2]
+    blocks, step, free = W.blocks, W.step, W.free
+    if np.any(np.diff(step) < 0):  # the product visits the blocks step by step
+        order = np.argsort(step, kind="stable")
+        blocks, step, free = blocks[order], step[order], free[order]
+    blocks = np.ascontiguousarray(blocks, dtype=np.float64)
+    step = np.ascontiguousarray(step, dtype=np.int64)
+    free = np.ascontiguousarray(free, dtype=np.int64)
+    Ui, Vd = np.ascontiguousarray(Ui), np.ascontiguousarray(Vd)
+    Uig = np.einsum("nij,nj->ni", Ui, g)
+    if not f:
+        return -Uig, np.zeros((0, d))
+    rhs = -np.array(h, dtype=np.float64).reshape(f, d)
+    kernels.couple_transpose(blocks, step, free, Uig, rhs)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(step, minlength=n), out=indptr[1:])
+    diag = np.empty_like(Vd)
+    kernels.schur_diagonal(Ui, blocks, step, free, Vd, diag)
+    pre = _block_diagonal(np.linalg.inv(diag))
+
+    def matvec(x):
+        out = np.empty((f, d))
+        kernels.schur_matvec(Ui, blocks, indptr, free, Vd,
+                             np.ascontiguousarray(x, dtype=np.float64).reshape(f, d), out)
+        return out.reshape(-1)
+
+    op = LinearOperator((d * f, d * f), matvec=matvec, dtype=float)
+    dp, info = cg(op, rhs.reshape(-1), rtol=rtol, atol=0.0, maxiter=10 * d * f, M=pre)
+    if info != 0:
+        raise RuntimeError(f"conjugate gradients did not converge ({info} iterations)")
+    dp = dp.reshape(f, d)
+    Wdp = np.zeros((n, p))
+    kernels.couple(blocks, step, free, dp, Wdp)
+    return -Uig - np.einsum("nij,nj->ni", Ui, Wdp), dp

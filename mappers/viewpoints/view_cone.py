@@ -60,6 +60,7 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval
 
 from mappers.catalog import METHODS
+from mappers.core.estimator_params import store_params
 from mappers.core.validation import check_views
 from mappers.defaults import localisation_free
 from mappers.viewpoints import view_cone_kernels as view_kernels
@@ -305,18 +306,7 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
                  miss_rate: float = 0.1, grid: int = 10, headings: int = 24,
                  pose_iters: int = 3, max_start_loss: float = 0.35, passes: int = 1,
                  random_state=0) -> None:
-        self.start = start
-        self.fov_deg = fov_deg
-        self.rounds = rounds
-        self.softness = softness
-        self.range_softness = range_softness
-        self.miss_rate = miss_rate
-        self.grid = grid
-        self.headings = headings
-        self.pose_iters = pose_iters
-        self.max_start_loss = max_start_loss
-        self.passes = passes
-        self.random_state = random_state
+        store_params(self, locals())
 
     def _start_map(self, X, mask, ids, pos, timeline) -> np.ndarray:
         label = localisation_free("visibility", True)[0] if self.start is None else self.start

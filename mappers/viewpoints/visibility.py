@@ -67,7 +67,9 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval
 
+from mappers.core.estimator_params import store_params
 from mappers.core.flicker import step_runs
+from mappers.core.sensors import check_matrix
 from mappers.core.validation import check_views
 from mappers.defaults import choose_for_history, localisation_free
 from mappers.fitting import check_inputs
@@ -98,13 +100,7 @@ def visibility_bits(X, mask=None) -> tuple[np.ndarray, np.ndarray]:
     """``(seen, observed)``, both (N, M) bool: whether each object was visible at each step, and
     whether the sensor measured that entry (the mask; all True without one). ValueError when
     ``X`` is not a 0/1 history or ``mask`` does not fit it."""
-    try:
-        X = np.asarray(X, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"a visibility history is a numeric (M, N) array of 0/1: {exc}") from exc
-    if X.ndim != 2 or X.shape[0] < 3 or X.shape[1] < 1:
-        raise ValueError(f"a visibility history is an (M, N) array with M >= 3 objects and N >= 1 "
-                         f"steps, got shape {X.shape}")
+    X = check_matrix(X, "a visibility history", copy=False)
     if mask is None:
         observed = np.ones(X.shape, dtype=bool)
     else:
@@ -237,22 +233,7 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
                  occlusion: bool = True, prior_blur: float = 2.0, continuity: bool = False,
                  step_sigma: float | None = None, align: bool = False, overrelax: float = 0.0,
                  model_rounds: int | None = None, random_state=0) -> None:
-        self.start = start
-        self.max_rounds = max_rounds
-        self.inner_iters = inner_iters
-        self.tol = tol
-        self.min_step_objects = min_step_objects
-        self.min_views = min_views
-        self.grid_cells = grid_cells
-        self.prior_iters = prior_iters
-        self.occlusion = occlusion
-        self.prior_blur = prior_blur
-        self.continuity = continuity
-        self.step_sigma = step_sigma
-        self.align = align
-        self.overrelax = overrelax
-        self.model_rounds = model_rounds
-        self.random_state = random_state
+        store_params(self, locals())
 
     def _start_map(self, X, mask, ids, pos, timeline) -> np.ndarray:
         if self.start is not None and self.start.strip().upper() in ("VIS-BA", "VIS-BA-WALK"):

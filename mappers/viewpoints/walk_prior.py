@@ -99,40 +99,42 @@ def _compile() -> None:
     """Compile the loops below (the helpers first: the compiled recursion calls them as globals)
     and keep the recursion in ``_compiled``."""
     g = globals()
-    compile_in_place(g, ("_conv", "_scatter", "_gather", "_unscatter", "_forward_backward"),
-                     fastmath=True)
+    compile_in_place(g, ("_conv_rows", "_conv", "_scatter", "_gather", "_unscatter",
+                         "_forward_backward"), fastmath=True)
     _compiled["fb"] = g["_forward_backward"]
+
+
+def _conv_rows(src, dst, taps, lo, hi, in_lo, in_hi, c0, c1):  # pragma: no cover - compiled
+    """``dst[i, c0:c1+1] = sum_j taps[i - j + r] * src[j, c0:c1+1]`` for each row ``i`` in
+    [lo, hi], over the rows ``j`` in [in_lo, in_hi] within the taps' radius ``r`` of ``i``: one
+    1-D convolution along the first axis, written along contiguous rows (the compiler
+    vectorises the innermost loop)."""
+    r = (len(taps) - 1) // 2
+    for i in range(lo, hi + 1):
+        out = dst[i]
+        for c in range(c0, c1 + 1):
+            out[c] = 0.0
+        for j in range(max(i - r, in_lo), min(i + r, in_hi) + 1):
+            kk = taps[i - j + r]
+            row = src[j]
+            for c in range(c0, c1 + 1):
+                out[c] += kk * row[c]
 
 
 def _conv(src, tmp, tmp_t, dst_t, box, kx, ky, nx, ny):  # pragma: no cover - compiled
     """``dst_t = ((kx in x, ky in y) * src)`` transposed (indexed ``[y, x]``) over ``box`` (x0,
     x1, y0, y1, inclusive: where ``src`` may be non-zero) widened by the taps' radius and cut to
     the grid; returns that box. Both passes run along contiguous rows (the second on the
-    transposed intermediate), which the compiler vectorises. ``tmp`` and ``tmp_t`` are zero on
-    entry and on return."""
+    transposed intermediate). ``tmp`` and ``tmp_t`` are zero on entry and on return."""
     r = (len(kx) - 1) // 2
     x0, x1, y0, y1 = box
     X0, X1, Y0, Y1 = max(x0 - r, 0), min(x1 + r, nx - 1), max(y0 - r, 0), min(y1 + r, ny - 1)
-    for ix in range(X0, X1 + 1):  # along x, over the support's columns
-        out = tmp[ix]
-        for jx in range(max(ix - r, x0), min(ix + r, x1) + 1):
-            kk = kx[ix - jx + r]
-            row = src[jx]
-            for iy in range(y0, y1 + 1):
-                out[iy] += kk * row[iy]
+    _conv_rows(src, tmp, kx, X0, X1, x0, x1, y0, y1)  # along x, over the support's columns
     for ix in range(X0, X1 + 1):
         for iy in range(y0, y1 + 1):
             tmp_t[iy, ix] = tmp[ix, iy]
             tmp[ix, iy] = 0.0
-    for iy in range(Y0, Y1 + 1):  # along y, on the transposed rows
-        out = dst_t[iy]
-        for ix in range(X0, X1 + 1):
-            out[ix] = 0.0
-        for jy in range(max(iy - r, y0), min(iy + r, y1) + 1):
-            kk = ky[iy - jy + r]
-            row = tmp_t[jy]
-            for ix in range(X0, X1 + 1):
-                out[ix] += kk * row[ix]
+    _conv_rows(tmp_t, dst_t, ky, Y0, Y1, y0, y1, X0, X1)  # along y, on the transposed rows
     for jy in range(y0, y1 + 1):
         for ix in range(X0, X1 + 1):
             tmp_t[jy, ix] = 0.0

@@ -129,21 +129,6 @@ def test_visibility_sensor_reads_what_the_camera_detects():
         o2, *_ = rb.step(np.full(1, 0.3, np.float32))
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"sensor": "visibility-bearing"}, "sensor must be one of"),
-    ({"sensor": "bearing", "range_noise": 0.1}, "range_noise applies"),
-    ({"sensor": "range", "bearing_noise_deg": 1.0}, "bearing_noise_deg applies"),
-    ({"n_anchors": 3}, "n_anchors"),
-    ({"tag_heights": (2.0, 1.0)}, "tag_heights"),
-    ({"miss_rate": 1.0}, "miss_rate"),
-    ({"hfov_deg": 200.0}, "hfov_deg"),
-    ({"tags_per_post": -1}, "tags_per_post"),
-])
-def test_bad_arguments_are_named(kwargs, match):
-    with pytest.raises(ValueError, match=match):
-        Camera3DEnv(**kwargs)
-
-
 def test_bad_reset_options_are_named():
     env = Camera3DEnv(**SMALL)
     with pytest.raises(ValueError, match="8 rows"):

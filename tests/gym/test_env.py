@@ -215,34 +215,6 @@ def test_truncation_after_2000_steps():
         assert truncated == (i == 1999)
 
 
-@pytest.mark.parametrize(
-    ("kwargs", "name"),
-    [
-        ({"sensor": "sonar"}, "sensor"),
-        ({"step_length": 0.0}, "step_length"),
-        ({"step_length": -0.2}, "step_length"),
-        ({"max_turn": 0.0}, "max_turn"),
-        ({"max_turn": 4.0}, "max_turn"),
-        ({"visual_angle_deg": 0.0}, "visual_angle_deg"),
-        ({"visual_angle_deg": 180.0}, "visual_angle_deg"),
-        ({"occlusion": "yes"}, "occlusion"),
-        ({"n_proximity_rays": 0}, "n_proximity_rays"),
-        ({"proximity_range": -0.5}, "proximity_range"),
-        ({"max_range": 0.0}, "max_range"),
-        ({"render_mode": "ansi"}, "render_mode"),
-        ({"n_objects": 500}, "n_objects"),
-        ({"arena_size": -1.0}, "arena_size"),
-        ({"object_diameter": -0.048}, "object_diameter"),
-        ({"robot_radius": 0.0}, "robot_radius"),
-        ({"n_anchors": 2}, "n_anchors"),
-        ({"object_clearance": -1.0}, "object_clearance"),
-    ],
-)
-def test_bad_constructor_arguments(kwargs, name):
-    with pytest.raises(ValueError, match=name):
-        LFMDREnv(**kwargs)
-
-
 def test_large_arena_same_density():
     env = LFMDREnv(n_objects=500, arena_size=2.5 * math.sqrt(10.0))
     obs, info = env.reset(seed=0)

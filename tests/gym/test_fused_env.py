@@ -29,19 +29,17 @@ def _geometry(info):
 
 def _occluded(info, radius):
     """Brute force: object j is hidden when the segment robot -> j passes within ``radius`` of
-    another object's centre (the sensors' line-of-sight test)."""
+    another object's centre (the sensors' line-of-sight test). Every pair (j, k) is tried, as
+    arrays: the loop over pairs in Python took 6 s of the test's CPU."""
     p = info["robot_pose"][:2]
     objs = info["object_positions"]
-    out = np.zeros(len(objs), dtype=bool)
-    for j, q in enumerate(objs):
-        d = q - p
-        for k, c in enumerate(objs):
-            if k == j:
-                continue
-            t = np.clip(np.dot(c - p, d) / np.dot(d, d), 0.0, 1.0)
-            if np.linalg.norm(p + t * d - c) < radius and t < 1.0:
-                out[j] = True
-    return out
+    d = objs - p  # (j, 2): robot -> object j
+    t = np.clip(np.einsum("kc,jc->jk", objs - p, d) / np.einsum("jc,jc->j", d, d)[:, None],
+                0.0, 1.0)  # (j, k): where the segment robot -> j passes closest to k
+    near = np.linalg.norm(p + t[:, :, None] * d[:, None, :] - objs[None, :, :], axis=2) < radius
+    blocked = near & (t < 1.0)
+    np.fill_diagonal(blocked, False)  # an object does not hide itself
+    return blocked.any(axis=1)
 
 
 def test_range_bearing_observations_match_the_geometry():

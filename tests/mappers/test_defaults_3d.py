@@ -17,7 +17,9 @@ def test_every_spatial_entry_is_a_3d_method_and_2d_answers_do_not_move():
     assert choose_method("visibility", dimension=3) == ("COVIS-3D", {})
     assert choose_method("bearing", masked=True, dimension=3) == ("SPATIAL-BA", {})
     assert choose_method("range-bearing", dimension=3) == ("SPATIAL-BA", {})
-    assert choose_method("range", dimension=3) is None
+    assert choose_method("range", dimension=3) == ("RANGE-3D", {})
+    assert choose_method("range", masked=True, dimension=3) == ("RANGE-3D", {})
+    assert choose_method("range") == ("UNFOLD", {})  # 2-D: as before
     assert choose_method("visibility") == ("CAL-SMA", {})  # 2-D: as before
     with pytest.raises(ValueError, match="dimension must be 2 or 3"):
         choose_method("visibility", dimension=4)
@@ -31,5 +33,7 @@ def test_default_method_with_3d_anchors():
     assert default_method({"bearing": X, "range": R}, anchor_positions=xyz) == "SPATIAL-BA"
     assert default_method(seen, anchor_positions=xyz, return_params=True) == ("COVIS-3D", {})
     assert default_method(seen) == "CAL-SMA"  # no anchors given: the 2-D table
-    with pytest.raises(ValueError, match="no 3-D method maps 'range'"):
-        default_method_3d("range")
+    assert default_method(R, anchor_positions=xyz, sensor="range") == "RANGE-3D"
+    assert default_method_3d("range", masked=True) == "RANGE-3D"
+    with pytest.raises(ValueError, match="no 3-D method maps 'visibility-bearing'"):
+        default_method_3d("visibility-bearing")

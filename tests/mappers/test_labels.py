@@ -153,7 +153,9 @@ def test_every_row_of_the_defaults_table_names_methods_that_map_it():
     assert choose_method("visibility", n_objects=SCALABLE_ABOVE_OBJECTS + 1) == (
         "CAL-SMA", {"sparse": True})
     assert choose_method("bearing", masked=True, n_objects=10**4) == (
-        "BEARING-BA", {"start": "COVIS-SPARSE", "schur_solver": "cg", "max_rounds": 3})
+        "BEARING-BA", {"start": "COVIS-SPARSE", "start_params": {"n_rounds": 5},
+                       "schur_solver": "cg", "schur_rtol": 1e-3, "gain_tol": 1e-2,
+                       "max_rounds": 6})
     assert choose_method("visibility", dropouts=True) == ("VIS-BA-WALK", {})
     # a logged run (MRCLAM): its own column, whatever the size
     for sensor, label in (("visibility", "COVIS-ENSEMBLE"), ("bearing", "COVIS-ENSEMBLE"),
@@ -214,7 +216,9 @@ def test_default_method_of_large_and_flickering_histories():
     assert default_method(B, sensor="bearing", return_params=True) == ("CAL-SMA", {"sparse": True})
     Bm = np.repeat(mask, 2, axis=1)
     assert default_method(B * Bm, sensor="bearing", mask=Bm, return_params=True) == (
-        "BEARING-BA", {"start": "COVIS-SPARSE", "schur_solver": "cg", "max_rounds": 3})
+        "BEARING-BA", {"start": "COVIS-SPARSE", "start_params": {"n_rounds": 5},
+                       "schur_solver": "cg", "schur_rtol": 1e-3, "gain_tol": 1e-2,
+                       "max_rounds": 6})
     assert mappers.default_method(r, sensor="range") == "UNFOLD"  # no scalable default
 
 

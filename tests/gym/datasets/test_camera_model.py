@@ -19,7 +19,9 @@ HEADER = "# synthetic\n# run\n# for\n# tests\n"
 
 def _write_run(root: Path, sd_range: float, sd_bearing: float, half_fov: float, max_range: float,
                seed: int = 0) -> Path:
-    """An MRCLAM-layout run of a known camera: 15 landmarks, five robots, Gaussian noise."""
+    """An MRCLAM-layout run of a known camera: 15 landmarks, five robots (400 readings each:
+    about 315 images of 3+ landmarks, each fitted 4 times by least squares; 600 readings took
+    1.6x the CPU for estimates as close), Gaussian noise."""
     rng = np.random.default_rng(seed)
     root.mkdir()
     landmarks = rng.uniform((0.0, 0.0), (10.0, 6.0), (15, 2))
@@ -30,7 +32,7 @@ def _write_run(root: Path, sd_range: float, sd_bearing: float, half_fov: float, 
         f"{s} {x:.6f} {y:.6f} 0.0001 0.0001\n" for s, (x, y) in zip(subjects, landmarks, strict=True)))
     for robot in range(1, 6):
         lines, t = [], 1000.0 * robot
-        while len(lines) < 600:
+        while len(lines) < 400:
             pose = np.array([*rng.uniform((0.0, 0.0), (10.0, 6.0)), rng.uniform(-np.pi, np.pi)])
             d = landmarks - pose[:2]
             r = np.hypot(d[:, 0], d[:, 1])
@@ -52,7 +54,7 @@ def synthetic_run(tmp_path_factory):
 
 def test_a_known_camera_is_recovered_from_a_synthetic_run(synthetic_run):
     cam = measure_camera([synthetic_run])
-    assert cam.images_fitted > 300
+    assert cam.images_fitted > 250
     assert cam.bearing_noise_deg == pytest.approx(0.5, rel=0.15)
     assert cam.range_noise == pytest.approx(0.05, rel=0.15)
     assert cam.range_noise_all == pytest.approx(0.05, rel=0.15)

@@ -13,7 +13,7 @@ from mappers.masked.coobservation import (
     angle_covisibility_dissimilarity,
     covisibility_dissimilarity,
 )
-from mappers.masked.covis_sparse import sparse_co_observation
+from mappers.masked.covis_sparse import _steps, sparse_co_observation
 
 
 @pytest.fixture(scope="module")
@@ -48,6 +48,34 @@ def test_sparse_coefficient_equals_the_dense_one(limited, sensor):
     dense_och = np.exp(-delta[i, j])
     big = och > 1e-6
     np.testing.assert_allclose(och[big], dense_och[big], rtol=1e-9, atol=1e-12)
+
+
+def _non_canonical(A):
+    """The same matrix, flagged as possibly unsorted: read by the general (COO) path."""
+    A = sp.csr_array(A, copy=True)
+    A.has_canonical_format = False
+    return A
+
+
+@pytest.mark.parametrize("mask_kind", ["recorded", "other", "none"])
+def test_the_canonical_bearing_path_gives_the_general_paths_matrices(limited, mask_kind):
+    _, small = limited
+    X, mask = small.sparse, small.sparse_mask
+    if mask_kind == "other":  # a mask with its own pattern: half the readings masked out
+        keep = np.random.default_rng(1).random(mask.nnz) < 0.5
+        mask = sp.csr_array((mask.data & keep, mask.indices.copy(), mask.indptr.copy()),
+                            shape=mask.shape)
+        mask.eliminate_zeros()  # in place: on copies, not on the fixture's arrays
+    elif mask_kind == "none":
+        mask = None
+    fast = _steps(X, mask, "bearing")
+    slow = _steps(_non_canonical(X), None if mask is None else _non_canonical(mask), "bearing")
+    assert fast[0].nnz > 1000
+    for a, b in zip(fast, slow, strict=True):
+        b = sp.csr_array(b)
+        b.sort_indices()
+        assert np.array_equal(a.indptr, b.indptr) and np.array_equal(a.indices, b.indices)
+        assert np.array_equal(a.data, b.data)  # value for value
 
 
 def test_covis_sparse_maps_as_well_as_the_dense_default(limited):

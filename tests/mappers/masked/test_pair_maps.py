@@ -229,10 +229,12 @@ def test_ensemble_is_the_mean_of_its_members_and_no_worse_than_them_on_average()
 
     hists = [(binned(k), None) for k in (1, 2, 3)]
     sets = [{"min_co": 3}, {"min_co": 5}]
+    # 100 SMACOF updates, not the default 300: the same map here (mean error 0.079 of the
+    # centroid's against 0.078, bound 0.4) at a third of the CPU (12 non-metric maps)
     ens = ensemble_embedding(hists, "visibility", "covis-nonmetric", anchor_ids=anchors,
-                             anchor_positions=P[anchors], param_sets=sets)
+                             anchor_positions=P[anchors], param_sets=sets, max_iter=100)
     members = [masked_embedding(X, m, "visibility", "covis-nonmetric", anchor_ids=anchors,
-                                anchor_positions=P[anchors], **ps).positions
+                                anchor_positions=P[anchors], max_iter=100, **ps).positions
                for X, m in hists for ps in sets]
     assert np.allclose(ens.positions, np.mean(members, axis=0))
     assert np.allclose(ens.positions[anchors], P[anchors])

@@ -332,7 +332,10 @@ def test_online_episode_frames_and_gif(tmp_path):
         online_episode("LFMDR-Bearing-v0", 60, every=0)
 
 
+@pytest.mark.slow
 def test_cli_run_online(tmp_path, capsys):
+    """Slow (5 s of CPU, most of it the GIF): the default run checks the same command, and
+    more, in tests/gym/test_cli.py::test_run_online_writes_every_file_its_help_promises."""
     pytest.importorskip("matplotlib")
     from lfmdr_gym.cli import main
 

@@ -55,6 +55,32 @@ def test_a_scipy_sparse_history_gives_the_dense_historys_map():
     np.testing.assert_allclose(sparse, dense, rtol=0, atol=1e-8)
 
 
+def test_gain_tol_stops_once_a_round_gains_little():
+    P, X, mask, ids = _masked_camera()
+    start = P + np.random.default_rng(5).normal(scale=0.05, size=P.shape)
+    full, Y = _fit(X, mask, P, ids, start, max_rounds=20, dense_coupling_bytes=0, schur_solver="cg")
+    early, Z = _fit(X, mask, P, ids, start, max_rounds=20, dense_coupling_bytes=0,
+                    schur_solver="cg", schur_rtol=1e-3, gain_tol=1e-2)
+    assert 2 <= early.n_rounds_ < full.n_rounds_
+    assert non_anchor_error(start, P, ids) > 0.03
+    assert non_anchor_error(Z, P, ids) < 1e-3  # exact bearings: close to the layout already
+    assert non_anchor_error(Y, P, ids) < 1e-6
+
+
+def test_start_params_reach_the_start_method():
+    P, X, mask, ids = _masked_camera()
+
+    def start_of(**kw):
+        est = BearingAdjustment(start="COVIS-SPARSE", max_rounds=1, **kw)
+        return est.fit(X, mask=mask, anchor_ids=ids, anchor_positions=P[ids]).start_
+
+    a, b = start_of(), start_of(start_params={"n_rounds": 1})
+    assert np.isfinite(a).all() and np.isfinite(b).all()
+    assert np.abs(a - b).max() > 1e-6  # one calibration round instead of ten
+    with pytest.raises(ValueError, match="n_round"):
+        start_of(start_params={"n_round": 1})
+
+
 def test_a_sparse_history_of_non_unit_pairs_is_refused():
     P, X, mask, ids = _masked_camera()
     with pytest.raises(ValueError, match="unit"):
