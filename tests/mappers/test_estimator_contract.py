@@ -29,7 +29,7 @@ from mappers.masked import (
 )
 from mappers.paper import LaplacianEigenmap, LocallyLinear, MaximumVarianceUnfolding
 from mappers.smacof import WeightedSMACOF
-from mappers.spatial import CoVisibility3D, SpatialAdjustment
+from mappers.spatial import CoVisibility3D, FrustumAdjustment, Range3D, SpatialAdjustment
 from mappers.viewpoints import (
     BearingAdjustment,
     RangeBearingAdjustment,
@@ -64,6 +64,8 @@ ESTIMATORS = [
     VisibilityBearingSMACOF(),
     SpatialAdjustment(),
     CoVisibility3D(),
+    Range3D(),
+    FrustumAdjustment(),
 ]
 
 _FITTED = (
@@ -108,6 +110,10 @@ _CANNOT_FIT = {
                        "the checks give neither",
     CoVisibility3D: "maps visibility (0/1) histories with 3-D anchors (four not on one plane); "
                     "the checks give real-valued data and no anchors",
+    Range3D: "maps range histories with 3-D anchors (four not on one plane); the checks give no "
+             "anchors",
+    FrustumAdjustment: "maps visibility (0/1) histories with 3-D anchors and the camera's "
+                       "calibration; the checks give real-valued data, no anchors and no camera",
 }
 _FUSED = {
     RangeBearingAdjustment: "maps fused range and bearing histories (a mapping sensor -> matrix, "
