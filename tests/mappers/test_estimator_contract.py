@@ -29,7 +29,7 @@ from mappers.masked import (
 )
 from mappers.paper import LaplacianEigenmap, LocallyLinear, MaximumVarianceUnfolding
 from mappers.smacof import WeightedSMACOF
-from mappers.spatial import CoVisibility3D, SpatialAdjustment
+from mappers.spatial import CoVisibility3D, Range3D, SpatialAdjustment
 from mappers.viewpoints import (
     BearingAdjustment,
     RangeBearingAdjustment,
@@ -64,6 +64,7 @@ ESTIMATORS = [
     VisibilityBearingSMACOF(),
     SpatialAdjustment(),
     CoVisibility3D(),
+    Range3D(),
 ]
 
 _FITTED = (
@@ -108,6 +109,8 @@ _CANNOT_FIT = {
                        "the checks give neither",
     CoVisibility3D: "maps visibility (0/1) histories with 3-D anchors (four not on one plane); "
                     "the checks give real-valued data and no anchors",
+    Range3D: "maps range histories with 3-D anchors (four not on one plane); the checks give no "
+             "anchors",
 }
 _FUSED = {
     RangeBearingAdjustment: "maps fused range and bearing histories (a mapping sensor -> matrix, "
