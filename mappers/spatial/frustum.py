@@ -53,14 +53,15 @@ from numbers import Integral, Real
 
 import numpy as np
 from scipy.special import log_expit
-from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.base import BaseEstimator
 from sklearn.utils._param_validation import Interval
 
 from mappers.core.align_3d import check_anchors_3d
+from mappers.core.embedding_transformer import EmbeddingTransformer
 from mappers.core.validation import check_views
 from mappers.spatial import frustum_kernels as kernels
 from mappers.spatial.covisibility_3d import CoVisibility3D
-from mappers.viewpoints import Damping, damped_step, keep_if_better, schur_step
+from mappers.viewpoints import Damping, damped_step, free_objects, keep_if_better, schur_step
 
 __all__ = ["FrustumAdjustment", "FrustumAdjustmentWarning", "FrustumCamera", "view_log_prob"]
 
@@ -194,7 +195,7 @@ class FrustumProblem:
         return P, C, loss
 
 
-class FrustumAdjustment(TransformerMixin, BaseEstimator):
+class FrustumAdjustment(EmbeddingTransformer, BaseEstimator):
     """Frustum bundle adjustment of a 3-D sightings map (module docstring).
 
     Parameters (the first four are the camera's calibration and must be given):
@@ -253,12 +254,6 @@ class FrustumAdjustment(TransformerMixin, BaseEstimator):
         self.pose_iters = pose_iters
         self.max_iter = max_iter
 
-    def fit_transform(self, X, y=None, *, anchor_ids=None, anchor_positions=None, mask=None,
-                      start_positions=None) -> np.ndarray:
-        """Fit and return ``embedding_`` (M, 3)."""
-        return self.fit(X, anchor_ids=anchor_ids, anchor_positions=anchor_positions, mask=mask,
-                        start_positions=start_positions).embedding_
-
     def fit(self, X, y=None, *, anchor_ids=None, anchor_positions=None, mask=None,
             start_positions=None):
         """Map the sightings ``X`` (M, N) of 0/1 in 3-D (see the module's docstring)."""
@@ -298,14 +293,7 @@ class FrustumAdjustment(TransformerMixin, BaseEstimator):
 
     def _adjust(self, P0, ids, seen, camera: FrustumCamera, soft: np.ndarray) -> None:
         placed = np.all(np.isfinite(P0), axis=1)
-        free = placed.copy()
-        free[ids] = False
-        if not free.any():
-            raise ValueError("FRUSTUM-BA has nothing to refine: every placed object is an anchor")
-        if free.sum() > MAX_FREE_OBJECTS:
-            raise ValueError(f"FRUSTUM-BA solves a (3F, 3F) system of its F free objects each "
-                             f"round and F = {int(free.sum())} is above {MAX_FREE_OBJECTS}: map "
-                             "this history with COVIS-3D")
+        free = free_objects(placed, ids, "FRUSTUM-BA", 3, MAX_FREE_OBJECTS, "COVIS-3D")
         use = np.flatnonzero(placed)
         free_index = np.full(len(use), -1, dtype=np.int64)
         n_free = int(free[use].sum())

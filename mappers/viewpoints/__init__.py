@@ -15,7 +15,7 @@ from mappers.viewpoints.marginals import (
     step_blocks,
 )
 from mappers.viewpoints.range_bearing import RangeBearingAdjustment
-from mappers.viewpoints.start_map import anchored_start, fit_start, keep_if_better
+from mappers.viewpoints.start_map import anchored_start, fit_start, free_objects, keep_if_better
 from mappers.viewpoints.view_cone import (
     MAX_FOV_DEG,
     MAX_FREE_OBJECTS,
@@ -38,7 +38,7 @@ __all__ = [
     "adjustment_covariances", "has_model_covariances", "model_covariances",
     "released_anchor", "schur_information", "step_blocks",
     "RangeBearingAdjustment",
-    "anchored_start", "fit_start", "keep_if_better",
+    "anchored_start", "fit_start", "free_objects", "keep_if_better",
     "MAX_FOV_DEG", "MAX_FREE_OBJECTS", "ConeProblem", "ViewAdjustment", "ViewAdjustmentWarning",
     "estimate_fov", "view_cone_score",
     "VisibilityAdjustment", "VisibilityAdjustmentWarning", "visibility_bits",

@@ -65,7 +65,7 @@ from mappers.core.validation import check_views
 from mappers.defaults import localisation_free
 from mappers.viewpoints import view_cone_kernels as view_kernels
 from mappers.viewpoints.engine import Damping, damped_step, joint_step
-from mappers.viewpoints.start_map import anchored_start, fit_start, keep_if_better
+from mappers.viewpoints.start_map import anchored_start, fit_start, free_objects, keep_if_better
 
 __all__ = ["MAX_FOV_DEG", "MAX_FREE_OBJECTS", "ConeProblem", "ViewAdjustment", "ViewAdjustmentWarning",
            "estimate_fov", "view_cone_score"]
@@ -374,14 +374,8 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
             self.fov_deg_ = 2.0 * float(_FOV_HALVES[int(np.argmax(widths))])
         self.radius_ = float("nan")
         self.poses_ = np.full((obs.shape[0], 3), np.nan)
-        free = placed.copy()
-        free[ids] = False
-        if not free.any():
-            raise ValueError("VIEW-BA has nothing to refine: every placed object is an anchor")
-        if free.sum() > MAX_FREE_OBJECTS:
-            raise ValueError(f"VIEW-BA solves a (2F, 2F) system of its F free objects each round "
-                             f"and F = {int(free.sum())} is above {MAX_FREE_OBJECTS}: map this "
-                             "history with DROPOUT-BLEND (build_map's default above 500 objects)")
+        free_objects(placed, ids, "VIEW-BA", 2, MAX_FREE_OBJECTS,
+                     "DROPOUT-BLEND (build_map's default above 500 objects)")
         if self.fov_deg_ > MAX_FOV_DEG:
             warnings.warn(f"a {self.fov_deg_:.0f}-degree view says little about a heading "
                           f"(above {MAX_FOV_DEG:.0f}): the start map is kept",
