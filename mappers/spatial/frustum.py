@@ -61,7 +61,16 @@ from mappers.core.embedding_transformer import EmbeddingTransformer
 from mappers.core.validation import check_views
 from mappers.spatial import frustum_kernels as kernels
 from mappers.spatial.covisibility_3d import CoVisibility3D
-from mappers.viewpoints import Damping, damped_step, free_objects, keep_if_better, schur_step
+from mappers.viewpoints import (
+    VIEWPOINT_SEARCH_CONSTRAINTS,
+    Damping,
+    damped_step,
+    free_objects,
+    keep_if_better,
+    schur_step,
+    search_cells,
+    search_poses,
+)
 
 __all__ = ["FrustumAdjustment", "FrustumAdjustmentWarning", "FrustumCamera", "view_log_prob"]
 
@@ -228,9 +237,7 @@ class FrustumAdjustment(EmbeddingTransformer, BaseEstimator):
         "range_softness": [Interval(Real, 0.0, None, closed="neither")],
         "miss_rate": [Interval(Real, 0.0, 1.0, closed="neither")],
         "rounds": [Interval(Integral, 0, None, closed="left")],
-        "grid": [Interval(Integral, 2, None, closed="left")],
-        "headings": [Interval(Integral, 4, None, closed="left")],
-        "pose_iters": [Interval(Integral, 0, None, closed="left")],
+        **VIEWPOINT_SEARCH_CONSTRAINTS,
         "max_iter": [Interval(Integral, 1, None, closed="left")],
     }
 
@@ -325,11 +332,7 @@ class FrustumAdjustment(EmbeddingTransformer, BaseEstimator):
     def _search(self, P, S, camera: FrustumCamera, softness: float) -> np.ndarray:
         """Each step's best viewpoint among the grid's candidates (floor positions over the
         objects' plan x headings), the objects held: ``(N, 3)``."""
-        lo, hi = P[:, :2].min(axis=0), P[:, :2].max(axis=0)
-        xs, ys = np.linspace(lo[0], hi[0], self.grid), np.linspace(lo[1], hi[1], self.grid)
-        cells = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
-        th = np.linspace(-math.pi, math.pi, self.headings, endpoint=False)
-        cand = np.column_stack([np.repeat(cells, len(th), axis=0), np.tile(th, len(cells))])
+        cand = search_poses(search_cells(P[:, :2], self.grid), self.headings)
         if S.shape[0] * len(cand) > _MAX_SEARCH_ENTRIES:
             raise ValueError(f"{S.shape[0]} steps x {len(cand)} candidate viewpoints exceed "
                              f"{_MAX_SEARCH_ENTRIES:.0e} entries: lower grid or headings")

@@ -19,10 +19,13 @@ from mappers.viewpoints.start_map import anchored_start, fit_start, free_objects
 from mappers.viewpoints.view_cone import (
     MAX_FOV_DEG,
     MAX_FREE_OBJECTS,
+    VIEWPOINT_SEARCH_CONSTRAINTS,
     ConeProblem,
     ViewAdjustment,
     ViewAdjustmentWarning,
     estimate_fov,
+    search_cells,
+    search_poses,
     view_cone_score,
 )
 from mappers.viewpoints.visibility import (
@@ -39,8 +42,9 @@ __all__ = [
     "released_anchor", "schur_information", "step_blocks",
     "RangeBearingAdjustment",
     "anchored_start", "fit_start", "free_objects", "keep_if_better",
-    "MAX_FOV_DEG", "MAX_FREE_OBJECTS", "ConeProblem", "ViewAdjustment", "ViewAdjustmentWarning",
-    "estimate_fov", "view_cone_score",
+    "MAX_FOV_DEG", "MAX_FREE_OBJECTS", "VIEWPOINT_SEARCH_CONSTRAINTS", "ConeProblem",
+    "ViewAdjustment", "ViewAdjustmentWarning", "estimate_fov", "search_cells", "search_poses",
+    "view_cone_score",
     "VisibilityAdjustment", "VisibilityAdjustmentWarning", "visibility_bits",
     "forward_backward", "gaussian_taps",
 ]
