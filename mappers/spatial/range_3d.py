@@ -46,6 +46,7 @@ from mappers.calibrated import ClassicalUnfolding
 from mappers.core.align_3d import apply_affine_3d, check_anchors_3d, fit_affine_3d
 from mappers.core.embedding_transformer import EmbeddingTransformer
 from mappers.core.errors import MappingError
+from mappers.core.iteration_params import ITERATION_CONSTRAINTS
 from mappers.core.validation import check_views
 from mappers.spatial.adjustment import DAMPING
 from mappers.spatial.covisibility_3d import CoVisibility3D
@@ -250,8 +251,7 @@ class Range3D(EmbeddingTransformer, BaseEstimator):
         "min_ranges": [Interval(Integral, 1, None, closed="left")],
         "min_spread": [Interval(Real, 0, None, closed="left")],
         "n_rounds": [Interval(Integral, 1, None, closed="left")],
-        "max_iter": [Interval(Integral, 1, None, closed="left")],
-        "tol": [Interval(Real, 0, None, closed="left")],
+        **ITERATION_CONSTRAINTS,
         "loss": [StrOptions({"cauchy", "huber"}), None],
         "loss_scale": [Interval(Real, 0, None, closed="neither")],
     }
