@@ -170,14 +170,22 @@ def summary(rows: list[dict[str, Any]], sensors: list[str]) -> list[str]:
     return lines
 
 
-def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__,
+def layout_options(description: str, layouts: int, seed0: int) -> argparse.ArgumentParser:
+    """A parser with the options of a benchmark over fresh layouts of ``LFMDR-Camera3D-v0``:
+    ``--layouts`` (default ``layouts``), ``--steps`` (2000), ``--seed0`` (default ``seed0``) and
+    ``--range-noise`` (0.02 m); ``description`` is its help text (the benchmark's docstring)."""
+    ap = argparse.ArgumentParser(description=description,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--layouts", type=int, default=25)
+    ap.add_argument("--layouts", type=int, default=layouts)
     ap.add_argument("--steps", type=int, default=2000)
-    ap.add_argument("--seed0", type=int, default=34000)
-    ap.add_argument("--bearing-noise-deg", type=float, default=1.0)
+    ap.add_argument("--seed0", type=int, default=seed0)
     ap.add_argument("--range-noise", type=float, default=0.02)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = layout_options(__doc__, layouts=25, seed0=34000)
+    ap.add_argument("--bearing-noise-deg", type=float, default=1.0)
     ap.add_argument("--sensors", default="range-bearing,bearing,visibility")
     ap.add_argument("--env-kw", action="append", default=[], metavar="NAME=VALUE")
     ap.add_argument("--visibility-method", default=None, metavar="LABEL",

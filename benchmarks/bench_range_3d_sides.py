@@ -14,8 +14,9 @@ sightings, which picks the side). Medians over the layouts at the end; nothing i
 
 from __future__ import annotations
 
-import argparse
+import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -23,7 +24,9 @@ import lfmdr_gym  # noqa: F401  (registers the env ids)
 from lfmdr_gym import RandomWalkPolicy, collect
 from mappers.spatial import Range3D
 
-ENV_ID = "LFMDR-Camera3D-v0"
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_camera3d import ENV_ID, layout_options, score  # noqa: E402
 
 
 def layout_scores(seed: int, steps: int, range_noise: float, max_range: float) -> dict[str, float]:
@@ -46,19 +49,14 @@ def layout_scores(seed: int, steps: int, range_noise: float, max_range: float) -
 
     off = rest[np.abs(truth[rest, 2] - height) > 0.1]
     side = np.sign(truth[off, 2] - height)
-    return {"mpe": float(np.linalg.norm(Y[rest] - truth[rest], axis=1).mean()),
+    return {"mpe": score(Y, truth, h.anchor_ids)[0],
             "folded": float(np.linalg.norm(fold(Y[rest]) - fold(truth[rest]), axis=1).mean()),
             "wrong_side": float(np.mean(np.sign(Y[off, 2] - height) != side)),
             "start_wrong_side": float(np.mean(np.sign(est.start_[off, 2] - height) != side))}
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--layouts", type=int, default=10)
-    ap.add_argument("--seed0", type=int, default=34100)
-    ap.add_argument("--steps", type=int, default=2000)
-    ap.add_argument("--range-noise", type=float, default=0.02)
+    ap = layout_options(__doc__, layouts=10, seed0=34100)
     ap.add_argument("--max-range", type=float, default=3.0)
     args = ap.parse_args(argv)
     rows = []

@@ -62,6 +62,7 @@ from sklearn.utils.validation import validate_data
 from mappers.core.align import apply_affine, check_anchors, fit_affine
 from mappers.core.estimator_params import store_params
 from mappers.core.graph import informative_pairs, knn_mask
+from mappers.core.iteration_params import ITERATION_CONSTRAINTS
 from mappers.smacof import classical_mds, euclidean_distance_matrix, weighted_smacof
 
 __all__ = [
@@ -232,8 +233,7 @@ CALIBRATION_CONSTRAINTS: dict = {
     "dissimilarity_degree": [Interval(Integral, 1, 3, closed="both")],
     "far_weight": [Interval(Real, 0, None, closed="left")],
     "far_factor": [Interval(Real, 0, None, closed="left")],
-    "max_iter": [Interval(Integral, 1, None, closed="left")],
-    "tol": [Interval(Real, 0, None, closed="left")],
+    **ITERATION_CONSTRAINTS,
     "random_state": ["random_state"],
 }
 """The ``_parameter_constraints`` CAL-SMA and its sparse variant share (calibration rounds,

@@ -37,6 +37,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 
 from mappers.core.align import check_anchors
 from mappers.core.estimator_params import store_params
+from mappers.core.iteration_params import ITERATION_CONSTRAINTS
 from mappers.core.validation import check_fused_input
 from mappers.fused.law_of_cosines import (
     frame_triangles,
@@ -124,8 +125,7 @@ class LawOfCosinesSMACOF(TransformerMixin, BaseEstimator):
         "min_count": [Interval(Integral, 1, None, closed="left")],
         "max_range": [Interval(Real, 0, None, closed="neither"), None],
         "trim": [Interval(Real, 0, None, closed="neither"), None],
-        "max_iter": [Interval(Integral, 1, None, closed="left")],
-        "tol": [Interval(Real, 0, None, closed="left")],
+        **ITERATION_CONSTRAINTS,
         "outlier": [Interval(Real, 0, None, closed="neither")],
         "max_rounds": [Interval(Integral, 1, None, closed="left")],
         "n_init": [Interval(Integral, 0, None, closed="left")],

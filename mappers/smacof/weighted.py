@@ -16,7 +16,7 @@ majoriser is minimised over X_f alone: V_ff X_f = [B(X) X]_f - V_fa X_a.
 from __future__ import annotations
 
 from collections.abc import Callable
-from numbers import Integral, Real
+from numbers import Integral
 
 import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
@@ -27,6 +27,7 @@ from sklearn.utils.extmath import svd_flip
 
 from mappers.core.estimator_params import store_params
 from mappers.core.graph import connected_knn_graph, warn_if_repaired
+from mappers.core.iteration_params import ITERATION_CONSTRAINTS
 from mappers.core.validation import check_points_or_dissimilarities
 
 __all__ = [
@@ -252,8 +253,7 @@ class WeightedSMACOF(TransformerMixin, BaseEstimator):
         "n_neighbors": [Interval(Integral, 1, None, closed="left"), None],
         "init": [StrOptions({"lpca", "unweighted"}), "array-like"],
         "n_init": [Interval(Integral, 1, None, closed="left")],
-        "max_iter": [Interval(Integral, 1, None, closed="left")],
-        "tol": [Interval(Real, 0, None, closed="left")],
+        **ITERATION_CONSTRAINTS,
         "dissimilarity": [StrOptions({"euclidean", "precomputed"})],
         "n_components": [Interval(Integral, 1, None, closed="left")],
         "random_state": ["random_state"],

@@ -24,9 +24,10 @@ out flattened. Fixed anchors span space by themselves.
 from __future__ import annotations
 
 import numpy as np
-from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.base import BaseEstimator
 
 from mappers.core.align_3d import check_anchors_3d
+from mappers.core.embedding_transformer import EmbeddingTransformer
 from mappers.core.validation import check_views
 from mappers.masked import covisibility_dissimilarity
 from mappers.smacof import weighted_smacof
@@ -58,18 +59,12 @@ def anchor_scale(delta: np.ndarray, ids: np.ndarray, pos: np.ndarray) -> float:
     return float(dist @ dd / (dd @ dd))
 
 
-class CoVisibility3D(TransformerMixin, BaseEstimator):
+class CoVisibility3D(EmbeddingTransformer, BaseEstimator):
     """Visibility histories (M, N) of 0/1 -> (M, 3) world positions (see the module's
     docstring); ``max_iter`` SMACOF updates at most. Objects never seen with another are NaN."""
 
     def __init__(self, *, max_iter: int = 300):
         self.max_iter = max_iter
-
-    def fit_transform(self, X, y=None, *, anchor_ids=None, anchor_positions=None,
-                      mask=None) -> np.ndarray:
-        """Fit and return ``embedding_`` (M, 3)."""
-        return self.fit(X, y, anchor_ids=anchor_ids, anchor_positions=anchor_positions,
-                        mask=mask).embedding_
 
     def fit(self, X, y=None, *, anchor_ids=None, anchor_positions=None, mask=None):
         """Map the visibility history ``X`` (M, N) (``mask`` True where observed) in 3-D."""

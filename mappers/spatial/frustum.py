@@ -53,14 +53,24 @@ from numbers import Integral, Real
 
 import numpy as np
 from scipy.special import log_expit
-from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.base import BaseEstimator
 from sklearn.utils._param_validation import Interval
 
 from mappers.core.align_3d import check_anchors_3d
+from mappers.core.embedding_transformer import EmbeddingTransformer
 from mappers.core.validation import check_views
 from mappers.spatial import frustum_kernels as kernels
 from mappers.spatial.covisibility_3d import CoVisibility3D
-from mappers.viewpoints import Damping, damped_step, keep_if_better, schur_step
+from mappers.viewpoints import (
+    VIEWPOINT_SEARCH_CONSTRAINTS,
+    Damping,
+    damped_step,
+    free_objects,
+    keep_if_better,
+    schur_step,
+    search_cells,
+    search_poses,
+)
 
 __all__ = ["FrustumAdjustment", "FrustumAdjustmentWarning", "FrustumCamera", "view_log_prob"]
 
@@ -194,7 +204,7 @@ class FrustumProblem:
         return P, C, loss
 
 
-class FrustumAdjustment(TransformerMixin, BaseEstimator):
+class FrustumAdjustment(EmbeddingTransformer, BaseEstimator):
     """Frustum bundle adjustment of a 3-D sightings map (module docstring).
 
     Parameters (the first four are the camera's calibration and must be given):
@@ -227,9 +237,7 @@ class FrustumAdjustment(TransformerMixin, BaseEstimator):
         "range_softness": [Interval(Real, 0.0, None, closed="neither")],
         "miss_rate": [Interval(Real, 0.0, 1.0, closed="neither")],
         "rounds": [Interval(Integral, 0, None, closed="left")],
-        "grid": [Interval(Integral, 2, None, closed="left")],
-        "headings": [Interval(Integral, 4, None, closed="left")],
-        "pose_iters": [Interval(Integral, 0, None, closed="left")],
+        **VIEWPOINT_SEARCH_CONSTRAINTS,
         "max_iter": [Interval(Integral, 1, None, closed="left")],
     }
 
@@ -252,12 +260,6 @@ class FrustumAdjustment(TransformerMixin, BaseEstimator):
         self.headings = headings
         self.pose_iters = pose_iters
         self.max_iter = max_iter
-
-    def fit_transform(self, X, y=None, *, anchor_ids=None, anchor_positions=None, mask=None,
-                      start_positions=None) -> np.ndarray:
-        """Fit and return ``embedding_`` (M, 3)."""
-        return self.fit(X, anchor_ids=anchor_ids, anchor_positions=anchor_positions, mask=mask,
-                        start_positions=start_positions).embedding_
 
     def fit(self, X, y=None, *, anchor_ids=None, anchor_positions=None, mask=None,
             start_positions=None):
@@ -298,14 +300,7 @@ class FrustumAdjustment(TransformerMixin, BaseEstimator):
 
     def _adjust(self, P0, ids, seen, camera: FrustumCamera, soft: np.ndarray) -> None:
         placed = np.all(np.isfinite(P0), axis=1)
-        free = placed.copy()
-        free[ids] = False
-        if not free.any():
-            raise ValueError("FRUSTUM-BA has nothing to refine: every placed object is an anchor")
-        if free.sum() > MAX_FREE_OBJECTS:
-            raise ValueError(f"FRUSTUM-BA solves a (3F, 3F) system of its F free objects each "
-                             f"round and F = {int(free.sum())} is above {MAX_FREE_OBJECTS}: map "
-                             "this history with COVIS-3D")
+        free = free_objects(placed, ids, "FRUSTUM-BA", 3, MAX_FREE_OBJECTS, "COVIS-3D")
         use = np.flatnonzero(placed)
         free_index = np.full(len(use), -1, dtype=np.int64)
         n_free = int(free[use].sum())
@@ -337,11 +332,7 @@ class FrustumAdjustment(TransformerMixin, BaseEstimator):
     def _search(self, P, S, camera: FrustumCamera, softness: float) -> np.ndarray:
         """Each step's best viewpoint among the grid's candidates (floor positions over the
         objects' plan x headings), the objects held: ``(N, 3)``."""
-        lo, hi = P[:, :2].min(axis=0), P[:, :2].max(axis=0)
-        xs, ys = np.linspace(lo[0], hi[0], self.grid), np.linspace(lo[1], hi[1], self.grid)
-        cells = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
-        th = np.linspace(-math.pi, math.pi, self.headings, endpoint=False)
-        cand = np.column_stack([np.repeat(cells, len(th), axis=0), np.tile(th, len(cells))])
+        cand = search_poses(search_cells(P[:, :2], self.grid), self.headings)
         if S.shape[0] * len(cand) > _MAX_SEARCH_ENTRIES:
             raise ValueError(f"{S.shape[0]} steps x {len(cand)} candidate viewpoints exceed "
                              f"{_MAX_SEARCH_ENTRIES:.0e} entries: lower grid or headings")

@@ -36,7 +36,8 @@ from mappers.core.jit import compiled_on_first_use
 
 __all__ = ["frustum_blocks", "frustum_loss"]  # noqa: F822 - bound by __getattr__
 
-__getattr__ = compiled_on_first_use(globals(), __all__, helpers=("log_sigmoid", "pair_margins", "pair_terms"))
+__getattr__ = compiled_on_first_use(
+    globals(), __all__, helpers=("log_sigmoid", "camera_frame", "pair_margins", "pair_terms"))
 
 
 def log_sigmoid(m):  # pragma: no cover - compiled
@@ -44,15 +45,24 @@ def log_sigmoid(m):  # pragma: no cover - compiled
     return -math.log1p(math.exp(-m)) if m > 0 else m - math.log1p(math.exp(m))
 
 
-def pair_margins(rx, ry, rz, ch, sh, cp, sp, t_h, t_v, R, s_c, s_r, ranged,
-                  mg, Jr, Jy):  # pragma: no cover - compiled
-    """One pair's five margins into ``mg`` (5,), their derivatives with respect to the offset
-    object - camera into ``Jr`` (5, 3) and to the heading into ``Jy`` (5,); returns ``d``."""
+def camera_frame(rx, ry, rz, ch, sh, cp, sp):  # pragma: no cover - compiled
+    """The offset object - camera ``(rx, ry, rz)`` seen from a camera of heading cosine and sine
+    ``ch``, ``sh`` and pitch cosine and sine ``cp``, ``sp``: ``(d, ah, xc, yc, zc)``, its
+    distance ``d``, its offset ``ah`` along the heading on the floor and its coordinates in the
+    camera's frame (module docstring)."""
     d = math.sqrt(rx * rx + ry * ry + rz * rz) + 1e-9
     ah = ch * rx + sh * ry
     xc = sh * rx - ch * ry
     zc = cp * ah + sp * rz
     yc = sp * ah - cp * rz
+    return d, ah, xc, yc, zc
+
+
+def pair_margins(rx, ry, rz, ch, sh, cp, sp, t_h, t_v, R, s_c, s_r, ranged,
+                  mg, Jr, Jy):  # pragma: no cover - compiled
+    """One pair's five margins into ``mg`` (5,), their derivatives with respect to the offset
+    object - camera into ``Jr`` (5, 3) and to the heading into ``Jy`` (5,); returns ``d``."""
+    d, ah, xc, yc, zc = camera_frame(rx, ry, rz, ch, sh, cp, sp)
     k = 1.0 / (d * s_c)
     mg[0] = (t_h * zc - xc) * k
     mg[1] = (t_h * zc + xc) * k
@@ -122,12 +132,8 @@ def _frustum_loss(P, C, seen, height, pitch, t_h, t_v, R, s_c, s_r,
     for t in range(n):
         ch, sh = math.cos(C[t, 2]), math.sin(C[t, 2])
         for j in range(m):
-            rx, ry, rz = P[j, 0] - C[t, 0], P[j, 1] - C[t, 1], P[j, 2] - height
-            d = math.sqrt(rx * rx + ry * ry + rz * rz) + 1e-9
-            ah = ch * rx + sh * ry
-            xc = sh * rx - ch * ry
-            zc = cp * ah + sp * rz
-            yc = sp * ah - cp * rz
+            d, _, xc, yc, zc = camera_frame(P[j, 0] - C[t, 0], P[j, 1] - C[t, 1],
+                                            P[j, 2] - height, ch, sh, cp, sp)
             k = 1.0 / (d * s_c)
             log_q = (log_sigmoid((t_h * zc - xc) * k) + log_sigmoid((t_h * zc + xc) * k)
                      + log_sigmoid((t_v * zc - yc) * k) + log_sigmoid((t_v * zc + yc) * k))

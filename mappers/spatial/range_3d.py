@@ -39,12 +39,14 @@ from __future__ import annotations
 from numbers import Integral, Real
 
 import numpy as np
-from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.base import BaseEstimator
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from mappers.calibrated import ClassicalUnfolding
 from mappers.core.align_3d import apply_affine_3d, check_anchors_3d, fit_affine_3d
+from mappers.core.embedding_transformer import EmbeddingTransformer
 from mappers.core.errors import MappingError
+from mappers.core.iteration_params import ITERATION_CONSTRAINTS
 from mappers.core.validation import check_views
 from mappers.spatial.adjustment import DAMPING
 from mappers.spatial.covisibility_3d import CoVisibility3D
@@ -217,7 +219,7 @@ def _sightings_start(seen: np.ndarray, ids: np.ndarray, pos: np.ndarray) -> np.n
                                           anchor_positions=pos[linked])
 
 
-class Range3D(TransformerMixin, BaseEstimator):
+class Range3D(EmbeddingTransformer, BaseEstimator):
     """Range histories (M, N) -> (M, 3) world positions (see the module's docstring).
 
     Parameters:
@@ -249,8 +251,7 @@ class Range3D(TransformerMixin, BaseEstimator):
         "min_ranges": [Interval(Integral, 1, None, closed="left")],
         "min_spread": [Interval(Real, 0, None, closed="left")],
         "n_rounds": [Interval(Integral, 1, None, closed="left")],
-        "max_iter": [Interval(Integral, 1, None, closed="left")],
-        "tol": [Interval(Real, 0, None, closed="left")],
+        **ITERATION_CONSTRAINTS,
         "loss": [StrOptions({"cauchy", "huber"}), None],
         "loss_scale": [Interval(Real, 0, None, closed="neither")],
     }
@@ -266,12 +267,6 @@ class Range3D(TransformerMixin, BaseEstimator):
         self.tol = tol
         self.loss = loss
         self.loss_scale = loss_scale
-
-    def fit_transform(self, X, y=None, *, anchor_ids=None, anchor_positions=None,
-                      mask=None) -> np.ndarray:
-        """Fit and return ``embedding_`` (M, 3)."""
-        return self.fit(X, y, anchor_ids=anchor_ids, anchor_positions=anchor_positions,
-                        mask=mask).embedding_
 
     def fit(self, X, y=None, *, anchor_ids=None, anchor_positions=None, mask=None):
         """Map the range history ``X`` (M, N) in 3-D (``mask`` True where observed)."""

@@ -15,10 +15,11 @@ from collections.abc import Mapping
 
 import numpy as np
 from scipy.sparse import issparse
-from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.base import BaseEstimator
 from threadpoolctl import threadpool_limits
 
 from mappers.core.align_3d import check_anchors_3d, umeyama
+from mappers.core.embedding_transformer import EmbeddingTransformer
 from mappers.core.validation import check_views
 from mappers.spatial.adjustment import adjust_viewpoints
 from mappers.spatial.covisibility_3d import CoVisibility3D
@@ -36,7 +37,7 @@ REGROW_ITER = 20
 """Levenberg-Marquardt iterations of each round's short adjustment."""
 
 
-class SpatialAdjustment(TransformerMixin, BaseEstimator):
+class SpatialAdjustment(EmbeddingTransformer, BaseEstimator):
     """The 6-DoF viewpoint bundle adjustment as an estimator (see the module's docstring).
 
     Args:
@@ -218,10 +219,6 @@ class SpatialAdjustment(TransformerMixin, BaseEstimator):
             if np.isfinite(P[:, 0]).sum() <= placed and np.isfinite(C[:, 0]).sum() <= posed:
                 break
         return P, R, C
-
-    def fit_transform(self, X, y=None, **inputs) -> np.ndarray:
-        """Fit and return ``embedding_`` (M, 3)."""
-        return self.fit(X, y, **inputs).embedding_
 
 
 def _inconsistent(obs, res, max_error: float, anchors) -> np.ndarray:

@@ -15,14 +15,17 @@ from mappers.viewpoints.marginals import (
     step_blocks,
 )
 from mappers.viewpoints.range_bearing import RangeBearingAdjustment
-from mappers.viewpoints.start_map import anchored_start, fit_start, keep_if_better
+from mappers.viewpoints.start_map import anchored_start, fit_start, free_objects, keep_if_better
 from mappers.viewpoints.view_cone import (
     MAX_FOV_DEG,
     MAX_FREE_OBJECTS,
+    VIEWPOINT_SEARCH_CONSTRAINTS,
     ConeProblem,
     ViewAdjustment,
     ViewAdjustmentWarning,
     estimate_fov,
+    search_cells,
+    search_poses,
     view_cone_score,
 )
 from mappers.viewpoints.visibility import (
@@ -38,9 +41,10 @@ __all__ = [
     "adjustment_covariances", "has_model_covariances", "model_covariances",
     "released_anchor", "schur_information", "step_blocks",
     "RangeBearingAdjustment",
-    "anchored_start", "fit_start", "keep_if_better",
-    "MAX_FOV_DEG", "MAX_FREE_OBJECTS", "ConeProblem", "ViewAdjustment", "ViewAdjustmentWarning",
-    "estimate_fov", "view_cone_score",
+    "anchored_start", "fit_start", "free_objects", "keep_if_better",
+    "MAX_FOV_DEG", "MAX_FREE_OBJECTS", "VIEWPOINT_SEARCH_CONSTRAINTS", "ConeProblem",
+    "ViewAdjustment", "ViewAdjustmentWarning", "estimate_fov", "search_cells", "search_poses",
+    "view_cone_score",
     "VisibilityAdjustment", "VisibilityAdjustmentWarning", "visibility_bits",
     "forward_backward", "gaussian_taps",
 ]

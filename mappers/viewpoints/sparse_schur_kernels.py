@@ -25,7 +25,7 @@ from mappers.core.jit import compiled_on_first_use
 __all__ = ["bearing_blocks", "couple", "couple_transpose", "outer_sums",  # noqa: F822
            "schur_diagonal", "schur_matvec"]
 
-__getattr__ = compiled_on_first_use(globals(), __all__)
+__getattr__ = compiled_on_first_use(globals(), __all__, helpers=("block_products",))
 
 
 def _schur_matvec(Ui, blocks, indptr, free, Vd, x, out):  # pragma: no cover - compiled
@@ -107,29 +107,29 @@ def _schur_diagonal(Ui, blocks, step, free, Vd, out):  # pragma: no cover - comp
                 out[j, r, c] -= s
 
 
-def _couple(blocks, step, free, x, out):  # pragma: no cover - compiled
-    """``out += W x``: each step's (p,) sum of its blocks times their objects' ``x`` (F, d)."""
+def block_products(blocks, into, by, x, out):  # pragma: no cover - compiled
+    """``out[into[k]] += blocks[k] @ x[by[k]]`` for each block k (``blocks`` (K, p, d), ``x``
+    (., d), ``out`` (., p)): the one loop of :func:`couple` and, on the transposed blocks, of
+    :func:`couple_transpose`."""
     p, d = blocks.shape[1], blocks.shape[2]
     for k in range(blocks.shape[0]):
-        t, j = step[k], free[k]
+        i, j = into[k], by[k]
         for a in range(p):
             s = 0.0
             for c in range(d):
                 s += blocks[k, a, c] * x[j, c]
-            out[t, a] += s
+            out[i, a] += s
+
+
+def _couple(blocks, step, free, x, out):  # pragma: no cover - compiled
+    """``out += W x``: each step's (p,) sum of its blocks times their objects' ``x`` (F, d)."""
+    block_products(blocks, step, free, x, out)
 
 
 def _couple_transpose(blocks, step, free, v, out):  # pragma: no cover - compiled
     """``out += W^T v``: each object's (d,) sum of its blocks' transposes times their steps'
     ``v`` (N, p)."""
-    p, d = blocks.shape[1], blocks.shape[2]
-    for k in range(blocks.shape[0]):
-        t, j = step[k], free[k]
-        for c in range(d):
-            s = 0.0
-            for a in range(p):
-                s += blocks[k, a, c] * v[t, a]
-            out[j, c] += s
+    block_products(blocks.transpose((0, 2, 1)), free, step, v, out)
 
 
 def _bearing_blocks(d, res, w, t, f, U, g, V, h, blocks, bstep, bfree):  # pragma: no cover

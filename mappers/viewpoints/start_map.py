@@ -1,4 +1,5 @@
-"""What the viewpoint adjustments share: the start map they refine, and the no-gain guard.
+"""What the viewpoint adjustments share: the start map they refine, the objects they free, and
+the no-gain guard.
 
 BEARING-BA (:mod:`mappers.viewpoints.bearing`), VIS-BA-WALK (:mod:`mappers.viewpoints.visibility`)
 and the range-bearing adjustment (:mod:`mappers.viewpoints.range_bearing`) each refine a start
@@ -17,7 +18,7 @@ from mappers.catalog import resolve_method
 from mappers.core.align import check_anchors
 from mappers.fitting import check_inputs, fit_checked
 
-__all__ = ["anchored_start", "fit_start", "keep_if_better"]
+__all__ = ["anchored_start", "fit_start", "free_objects", "keep_if_better"]
 
 
 def fit_start(label: str, X, ids, pos, *, sensor: str, mask=None, timeline=None,
@@ -69,3 +70,30 @@ def keep_if_better(P: np.ndarray, P0: np.ndarray, placed: np.ndarray, cost: floa
                   f"cost {cost:.4g} against {start_cost:.4g}{'' if finite else ', not finite'}): "
                   "the start map is kept", category, stacklevel=4)
     return False, P0
+
+
+def free_objects(placed: np.ndarray, ids: np.ndarray, method: str, dims: int, max_free: int,
+                 instead: str) -> np.ndarray:
+    """The objects an adjustment that solves a dense system of its free objects refines: the
+    ``placed`` (M,) bool ones that are not anchors (``ids``), as a bool mask (M,).
+
+    Parameters:
+        placed: True for the objects the start map placed.
+        ids: the anchors' indices (held at their known positions).
+        method: the adjustment's name, for the errors (e.g. ``"VIEW-BA"``).
+        dims: the coordinates of one object (its system is ``(dims F, dims F)``).
+        max_free: the most free objects F it solves for.
+        instead: the method the error advises above ``max_free``.
+
+    Raises:
+        ValueError: when no object is free, or more than ``max_free`` are.
+    """
+    free = placed.copy()
+    free[ids] = False
+    if not free.any():
+        raise ValueError(f"{method} has nothing to refine: every placed object is an anchor")
+    if free.sum() > max_free:
+        raise ValueError(f"{method} solves a ({dims}F, {dims}F) system of its F free objects "
+                         f"each round and F = {int(free.sum())} is above {max_free}: map this "
+                         f"history with {instead}")
+    return free

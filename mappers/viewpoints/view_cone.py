@@ -65,10 +65,11 @@ from mappers.core.validation import check_views
 from mappers.defaults import localisation_free
 from mappers.viewpoints import view_cone_kernels as view_kernels
 from mappers.viewpoints.engine import Damping, damped_step, joint_step
-from mappers.viewpoints.start_map import anchored_start, fit_start, keep_if_better
+from mappers.viewpoints.start_map import anchored_start, fit_start, free_objects, keep_if_better
 
-__all__ = ["MAX_FOV_DEG", "MAX_FREE_OBJECTS", "ConeProblem", "ViewAdjustment", "ViewAdjustmentWarning",
-           "estimate_fov", "view_cone_score"]
+__all__ = ["MAX_FOV_DEG", "MAX_FREE_OBJECTS", "VIEWPOINT_SEARCH_CONSTRAINTS", "ConeProblem",
+           "ViewAdjustment", "ViewAdjustmentWarning", "estimate_fov", "search_cells", "search_poses",
+           "view_cone_score"]
 
 DAMPING = Damping(up=5.0, down=3.0, floor=1e-6, tries=8, accept_equal=False)
 """VIEW-BA's Levenberg-Marquardt damping rule (:class:`mappers.viewpoints.engine.Damping`): a
@@ -82,6 +83,16 @@ the map both ways)."""
 MAX_FREE_OBJECTS = 2000
 """Most free (non-anchor) objects VIEW-BA takes: its joint step holds an (N, 3, 2F) block and
 solves a (2F, 2F) system per round (at F = 2,000 and N = 2,000: 96 MB and 24 GFLOP a round)."""
+
+VIEWPOINT_SEARCH_CONSTRAINTS: dict = {
+    "grid": [Interval(Integral, 2, None, closed="left")],
+    "headings": [Interval(Integral, 4, None, closed="left")],
+    "pose_iters": [Interval(Integral, 0, None, closed="left")],
+}
+"""scikit-learn's constraints of the viewpoints' grid search parameters (``grid`` positions per
+side x ``headings`` (:func:`search_cells`, :func:`search_poses`), then ``pose_iters`` Newton
+steps of each viewpoint alone), shared by VIEW-BA and FRUSTUM-BA
+(:class:`mappers.spatial.FrustumAdjustment`)."""
 
 _PASS_ATTRS = ("embedding_", "refined_", "fov_deg_", "radius_", "poses_", "loss_",
                "start_loss_")
@@ -102,8 +113,15 @@ def _cos_off(P, cells, headings: int):
     rel = P[None, :, :] - cells[:, None, :]
     phi = np.arctan2(rel[..., 1], rel[..., 0])
     cos_off = np.cos(phi[:, None, :] - th[None, :, None]).reshape(-1, P.shape[0])
-    poses = np.column_stack([np.repeat(cells, headings, axis=0), np.tile(th, len(cells))])
-    return cos_off, poses
+    return cos_off, search_poses(cells, headings)
+
+
+def search_poses(cells: np.ndarray, headings: int) -> np.ndarray:
+    """The candidate viewpoints of the grid search: each of the floor positions ``cells``
+    (G, 2) with each of ``headings`` evenly spaced headings from -pi, as (G * H, 3) rows
+    ``(x, y, heading)`` (a cell's headings consecutive)."""
+    th = np.linspace(-math.pi, math.pi, headings, endpoint=False)
+    return np.column_stack([np.repeat(cells, headings, axis=0), np.tile(th, len(cells))])
 
 
 def _cone_log_terms(cos_off, half_angle: float, softness: float):
@@ -113,7 +131,9 @@ def _cone_log_terms(cos_off, half_angle: float, softness: float):
     return log_expit(z), log_expit(-z)
 
 
-def _cells(P, grid: int) -> np.ndarray:
+def search_cells(P, grid: int) -> np.ndarray:
+    """The floor positions of the grid search: ``grid`` x ``grid`` points evenly spaced over the
+    bounding box of the plan ``P`` (M, 2), as (grid^2, 2) rows."""
     lo, hi = P.min(axis=0), P.max(axis=0)
     xs, ys = np.linspace(lo[0], hi[0], grid), np.linspace(lo[1], hi[1], grid)
     return np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
@@ -156,7 +176,7 @@ def view_cone_score(positions, observed, half_angle, *, grid: int = 10, headings
         raise ValueError(f"half_angle must be in (0, pi) radians, got {half_angle}")
     placed = np.all(np.isfinite(P), axis=1)
     P = P[placed]
-    cos_off, _ = _cos_off(P, _cells(P, grid), headings)
+    cos_off, _ = _cos_off(P, search_cells(P, grid), headings)
     scores = _profile(cos_off, Ob[:, placed], halves.ravel(), softness)
     return float(scores[0]) if halves.ndim == 0 else scores.reshape(halves.shape)
 
@@ -293,9 +313,7 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         "softness": [Interval(Real, 0, None, closed="neither")],
         "range_softness": [Interval(Real, 0, None, closed="neither")],
         "miss_rate": [Interval(Real, 0, 1, closed="left")],
-        "grid": [Interval(Integral, 2, None, closed="left")],
-        "headings": [Interval(Integral, 4, None, closed="left")],
-        "pose_iters": [Interval(Integral, 0, None, closed="left")],
+        **VIEWPOINT_SEARCH_CONSTRAINTS,
         "max_start_loss": [Interval(Real, 0, None, closed="neither")],
         "passes": [Interval(Integral, 1, None, closed="left")],
         "random_state": ["random_state"],
@@ -374,14 +392,8 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
             self.fov_deg_ = 2.0 * float(_FOV_HALVES[int(np.argmax(widths))])
         self.radius_ = float("nan")
         self.poses_ = np.full((obs.shape[0], 3), np.nan)
-        free = placed.copy()
-        free[ids] = False
-        if not free.any():
-            raise ValueError("VIEW-BA has nothing to refine: every placed object is an anchor")
-        if free.sum() > MAX_FREE_OBJECTS:
-            raise ValueError(f"VIEW-BA solves a (2F, 2F) system of its F free objects each round "
-                             f"and F = {int(free.sum())} is above {MAX_FREE_OBJECTS}: map this "
-                             "history with DROPOUT-BLEND (build_map's default above 500 objects)")
+        free_objects(placed, ids, "VIEW-BA", 2, MAX_FREE_OBJECTS,
+                     "DROPOUT-BLEND (build_map's default above 500 objects)")
         if self.fov_deg_ > MAX_FOV_DEG:
             warnings.warn(f"a {self.fov_deg_:.0f}-degree view says little about a heading "
                           f"(above {MAX_FOV_DEG:.0f}): the start map is kept",
@@ -411,7 +423,7 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
     def _candidates(self, P):
         """The grid's candidate viewpoints over the objects ``P`` (placed only): ``(cells,
         cos_off, poses)`` (:func:`_cos_off`)."""
-        cells = _cells(P, self.grid)
+        cells = search_cells(P, self.grid)
         return (cells, *_cos_off(P, cells, self.headings))
 
     def _problem(self, obs, seen, free_index, n_free) -> ConeProblem:

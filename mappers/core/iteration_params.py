@@ -1,0 +1,22 @@
+"""The stopping rule of an iterative fit as scikit-learn parameter constraints.
+
+An estimator that iterates (SMACOF's Guttman updates, Levenberg-Marquardt rounds) takes
+``max_iter``, the most iterations (an integer >= 1), and ``tol``, the relative improvement below
+which it stops (a number >= 0). scikit-learn validates an estimator's parameters against its
+``_parameter_constraints`` (``sklearn.utils._param_validation``); this is that entry, written
+once for every such estimator: spread it into the dict, ``{**ITERATION_CONSTRAINTS, ...}``.
+"""
+
+from __future__ import annotations
+
+from numbers import Integral, Real
+
+from sklearn.utils._param_validation import Interval
+
+__all__ = ["ITERATION_CONSTRAINTS"]
+
+ITERATION_CONSTRAINTS: dict = {
+    "max_iter": [Interval(Integral, 1, None, closed="left")],
+    "tol": [Interval(Real, 0, None, closed="left")],
+}
+"""``max_iter`` an integer >= 1, ``tol`` a number >= 0."""
