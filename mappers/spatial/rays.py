@@ -41,6 +41,9 @@ class RayObservations(NamedTuple):
     n_objects: int
 
 
+_RANGES_HINT = "; a history of ranges alone is mapped with sensor='range'"
+
+
 def ray_observations(X, mask=None, ranges=None, range_mask=None) -> RayObservations:
     """The sightings of a 3-D bearing history ``X`` (M, 3N) with its optional ``mask`` (M, 3N),
     and of an optional range history ``ranges`` (M, N) with ``range_mask``.
@@ -57,7 +60,7 @@ def ray_observations(X, mask=None, ranges=None, range_mask=None) -> RayObservati
         raise ValueError(
             f"a 3-D bearing history has 3 columns (a ray's x, y, z) per step, got shape {X.shape}"
             + ("; it looks like a 2-D bearing history of (cos, sin) pairs, which needs (A, 2) "
-               "anchor positions" if pairs else ""))
+               "anchor positions" if pairs else "") + _RANGES_HINT)
     m, n = X.shape[0], X.shape[1] // RAY_COLUMNS
     rays = X.reshape(m, n, RAY_COLUMNS)
     if mask is not None:
@@ -89,7 +92,8 @@ def ray_observations(X, mask=None, ranges=None, range_mask=None) -> RayObservati
             "a 3-D bearing history holds unit rays (x, y, z) per step; found rays of length "
             f"{np.round(length[bad][:3], 3).tolist()}"
             + (" (columns in a multiple of 2 and 3: is it a 2-D history of (cos, sin) pairs? "
-               "those need (A, 2) anchor positions)" if X.shape[1] % 2 == 0 else ""))
+               "those need (A, 2) anchor positions)" if X.shape[1] % 2 == 0 else "")
+            + _RANGES_HINT)
     obj, step = np.nonzero(seen)
     order = np.lexsort((obj, step))
     obj, step = obj[order], step[order]

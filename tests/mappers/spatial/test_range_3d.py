@@ -102,6 +102,10 @@ def test_bad_input_is_refused_naming_the_problem():
         Range3D(start="unfold").fit(np.where(R < 2, R, 0), mask=R < 2, anchor_ids=ANCHORS,
                                     anchor_positions=P[ANCHORS])
     assert METHODS_3D["RANGE-3D"] is Range3D
+    # a plain array of ranges is not guessed to be ranges: refused, saying how to pass them
+    for columns in (R, R[:, :119]):  # a multiple of 3 columns (not unit rays), and not
+        with pytest.raises(ValueError, match="sensor='range'"):
+            build_map(columns, ANCHORS, P[ANCHORS])
 
 
 def test_an_object_carried_across_the_viewpoints_plane_goes_back_to_its_start_side():
