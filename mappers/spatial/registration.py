@@ -204,17 +204,34 @@ def _merge_pieces(pieces):
 
 def _pair_distances(obs, pts, groups) -> dict[tuple[int, int], float]:
     """Pose-free distances: per pair of objects seen in one step with ranges, the median over
-    those steps of the distance between their points (the law of cosines)."""
-    found: dict[tuple[int, int], list[float]] = {}
+    those steps of the distance between their points (the law of cosines). Keyed ``(a, b)`` in
+    the order the step lists them, in the order the pairs are first met (the pose fit of
+    :func:`_fit_piece` reads them in that order)."""
+    first, second, dist = [], [], []
     for g in groups:
         if g.size < 2:
             continue
         d = np.linalg.norm(pts[g][:, None] - pts[g][None], axis=2)
         o = obs.obj[g]
-        for a in range(g.size):
-            for b in range(a + 1, g.size):
-                found.setdefault((int(o[a]), int(o[b])), []).append(float(d[a, b]))
-    return {k: float(np.median(v)) for k, v in found.items()}
+        a, b = np.triu_indices(g.size, 1)
+        first.append(o[a])
+        second.append(o[b])
+        dist.append(d[a, b])
+    if not dist:
+        return {}
+    first, second, dist = np.concatenate(first), np.concatenate(second), np.concatenate(dist)
+    code = first.astype(np.int64) * obs.n_objects + second
+    order = np.lexsort((dist, code))  # by pair, each pair's distances sorted
+    code_s, dist_s = code[order], dist[order]
+    starts = np.flatnonzero(np.r_[True, code_s[1:] != code_s[:-1]])
+    counts = np.diff(np.r_[starts, code_s.size])
+    low = dist_s[starts + (counts - 1) // 2]
+    high = dist_s[starts + counts // 2]
+    median = np.where(counts % 2 == 1, low, (low + high) / 2)  # as np.median computes it
+    _, met = np.unique(code, return_index=True)  # sorted by code, as ``starts``
+    keys = code_s[starts]
+    return {(int(k // obs.n_objects), int(k % obs.n_objects)): float(median[i])
+            for i in np.argsort(met, kind="stable") for k in [keys[i]]}
 
 
 def _place_piece(piece, P, R, C, pairs, scale):
