@@ -112,7 +112,8 @@ def adjust_viewpoints(obs: RayObservations, P0: np.ndarray, R0: np.ndarray, C0: 
                       max_iter: int = 100, tol: float = 1e-10,
                       fit_range_scale: bool = False, scale_rounds: int = 4,
                       anchor_noise: float | None = None,
-                      dense_coupling_bytes: float = DENSE_COUPLING_MAX_BYTES) -> AdjustmentResult:
+                      dense_coupling_bytes: float = DENSE_COUPLING_MAX_BYTES,
+                      gain_tol: float = 0.0) -> AdjustmentResult:
     """Adjust the points and the steps' poses to the sightings (see the module's docstring).
 
     Args:
@@ -126,6 +127,10 @@ def adjust_viewpoints(obs: RayObservations, P0: np.ndarray, R0: np.ndarray, C0: 
         loss: "cauchy", "huber" or None (least squares), at ``loss_scale`` noise units.
         max_iter, tol: at most this many iterations; stop when the cost falls by less than
             ``tol`` of itself.
+        gain_tol: also stop when an iteration lowers the cost by at most this share of the cost
+            the adjustment started from (as BEARING-BA's ``gain_tol``; 0: only ``tol``): the
+            sightings are explained no better, while a robust loss's reweighting and a
+            weakly fixed pose can keep the cost creeping down for dozens of iterations.
         fit_range_scale: also estimate one factor of all ranges (a stereo camera's depth is
             ``focal * baseline / disparity``, so an error of its calibration scales every range
             alike; STAR-loc's are 1.5-3 % short): after each adjustment the ranges are
@@ -140,8 +145,10 @@ def adjust_viewpoints(obs: RayObservations, P0: np.ndarray, R0: np.ndarray, C0: 
     """
     if anchor_noise is not None and not anchor_noise > 0:
         raise ValueError(f"anchor_noise must be None or > 0, got {anchor_noise!r}")
+    if not 0.0 <= gain_tol < 1.0:
+        raise ValueError(f"gain_tol must be in [0, 1), got {gain_tol!r}")
     result = _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, loss,
-                     loss_scale, max_iter, tol, anchor_noise, dense_coupling_bytes)
+                     loss_scale, max_iter, tol, anchor_noise, dense_coupling_bytes, gain_tol)
     has_r = np.isfinite(obs.range)
     factor = 1.0
     for _ in range(scale_rounds if fit_range_scale and has_r.any() else 0):
@@ -154,7 +161,7 @@ def adjust_viewpoints(obs: RayObservations, P0: np.ndarray, R0: np.ndarray, C0: 
         factor *= k
         obs = obs._replace(range=obs.range * k)
         result = _adjust(obs, P, R, C, fixed, bearing_noise, range_noise, range_growth, loss,
-                         loss_scale, max_iter, tol, anchor_noise, dense_coupling_bytes)
+                         loss_scale, max_iter, tol, anchor_noise, dense_coupling_bytes, gain_tol)
         if abs(k - 1.0) < 1e-4:
             break
     return result._replace(range_scale=factor)
@@ -162,7 +169,7 @@ def adjust_viewpoints(obs: RayObservations, P0: np.ndarray, R0: np.ndarray, C0: 
 
 def _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, loss, loss_scale,
             max_iter, tol, anchor_noise=None,
-            dense_coupling_bytes=DENSE_COUPLING_MAX_BYTES) -> AdjustmentResult:
+            dense_coupling_bytes=DENSE_COUPLING_MAX_BYTES, gain_tol=0.0) -> AdjustmentResult:
     """One adjustment of :func:`adjust_viewpoints` (the ranges as they are)."""
     if loss not in ("cauchy", "huber", None):
         raise ValueError(f"loss must be 'cauchy', 'huber' or None, got {loss!r}")
@@ -198,7 +205,7 @@ def _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, lo
         return float(robust_cost(np.linalg.norm(res[0], axis=1), loss_scale, loss).sum()) + prior, res
 
     cost, res = cost_of(P, R, C)
-    lam, it = 1e-3, 0
+    first, lam, it = cost, 1e-3, 0
     for it in range(1, max_iter + 1):  # noqa: B007 - the count is returned
         e, v, nv, vh = res
         w = robust_weights(np.linalg.norm(e, axis=1), loss_scale, loss)
@@ -225,7 +232,7 @@ def _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, lo
         state, new, lam, improved = damped_step(trial, cost, lam, DAMPING)
         if improved:
             P, R, C, res = state
-        if not improved or cost - new <= tol * cost:
+        if not improved or cost - new <= max(tol * cost, gain_tol * first):
             cost = new if improved else cost
             break
         cost = new

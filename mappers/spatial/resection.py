@@ -53,23 +53,38 @@ def orthogonal_iteration_batch(seg: np.ndarray, p: np.ndarray, u: np.ndarray, n_
     q = u * (spread_p / np.maximum(spread_u, 1e-6))[seg, None]
     Rcw = _kabsch(G, seg, n, p, q)
 
-    def translation(Rcw):
+    def translation(Rcw, G=G, seg=seg, p=p, V=V, F=F, n=n):
         pc = np.einsum("kij,kj->ki", Rcw[seg], p)
         t = np.einsum("sij,sj->si", F, _segment_sum(G, np.einsum("kij,kj->ki", V, pc) - pc)
                       / n[:, None])
         return pc, t
 
+    # the iterations run on the segments still moving: a converged one stops where it is, so
+    # the others' numbers are those of iterating all (each segment's sums are its own rows'),
+    # and the arrays are cut down to the moving ones whenever a quarter of them has stopped
+    live = np.arange(n_seg)  # the segments iterated on, and their part of the arrays
+    Gl, segl, pl, Vl, Fl, nl, Rl = G, seg, p, V, F, n, Rcw.copy()
     moving = np.ones(n_seg, dtype=bool)
     for _ in range(iters):
-        pc, t = translation(Rcw)
-        q = np.einsum("kij,kj->ki", V, pc + t[seg])
-        new = _kabsch(G, seg, n, p, q)
-        new[~moving] = Rcw[~moving]  # a converged step stays where it stopped
-        done = np.abs(new - Rcw).max(axis=(1, 2)) < 1e-10
-        Rcw = new
-        moving &= ~done
+        pc, t = translation(Rl, Gl, segl, pl, Vl, Fl, nl)
+        q = np.einsum("kij,kj->ki", Vl, pc + t[segl])
+        new = _kabsch(Gl, segl, nl, pl, q)
+        still = moving[live]
+        new[~still] = Rl[~still]  # a converged step stays where it stopped
+        done = np.abs(new - Rl).max(axis=(1, 2)) < 1e-10
+        Rl = new
+        moving[live[done]] = False
+        Rcw[live] = Rl
         if not moving.any():
             break
+        if moving.sum() < 0.75 * live.size:
+            keep = moving[live]
+            rows = keep[segl]
+            live, Rl, Fl, nl = live[keep], Rl[keep], Fl[keep], nl[keep]
+            segl = np.cumsum(keep)[segl[rows]] - 1
+            pl, Vl = pl[rows], Vl[rows]
+            Gl = sparse.csc_matrix((np.ones(segl.size), (segl, np.arange(segl.size))),
+                                   shape=(live.size, segl.size))
     pc, t = translation(Rcw)
     cam = pc + t[seg]
     cos = np.einsum("kj,kj->k", cam, u) / np.maximum(np.linalg.norm(cam, axis=1), 1e-12)
