@@ -84,3 +84,23 @@ def test_the_adjustment_takes_sightings_in_any_order():
     assert a.n_iter == b.n_iter and np.abs(a.points - start).max() > 1e-3
     np.testing.assert_allclose(b.points, a.points, atol=1e-9)
     np.testing.assert_allclose(b.positions, a.positions, atol=1e-9)
+
+
+def test_the_compiled_resection_is_the_one_step_orthogonal_iteration():
+    """The batched resection's compiled iterations give each step the pose of the one-step
+    orthogonal iteration to rounding, in any order of the sightings."""
+    from mappers.spatial.registration import orthogonal_iteration
+    from mappers.spatial.resection import orthogonal_iteration_batch
+
+    obs, P, R, C = _problem(seed=3, n=40, per=6)
+    noisy = P + np.random.default_rng(4).normal(0, 0.05, P.shape)  # the rays miss a little
+    order = np.random.default_rng(5).permutation(len(obs.step))
+    Rb, cb, rms = orthogonal_iteration_batch(obs.step[order], noisy[obs.obj[order]],
+                                             obs.ray[order], obs.n_steps)
+    for t in range(obs.n_steps):
+        k = obs.step == t
+        R1, c1, rms1 = orthogonal_iteration(noisy[obs.obj[k]], obs.ray[k])
+        np.testing.assert_allclose(Rb[t], R1, atol=1e-9)
+        np.testing.assert_allclose(cb[t], c1, atol=1e-9)
+        assert rms1 > 1e-3 and abs(rms[t] - rms1) < 1e-6
+    assert np.abs(Rb - R).max() < 0.2  # near the true poses: a real resection
