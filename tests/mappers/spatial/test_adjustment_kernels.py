@@ -104,3 +104,18 @@ def test_the_compiled_resection_is_the_one_step_orthogonal_iteration():
         np.testing.assert_allclose(cb[t], c1, atol=1e-9)
         assert rms1 > 1e-3 and abs(rms[t] - rms1) < 1e-6
     assert np.abs(Rb - R).max() < 0.2  # near the true poses: a real resection
+
+
+def test_gain_tol_stops_an_adjustment_early_near_its_end():
+    obs, P, R, C = _problem(seed=6, ranged=0.0)
+    fixed = np.zeros(obs.n_objects, dtype=bool)
+    fixed[:5] = True
+    start = P + np.where(fixed[:, None], 0.0, np.random.default_rng(7).normal(0, 0.05, P.shape))
+    kw = {"bearing_noise": 0.02, "max_iter": 100, "tol": 1e-12}
+    full = adjust_viewpoints(obs, start, R, C, fixed, **kw)
+    early = adjust_viewpoints(obs, start, R, C, fixed, gain_tol=1e-3, **kw)
+    assert early.n_iter < full.n_iter
+    assert early.cost <= full.cost * (1 + 1e-2)
+    assert np.abs(early.points - full.points).max() < 0.1 * np.abs(start - full.points).max()
+    with pytest.raises(ValueError, match="gain_tol"):
+        adjust_viewpoints(obs, start, R, C, fixed, gain_tol=1.0, **kw)
