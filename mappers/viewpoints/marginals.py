@@ -48,13 +48,15 @@ from mappers.viewpoints.engine import (
     normal_blocks,
     pose_jacobian,
     robust_weights,
+    schur_step,
     use_sparse_coupling,
 )
 from mappers.viewpoints.range_bearing import RangeBearingAdjustment
 
 __all__ = [
-    "adjustment_covariances", "has_model_covariances", "model_covariances", "released_anchor",
-    "sandwich_covariances", "schur_information", "step_blocks",
+    "adjustment_covariances", "has_model_covariances", "held_out_anchors", "model_covariances",
+    "released_anchor", "released_steps", "sandwich_covariances", "schur_information",
+    "step_blocks",
 ]
 
 
@@ -144,15 +146,23 @@ def model_covariances(S, U, Wf, sandwich_args, dof_resid, n_residuals, n_unknown
     return cov
 
 
-def _bearing(est: BearingAdjustment, X, mask, anchor_ids, blocks) -> np.ndarray:
-    P, C, phi, used, placed, free, free_index = _frame(est, anchor_ids)
+def _bearing_parts(est: BearingAdjustment, X, mask, anchor_ids, blocks, unknown):
+    """The linearisation of a fitted bearing adjustment at its solution, ``unknown`` ((M,) bool)
+    the objects taken as unknowns (its free objects; with the anchors too for
+    :func:`held_out_anchors`): ``(U, V, Wf, g, h, sandwich_args, dof_resid, n_residuals,
+    n_unknowns, index)`` (``index``: each object's row among the unknowns, -1 for none;
+    ``n_unknowns`` counts the adjustment's own: its poses and free objects)."""
+    P, C, phi, used, placed, free, _ = _frame(est, anchor_ids)
+    unknown = unknown & placed
+    index = np.full(len(P), -1)
+    index[unknown] = np.arange(unknown.sum())
     limit = getattr(est, "dense_coupling_bytes", DENSE_COUPLING_MAX_BYTES)
-    if use_sparse_coupling(len(C), 3, 2, int(free.sum()), limit):
+    if use_sparse_coupling(len(C), 3, 2, int(unknown.sum()), limit):
         raise ValueError(
             f"model covariances of BEARING-BA hold the dense (N, 3, 2F) coupling, "
-            f"{8 * 6 * len(C) * int(free.sum()) / 2**30:.1f} GiB for N = {len(C)} steps and "
-            f"F = {int(free.sum())} free objects (above its dense_coupling_bytes, {limit:.3g}); "
-            "use uncertainty='bootstrap' or fewer steps")
+            f"{8 * 6 * len(C) * int(unknown.sum()) / 2**30:.1f} GiB for N = {len(C)} steps and "
+            f"F = {int(unknown.sum())} free objects (above its dense_coupling_bytes, "
+            f"{limit:.3g}); use uncertainty='bootstrap' or fewer steps")
     if sp.issparse(X):  # a compact history of a size the dense coupling fits
         X, mask = X.toarray(), (mask.toarray() if sp.issparse(mask) else mask)
     theta, seen = bearing_angles(X, mask)
@@ -161,43 +171,108 @@ def _bearing(est: BearingAdjustment, X, mask, anchor_ids, blocks) -> np.ndarray:
     obs = (t, i, theta[t, i])
     res, _ = bearing_residuals(P, C, phi, obs)
     w = robust_weights(res, est.scale_, est.loss)
-    U, V, Wf, _, _ = normal_blocks(P, C, phi, obs, w, free_index, int(free.sum()))
-    S = schur_information(U, V, Wf)
+    U, V, Wf, g, h = normal_blocks(P, C, phi, obs, w, index, int(unknown.sum()))
     a = pose_jacobian(bearing_residuals(P, C, phi, obs)[1])
-    g = (w * res)[:, None] * a
-    return model_covariances(S, U, Wf, (t, free_index[i], g, -g[:, :2], blocks),
-                        float(np.sum(w * res * res)), len(t),
-                        3 * int(used.sum()) + 2 * int(free.sum()), est.embedding_, free)
+    gk = (w * res)[:, None] * a
+    return (U, V, Wf, g, h, (t, index[i], gk, -gk[:, :2], blocks), float(np.sum(w * res * res)),
+            len(t), 3 * int(used.sum()) + 2 * int(free.sum()), index)
 
 
-def _range_bearing(est: RangeBearingAdjustment, X, masks, anchor_ids, blocks) -> np.ndarray:
+def _range_bearing_parts(est: RangeBearingAdjustment, X, masks, anchor_ids, blocks, unknown):
+    """:func:`_bearing_parts` of a fitted range-bearing adjustment."""
     masks = dict(masks or {})
     theta, seen = bearing_angles(X["bearing"], masks.get("bearing"))
     R = np.asarray(X["range"], dtype=float).T
     if masks.get("range") is not None:
         seen &= np.asarray(masks["range"], dtype=bool).T
     seen &= np.isfinite(R) & (R > 0)
-    P, C, phi, used, placed, free, free_index = _frame(est, anchor_ids)
+    P, C, phi, used, placed, free, _ = _frame(est, anchor_ids)
+    unknown = unknown & placed
+    index = np.full(len(P), -1)
+    index[unknown] = np.arange(unknown.sum())
     seen &= used[:, None] & placed[None, :]
     t, i = np.nonzero(seen)
     obs = (t, i, theta[t, i], R[t, i])
     wb = np.ones(len(t))
     # the adjustment's own blocks: scaled angle and range residuals, robust weights inside
-    U, V, Wf, _, _ = est._blocks(P, C, phi, obs, wb, est.scales_, free_index, int(free.sum()))
+    U, V, Wf, g, h = est._blocks(P, C, phi, obs, wb, est.scales_, index, int(unknown.sum()))
     ra, rr, d = rb.bearing_residuals(P, C, phi, obs)
     ua, ur = ra / est.scales_[0], rr / est.scales_[1]
     wa = robust_weights(ua, est.robust_scale, est.loss)
     wr = robust_weights(ur, est.robust_scale, est.loss)
-    S = schur_information(U, V, Wf)
     # each reading's gradient, as the adjustment's blocks build it: J^T W u over both residuals
     dist = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
     ga = (wa * ua / est.scales_[0])[:, None] * pose_jacobian(d)
     gr = (wr * ur / est.scales_[1])[:, None] * np.column_stack(
         [-d[:, 0] / dist, -d[:, 1] / dist, np.zeros_like(dist)])
-    g = ga + gr
-    return model_covariances(S, U, Wf, (t, free_index[i], g, -g[:, :2], blocks),
-                        float(np.sum(wa * ua * ua + wr * ur * ur)), 2 * len(t),
-                        3 * int(used.sum()) + 2 * int(free.sum()), est.embedding_, free)
+    gk = ga + gr
+    return (U, V, Wf, g, h, (t, index[i], gk, -gk[:, :2], blocks),
+            float(np.sum(wa * ua * ua + wr * ur * ur)), 2 * len(t),
+            3 * int(used.sum()) + 2 * int(free.sum()), index)
+
+
+def _covariances(parts, P, free) -> np.ndarray:
+    U, V, Wf, _, _, sandwich, dof, n_rows, n_unknowns, _ = parts
+    return model_covariances(schur_information(U, V, Wf), U, Wf, sandwich, dof, n_rows,
+                             n_unknowns, P, free)
+
+
+def released_steps(parts, free_rows, held_rows, prior: float | None = None
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """For each of ``held_rows`` (rows of the unknowns of ``parts``, a linearisation as
+    :func:`_bearing_parts` gives it, whose objects the adjustment held): the undamped
+    Gauss-Newton steps from the solution when it alone is released, the objects of
+    ``free_rows`` free, and its covariance then, the other held rows fixed
+    (:func:`model_covariances`, the same noise scale). ``(steps (H, H, d), covariances
+    (H, d, d))``: ``steps[j, k]`` the step of held row ``k`` when row ``j`` is released (zero
+    for the others when they are held exactly, ``prior`` None; with ``prior``, the information
+    ``prior * I`` of a held row's prior, as the adjustment with ``anchor_noise`` holds its
+    anchors, the others move too and row ``j`` loses its prior). Generic over the pose's size
+    and the map's dimension.
+
+    At the solution the free objects' and the poses' gradients vanish (and a held row's
+    readings balance its prior), so the step is what the released object's own readings pull
+    it by, through the rest of the adjustment: the linearised leave-one-out prediction of a
+    held object (the outlier test of a constraint, Baarda 1968; Koch, *Parameter Estimation
+    and Hypothesis Testing in Linear Models*, 1999, §4.4), at the cost of a small solve instead
+    of an adjustment again."""
+    U, V, Wf, g, h, (t, f_all, gp, go, blocks), dof, n_rows, n_unknowns, _ = parts
+    d = V.shape[1]
+    free_rows = np.asarray(free_rows, dtype=int)
+    held_rows = np.asarray(held_rows, dtype=int)
+    steps = np.zeros((len(held_rows), len(held_rows), d))
+    covs = []
+    for n, j in enumerate(held_rows):
+        sub = np.r_[free_rows, j]
+        remap = np.full(len(V) + 1, -1)  # (the last entry: readings of no unknown)
+        remap[sub] = np.arange(len(sub))
+        cols = (sub[:, None] * d + np.arange(d)[None, :]).ravel()
+        Wj = Wf[:, :, cols]
+        if prior is None:
+            steps[n, n] = schur_step(U, V[sub], Wj, g, h[sub], 0.0)[1][-1]
+        else:
+            others = held_rows[held_rows != j]
+            V2, h2 = V.copy(), h.copy()
+            V2[others] += prior * np.eye(d)
+            h2[others] = 0.0  # their readings balance their priors at the solution
+            steps[n] = schur_step(U, V2, Wf, g, h2, 0.0)[1][held_rows]
+        sandwich = (t, remap[np.where(f_all >= 0, f_all, len(V))], gp, go, blocks)
+        cov = model_covariances(schur_information(U, V[sub], Wj), U, Wj, sandwich, dof, n_rows,
+                                n_unknowns, np.zeros((len(sub), d)), np.ones(len(sub), bool))
+        covs.append(cov[-1])
+    return steps, np.reshape(covs, (-1, d, d))
+
+
+def _bearing(est: BearingAdjustment, X, mask, anchor_ids, blocks) -> np.ndarray:
+    free = _frame(est, anchor_ids)[5]
+    return _covariances(_bearing_parts(est, X, mask, anchor_ids, blocks, free),
+                        est.embedding_, free)
+
+
+def _range_bearing(est: RangeBearingAdjustment, X, masks, anchor_ids, blocks) -> np.ndarray:
+    free = _frame(est, anchor_ids)[5]
+    return _covariances(_range_bearing_parts(est, X, masks, anchor_ids, blocks, free),
+                        est.embedding_, free)
 
 
 def _adjustment(est):
@@ -258,3 +333,31 @@ def adjustment_covariances(est, X, mask, anchor_ids, timeline=None) -> np.ndarra
     if isinstance(X, dict):  # a fused map refined by the bearing-only adjustment
         X, mask = X["bearing"], (mask or {}).get("bearing")
     return _bearing(adj, X, mask, anchor_ids, blocks)
+
+
+def held_out_anchors(est, X, mask, anchor_ids, timeline=None) -> tuple[np.ndarray, np.ndarray]:
+    """Each anchor of the fitted adjustment in ``est`` held out, linearised: its position
+    (A, 2) and covariance (A, 2, 2) in the adjustment's frame when it alone is released and the
+    other anchors held (:func:`released_steps`; one step from the solution, no adjustment
+    again). Arguments as for :func:`adjustment_covariances`. An anchor its readings do not pin
+    down (a non-finite covariance) gets NaN rows."""
+    adj = _adjustment(est)
+    if adj is None:
+        raise ValueError(f"{type(est).__name__} holds no bundle adjustment")
+    blocks = step_blocks(len(adj.poses_), timeline)
+    if isinstance(adj, RangeBearingAdjustment):
+        make = _range_bearing_parts
+    else:
+        make = _bearing_parts
+        if isinstance(X, dict):  # a fused map refined by the bearing-only adjustment
+            X, mask = X["bearing"], (mask or {}).get("bearing")
+    ids = np.asarray(anchor_ids, dtype=int)
+    P, _, _, _, placed, free, _ = _frame(adj, ids)
+    parts = make(adj, X, mask, ids, blocks, placed)
+    index = parts[-1]
+    steps, covs = released_steps(parts, index[free], index[ids])
+    pos = np.asarray(adj.embedding_, dtype=float)[ids] + np.diagonal(steps).T
+    bad = ~np.all(np.isfinite(covs), axis=(1, 2)) | ~np.all(np.isfinite(pos), axis=1)
+    pos[bad], covs[bad] = np.nan, np.nan
+    return pos, covs
+
