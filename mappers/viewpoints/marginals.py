@@ -48,13 +48,12 @@ from mappers.viewpoints.engine import (
     normal_blocks,
     pose_jacobian,
     robust_weights,
-    schur_step,
     use_sparse_coupling,
 )
 from mappers.viewpoints.range_bearing import RangeBearingAdjustment
 
 __all__ = [
-    "adjustment_covariances", "has_model_covariances", "held_out_anchors", "model_covariances",
+    "adjustment_covariances", "block_gradients", "has_model_covariances", "held_out_anchors", "model_covariances",
     "released_anchor", "released_steps", "sandwich_covariances", "schur_information",
     "step_blocks",
 ]
@@ -106,15 +105,13 @@ def step_blocks(n_steps: int, timeline=None) -> np.ndarray:
     return out
 
 
-def sandwich_covariances(Sinv, U, Wf, t, f, g_pose, g_obj, blocks) -> np.ndarray:
-    """The (F, d, d) cluster-robust covariances (module docstring), generic over the pose size
-    ``p`` and the map's dimension ``d``: ``Sinv`` (dF, dF) the inverse of the objects' reduced
-    information, ``U`` (N, p, p) and ``Wf`` (N, p, dF) the poses' blocks, ``g_pose`` (K, p) and
-    ``g_obj`` (K, d) each reading's gradient, ``t`` its step (row of ``U``), ``f`` its free
-    object (-1: none) and ``blocks`` (N,) each step's block."""
+def block_gradients(U, Wf, t, f, g_pose, g_obj, blocks, n_cols) -> np.ndarray:
+    """(B, n_cols) the reduced gradient of the readings of each block (the objects' part, the
+    poses' part eliminated): the ``z_b`` of :func:`sandwich_covariances`, whose arguments these
+    are (``n_cols``: d times the number of unknown objects)."""
     n, p, d = len(U), U.shape[1], g_obj.shape[1]
     n_blocks = int(blocks.max()) + 1 if len(blocks) else 0
-    Z = np.zeros((n_blocks, Sinv.shape[0]))
+    Z = np.zeros((n_blocks, n_cols))
     k = f >= 0
     for c in range(d):
         np.add.at(Z, (blocks[t[k]], d * f[k] + c), g_obj[k, c])
@@ -122,6 +119,18 @@ def sandwich_covariances(Sinv, U, Wf, t, f, g_pose, g_obj, blocks) -> np.ndarray
     np.add.at(gp, t, g_pose)
     y = np.linalg.solve(U + 1e-12 * np.eye(p), gp[..., None])[..., 0]
     np.add.at(Z, blocks, -np.einsum("nij,ni->nj", Wf, y))
+    return Z
+
+
+def sandwich_covariances(Sinv, U, Wf, t, f, g_pose, g_obj, blocks) -> np.ndarray:
+    """The (F, d, d) cluster-robust covariances (module docstring), generic over the pose size
+    ``p`` and the map's dimension ``d``: ``Sinv`` (dF, dF) the inverse of the objects' reduced
+    information, ``U`` (N, p, p) and ``Wf`` (N, p, dF) the poses' blocks, ``g_pose`` (K, p) and
+    ``g_obj`` (K, d) each reading's gradient, ``t`` its step (row of ``U``), ``f`` its free
+    object (-1: none) and ``blocks`` (N,) each step's block."""
+    d = g_obj.shape[1]
+    Z = block_gradients(U, Wf, t, f, g_pose, g_obj, blocks, Sinv.shape[0])
+    n_blocks = len(Z)
     A = (Z @ Sinv).reshape(n_blocks, -1, d)
     return np.einsum("bfi,bfj->fij", A, A) * n_blocks / max(n_blocks - 1, 1)
 
@@ -240,27 +249,39 @@ def released_steps(parts, free_rows, held_rows, prior: float | None = None
     d = V.shape[1]
     free_rows = np.asarray(free_rows, dtype=int)
     held_rows = np.asarray(held_rows, dtype=int)
+    # the poses eliminated once for all unknowns: a subset's reduced information and gradient
+    # are the rows (and columns) of these
+    S = schur_information(U, V, Wf)
+    Ui = np.linalg.inv(U + 1e-12 * np.eye(U.shape[1]))
+    z = h.reshape(-1) - Wf.reshape(-1, S.shape[0]).T @ np.einsum("nij,nj->ni", Ui, g).ravel()
+    Z = block_gradients(U, Wf, t, f_all, gp, go, blocks, S.shape[0])
+    n_blocks = len(Z)
+    sigma2 = dof / max(n_rows - n_unknowns, 1)
+    cols_of = lambda rows: (np.asarray(rows)[:, None] * d + np.arange(d)[None, :]).ravel()  # noqa: E731
     steps = np.zeros((len(held_rows), len(held_rows), d))
-    covs = []
+    covs = np.full((len(held_rows), d, d), np.nan)
     for n, j in enumerate(held_rows):
-        sub = np.r_[free_rows, j]
-        remap = np.full(len(V) + 1, -1)  # (the last entry: readings of no unknown)
-        remap[sub] = np.arange(len(sub))
-        cols = (sub[:, None] * d + np.arange(d)[None, :]).ravel()
-        Wj = Wf[:, :, cols]
+        cols = cols_of(np.r_[free_rows, j])
+        Sj = S[np.ix_(cols, cols)]
+        model = sigma2 * block_marginals(Sj, d)[-1]
+        if not np.all(np.isfinite(model)):
+            covs[n] = model
+            continue
+        Sinv = np.linalg.inv(0.5 * (Sj + Sj.T))
         if prior is None:
-            steps[n, n] = schur_step(U, V[sub], Wj, g, h[sub], 0.0)[1][-1]
+            steps[n, n] = -(Sinv @ z[cols])[-d:]
         else:
-            others = held_rows[held_rows != j]
-            V2, h2 = V.copy(), h.copy()
-            V2[others] += prior * np.eye(d)
-            h2[others] = 0.0  # their readings balance their priors at the solution
-            steps[n] = schur_step(U, V2, Wf, g, h2, 0.0)[1][held_rows]
-        sandwich = (t, remap[np.where(f_all >= 0, f_all, len(V))], gp, go, blocks)
-        cov = model_covariances(schur_information(U, V[sub], Wj), U, Wj, sandwich, dof, n_rows,
-                                n_unknowns, np.zeros((len(sub), d)), np.ones(len(sub), bool))
-        covs.append(cov[-1])
-    return steps, np.reshape(covs, (-1, d, d))
+            cols2 = cols_of(np.r_[free_rows, held_rows])
+            S2 = S[np.ix_(cols2, cols2)].copy()
+            z2 = z[cols2].copy()
+            k = len(free_rows) * d + d * np.flatnonzero(held_rows != j)[:, None] + np.arange(d)
+            S2[k.ravel(), k.ravel()] += prior
+            z2[k.ravel()] = 0.0  # their readings balance their priors at the solution
+            steps[n] = -np.linalg.solve(S2, z2)[len(free_rows) * d:].reshape(-1, d)
+        a = Z[:, cols] @ Sinv[:, -d:]
+        robust = a.T @ a * n_blocks / max(n_blocks - 1, 1)
+        covs[n] = robust if np.trace(robust) > np.trace(model) else model
+    return steps, covs
 
 
 def _bearing(est: BearingAdjustment, X, mask, anchor_ids, blocks) -> np.ndarray:
