@@ -95,8 +95,11 @@ def build_map(
             of a moving-block bootstrap over the steps (any method; about 20 maps' time);
             True: ``"model"`` where the method has one, else ``"bootstrap"``
             (:mod:`mappers.covariances`); ``"anchors"``: True's covariances checked by the
-            anchors, each mapped in turn from the others, and scaled when they miss them
-            (:mod:`mappers.core.held_out_anchors`; about one map more per anchor). 3-D maps:
+            anchors, each held out in turn, and scaled when they miss them
+            (:mod:`mappers.core.held_out_anchors`; for a method with an adjustment each anchor
+            is released from it by one linearised step, else mapped again from the others);
+            ``"floor"``: the model's with a floor for a logged sensor's systematic errors
+            (:func:`mappers.core.uncertainty.systematic_floor`; methods with an adjustment). 3-D maps:
             the model for SPATIAL-BA, the bootstrap for COVIS-3D.
         **params: method parameters (``n_neighbors`` = K, ``sigma2``, ``degree``, ...).
 
