@@ -36,6 +36,7 @@ say about them. Steps the adjustment left out (no pose) contribute nothing.
 from __future__ import annotations
 
 import numpy as np
+import scipy.linalg
 import scipy.sparse as sp
 
 from mappers.core.uncertainty import block_marginals
@@ -258,27 +259,34 @@ def released_steps(parts, free_rows, held_rows, prior: float | None = None
     n_blocks = len(Z)
     sigma2 = dof / max(n_rows - n_unknowns, 1)
     cols_of = lambda rows: (np.asarray(rows)[:, None] * d + np.arange(d)[None, :]).ravel()  # noqa: E731
+    F, A = cols_of(free_rows), cols_of(held_rows)
     steps = np.zeros((len(held_rows), len(held_rows), d))
     covs = np.full((len(held_rows), d, d), np.nan)
-    for n, j in enumerate(held_rows):
-        cols = cols_of(np.r_[free_rows, j])
-        Sj = S[np.ix_(cols, cols)]
-        model = sigma2 * block_marginals(Sj, d)[-1]
-        if not np.all(np.isfinite(model)):
-            covs[n] = model
+    SFF = 0.5 * (S[np.ix_(F, F)] + S[np.ix_(F, F)].T)
+    try:  # the free objects' block factored once; each released row is then a d x d Schur
+        GS = scipy.linalg.cho_solve(scipy.linalg.cho_factor(SFF, lower=True), S[np.ix_(F, A)])
+    except np.linalg.LinAlgError:  # a free object the readings do not pin down: its null
+        GS = scipy.linalg.pinvh(SFF) @ S[np.ix_(F, A)]  # directions left out (pseudo-inverse)
+    T = S[np.ix_(A, A)] - S[np.ix_(A, F)] @ GS  # the held rows' information, free ones eliminated
+    y = z[A] - GS.T @ z[F]  # and their reduced gradient
+    ZA = Z[:, A] - Z[:, F] @ GS  # each block's reduced gradient of the held rows
+    for n in range(len(held_rows)):
+        k = slice(n * d, (n + 1) * d)
+        M = 0.5 * (T[k, k] + T[k, k].T)
+        if not np.linalg.eigvalsh(M)[0] > 1e-12 * max(float(np.abs(M).max()), 1e-300):
+            covs[n] = np.inf  # released, the row is not pinned down
             continue
-        Sinv = np.linalg.inv(0.5 * (Sj + Sj.T))
+        Minv = np.linalg.inv(M)
         if prior is None:
-            steps[n, n] = -(Sinv @ z[cols])[-d:]
-        else:
-            cols2 = cols_of(np.r_[free_rows, held_rows])
-            S2 = S[np.ix_(cols2, cols2)].copy()
-            z2 = z[cols2].copy()
-            k = len(free_rows) * d + d * np.flatnonzero(held_rows != j)[:, None] + np.arange(d)
-            S2[k.ravel(), k.ravel()] += prior
-            z2[k.ravel()] = 0.0  # their readings balance their priors at the solution
-            steps[n] = -np.linalg.solve(S2, z2)[len(free_rows) * d:].reshape(-1, d)
-        a = Z[:, cols] @ Sinv[:, -d:]
+            steps[n, n] = -Minv @ y[k]
+        else:  # the other held rows keep their prior; their readings balance it (y = 0)
+            T2 = T + prior * np.eye(len(A))
+            T2[k, k] = T[k, k]
+            y2 = np.zeros(len(A))
+            y2[k] = y[k]
+            steps[n] = -np.linalg.solve(T2, y2).reshape(-1, d)
+        model = sigma2 * Minv
+        a = ZA[:, k] @ Minv
         robust = a.T @ a * n_blocks / max(n_blocks - 1, 1)
         covs[n] = robust if np.trace(robust) > np.trace(model) else model
     return steps, covs
