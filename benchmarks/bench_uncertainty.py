@@ -1,7 +1,7 @@
 """Per-landmark uncertainty (``build_map(uncertainty=True)``): is it calibrated, sharp and cheap?
 
     python benchmarks/bench_uncertainty.py [--layouts 25] [--steps 1000] [--seed0 12000]
-        [--sets visibility,bearing,range-bearing,bearing-view90,mrclam,starloc,...]
+        [--sets visibility,bearing,range-bearing,bearing-view90,mrclam,starloc,...] [--setups s3]
         [--uncertainty true|anchors] [--csv docs/results/uncertainty/uncertainty.csv]
 
 Simulated sets: each layout is one random walk of ``LFMDR-Bearing-v0`` (50 objects, 4 corner
@@ -36,8 +36,15 @@ whether one factor carries from run to run).
 scaled by the held-out anchors, :mod:`mappers.core.held_out_anchors`). ``starloc`` and
 ``starloc-anchors``: every STAR-loc s3 sequence under ``--starloc`` mapped from stereo rays and
 ranges (SPATIAL-BA, :func:`lfmdr_gym.experiments.starloc.map_starloc`), its scored tags scored
-in 3-D (chi-squared(3)), with ``uncertainty=True`` and ``"anchors"``. ``--uncertainty anchors``
-asks the simulated sets for ``"anchors"`` instead of True.
+in 3-D (chi-squared(3)), with ``uncertainty=True`` and ``"anchors"``; ``--setups s1,s2`` maps
+the sequences of those setups instead of s3's. ``mrclam-floor`` and ``starloc-floor``: with
+``uncertainty="floor"`` (the model plus the systematic floor,
+:func:`mappers.core.uncertainty.systematic_floor`). For ``mrclam`` and ``starloc`` the line
+``floor for 0.95`` gives the smallest share of the anchors' extent (:data:`FLOOR_GRID`) whose
+floor puts 95 % of the set's landmarks inside their regions: how
+:data:`mappers.core.uncertainty.SYSTEMATIC_FLOOR` was chosen (on ``starloc``, the s3
+sequences). ``--uncertainty anchors`` asks the simulated sets for ``"anchors"`` instead of
+True.
 
 Per map: the share of non-anchor landmarks whose truth lies inside their 95 % region (squared
 Mahalanobis distance at most the chi-squared(2) 0.95 quantile), the mean RMS radius of their
