@@ -77,9 +77,10 @@ def jackknife_targets(est: CalibratedSMACOF, X: np.ndarray, n_steps: int
         n_steps: the history's steps.
 
     Returns:
-        ``(T, W, dT, few)``: the (M, M) targets and weights of the final re-embedding's stress
-        (neighbour pairs with weight 1; far pairs whose lower bound is active with CAL-SMA's
-        far weight, an inactive bound follows the map and exerts no force), the (nb, M, M)
+        ``(T, W, dT, few)``: the (M, M) targets and weights of the stress whose minimiser the
+        map is, CAL-SMA's last re-embedding (neighbour pairs with weight 1 and their calibrated
+        targets; the other pairs with CAL-SMA's far weight and the target ``max(distance,
+        bound)``: a weak spring that keeps a loosely tied object where it is), the (nb, M, M)
         target changes of the nb delete-one-block replicates, and an (M,) bool, True for
         objects seen in fewer than two blocks.
     """
@@ -118,10 +119,10 @@ def jackknife_targets(est: CalibratedSMACOF, X: np.ndarray, n_steps: int
     T[i, j] = T[j, i] = t0
     R = T.max(axis=1)
     bound = est.far_factor * np.maximum(R[:, None], R[None, :])
-    active = ~loc & (euclidean_distance_matrix(Y) < bound)
-    np.fill_diagonal(active, False)
-    W = np.where(loc, 1.0, np.where(active, est.far_weight, 0.0))
-    T = np.where(active, bound, T)
+    far = ~loc
+    np.fill_diagonal(far, False)
+    W = np.where(loc, 1.0, np.where(far, est.far_weight, 0.0))
+    T = np.where(far, np.maximum(euclidean_distance_matrix(Y), bound), T)
     dT = np.zeros((len(Gk), m, m))
     dT[:, i, j] = dt
     dT[:, j, i] = dt
