@@ -46,27 +46,34 @@ def has_linear_jackknife(est) -> bool:
             and getattr(est, "dissimilarity_kind_", None) == "cosine")
 
 
-def _block_grams(X: np.ndarray, n_steps: int) -> np.ndarray:
-    """(nb, M, M) Gram matrices of the rows of ``X`` (M, n_steps * per_step) over blocks of
-    ``ceil(sqrt(n_steps))`` consecutive steps (the last block may be shorter)."""
+def _block_grams(X: np.ndarray, n_steps: int, i: np.ndarray, j: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The Gram matrix of the rows of ``X`` (M, n_steps * per_step) over each block of
+    ``ceil(sqrt(n_steps))`` consecutive steps (the last may be shorter), at the pairs
+    ``(i, j)`` and on the diagonal: ``(nb, P)`` and ``(nb, M)`` (never an (nb, M, M) array)."""
     per_step = X.shape[1] // n_steps
     block = max(1, math.ceil(math.sqrt(n_steps)))
-    edges = np.minimum(np.arange(0, n_steps + block, block), n_steps) * per_step
-    edges = np.unique(edges)
-    return np.stack([X[:, a:b] @ X[:, a:b].T for a, b in zip(edges[:-1], edges[1:], strict=True)])
+    edges = np.unique(np.minimum(np.arange(0, n_steps + block, block), n_steps) * per_step)
+    at_pairs, diag = [], []
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        G = X[:, a:b] @ X[:, a:b].T
+        at_pairs.append(G[i, j])
+        diag.append(np.diag(G).copy())
+    return np.array(at_pairs), np.array(diag)
 
 
-def _cosine_logs(G: np.ndarray, floor: float) -> tuple[np.ndarray, np.ndarray]:
-    """``log max(1 - cos, floor)`` of Gram matrices (..., M, M), and which rows are empty."""
-    diag = np.einsum("...ii->...i", G)
-    empty = diag <= 0
-    norm = np.sqrt(np.where(empty, 1.0, diag))
-    cos = np.clip(G / (norm[..., :, None] * norm[..., None, :]), -1.0, 1.0)
-    return np.log(np.maximum(1.0 - cos, floor)), empty
+def _cosine_logs(G_pairs: np.ndarray, diag: np.ndarray, i: np.ndarray, j: np.ndarray,
+                 floor: float) -> np.ndarray:
+    """``log max(1 - cos, floor)`` at the pairs ``(i, j)`` from Gram entries (..., P) and
+    diagonals (..., M) (an empty row: cosine 0)."""
+    norm = np.sqrt(np.where(diag > 0, diag, 1.0))
+    cos = np.clip(G_pairs / (norm[..., i] * norm[..., j]), -1.0, 1.0)
+    return np.log(np.maximum(1.0 - cos, floor))
 
 
 def jackknife_targets(est: CalibratedSMACOF, X: np.ndarray, n_steps: int
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                      ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray],
+                                 np.ndarray, np.ndarray]:
     """The stress CAL-SMA's map minimises and its block-jackknife replicates' target changes
     (steps 1 and 2 of the module docstring).
 
@@ -77,12 +84,13 @@ def jackknife_targets(est: CalibratedSMACOF, X: np.ndarray, n_steps: int
         n_steps: the history's steps.
 
     Returns:
-        ``(T, W, dT, few)``: the (M, M) targets and weights of the stress whose minimiser the
-        map is, CAL-SMA's last re-embedding (neighbour pairs with weight 1 and their calibrated
-        targets; the other pairs with CAL-SMA's far weight and the target ``max(distance,
-        bound)``: a weak spring that keeps a loosely tied object where it is), the (nb, M, M)
-        target changes of the nb delete-one-block replicates, and an (M,) bool, True for
-        objects seen in fewer than two blocks.
+        ``(T, W, pairs, dt, few)``: the (M, M) targets and weights of the stress whose
+        minimiser the map is, CAL-SMA's last re-embedding (neighbour pairs with weight 1 and
+        their calibrated targets; the other pairs with CAL-SMA's far weight and the target
+        ``max(distance, bound)``: a weak spring that keeps a loosely tied object where it
+        is), the neighbour pairs ``(i, j)`` (each once), their (nb, P) target changes in the
+        nb delete-one-block replicates, and an (M,) bool, True for objects seen in fewer than
+        two blocks.
     """
     if not has_linear_jackknife(est):
         raise ValueError("the linearised jackknife needs a fitted, anchored CAL-SMA of "
@@ -102,15 +110,16 @@ def jackknife_targets(est: CalibratedSMACOF, X: np.ndarray, n_steps: int
     expo0 = fit.F @ fit.coef
     a = fit.coef[:est.dissimilarity_degree]
 
-    Gk = _block_grams(X, n_steps)
-    G = Gk.sum(axis=0)
-    L_full, _ = _cosine_logs(G, floor)
-    Lb, empty = _cosine_logs(G[None] - Gk, floor)  # (nb, M, M): block b deleted
-    few = np.sum(np.einsum("bii->bi", Gk) > 0, axis=0) < 2
+    Gk, diag_k = _block_grams(X, n_steps, i, j)
+    G, diag = Gk.sum(axis=0), diag_k.sum(axis=0)
+    L_full = _cosine_logs(G, diag, i, j, floor)
+    Lb = _cosine_logs(G[None] - Gk, diag[None] - diag_k, i, j, floor)  # block b deleted
+    few = np.sum(diag_k > 0, axis=0) < 2
     # a replicate without any sighting of an object leaves that object's pairs as they were
     # (the object itself gets no covariance: ``few``)
-    Lb = np.where(empty[:, :, None] | empty[:, None, :], L_full[None], Lb)
-    dL = Lb[:, i, j] - L_full[i, j]  # (nb, pairs)
+    empty = (diag[None] - diag_k) <= 0
+    Lb = np.where(empty[:, i] | empty[:, j], L_full[None], Lb)
+    dL = Lb - L_full  # (nb, pairs)
     change = sum(a[p - 1] * ((L0 + dL) ** p - L0**p) for p in range(1, len(a) + 1))
     t0 = np.exp(np.clip(expo0, lo, hi))
     dt = np.exp(np.clip(expo0 + change, lo, hi)) - t0
@@ -123,10 +132,7 @@ def jackknife_targets(est: CalibratedSMACOF, X: np.ndarray, n_steps: int
     np.fill_diagonal(far, False)
     W = np.where(loc, 1.0, np.where(far, est.far_weight, 0.0))
     T = np.where(far, np.maximum(euclidean_distance_matrix(Y), bound), T)
-    dT = np.zeros((len(Gk), m, m))
-    dT[:, i, j] = dt
-    dT[:, j, i] = dt
-    return T, W, dT, few
+    return T, W, (i, j), dt, few
 
 
 def linear_jackknife_covariances(est: CalibratedSMACOF, X: np.ndarray, n_steps: int,
@@ -143,10 +149,10 @@ def linear_jackknife_covariances(est: CalibratedSMACOF, X: np.ndarray, n_steps: 
         objects the stress does not pin down) and an (M,) bool, True for objects seen in fewer
         than two blocks (the jackknife cannot measure their spread: NaN covariance).
     """
-    T, W, dT, few = jackknife_targets(est, X, n_steps)
-    m, nb = len(T), len(dT)
+    T, W, pairs, dt, few = jackknife_targets(est, X, n_steps)
+    m, nb = len(T), len(dt)
     free = np.setdiff1d(np.arange(m), anchors)
-    moves, loose = stress_response(est.embedding_, T, W, free, dT)
+    moves, loose = stress_response(est.embedding_, T, W, free, pairs, dt)
     dev = moves - moves.mean(axis=0)
     cov = np.einsum("bmi,bmj->mij", dev, dev) * (nb - 1) / nb
     cov[loose] = np.diag([np.inf, np.inf])

@@ -72,15 +72,18 @@ def stress_hessian(X: np.ndarray, targets: np.ndarray, weights: np.ndarray) -> n
 
 
 def stress_response(X: np.ndarray, targets: np.ndarray, weights: np.ndarray, free: np.ndarray,
-                    delta_targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                    pairs: tuple[np.ndarray, np.ndarray], delta_targets: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
     """First-order moves of the minimiser ``X`` (M, d) of the weighted stress, the points not
-    in ``free`` held, for each of B target perturbations (module docstring).
+    in ``free`` held, for each of B perturbations of some pairs' targets (module docstring).
 
     Parameters:
         X: (M, d) a minimiser of the stress over the ``free`` points.
         targets, weights: (M, M) the stress's targets and weights at that minimum.
         free: indices of the points that move (the others are anchors).
-        delta_targets: (B, M, M) symmetric changes of the targets.
+        pairs: ``(i, j)``, two (P,) index arrays: the pairs whose targets change (each
+            unordered pair once).
+        delta_targets: (B, P) the changes of those targets (``t_ij`` and ``t_ji`` alike).
 
     Returns:
         ``(moves, loose)``: (B, M, d) moves (zero for the held points) and an (M,) bool, True for
@@ -92,17 +95,23 @@ def stress_response(X: np.ndarray, targets: np.ndarray, weights: np.ndarray, fre
     X = np.asarray(X, dtype=float)
     m, d = X.shape
     free = np.asarray(free, dtype=int)
+    i, j = (np.asarray(a, dtype=int) for a in pairs)
     dT = np.asarray(delta_targets, dtype=float)
-    if dT.ndim != 3 or dT.shape[1:] != (m, m):
-        raise ValueError(f"delta_targets must be (B, {m}, {m}), got {dT.shape}")
-    W = np.array(weights, dtype=float)
-    np.fill_diagonal(W, 0.0)
-    Dx = euclidean_distance_matrix(X)
-    U = _unit_vectors(X, Dx)
+    if i.shape != j.shape or i.ndim != 1 or dT.ndim != 2 or dT.shape[1] != len(i):
+        raise ValueError(f"delta_targets must be (B, P) for P = {len(i)} pairs (i, j) of equal "
+                         f"length, got {dT.shape} for pairs {i.shape} and {j.shape}")
+    W = np.asarray(weights, dtype=float)
+    diff = X[i] - X[j]
+    dist = np.linalg.norm(diff, axis=1)
+    u = np.where((dist > 0)[:, None], diff / np.where(dist > 0, dist, 1.0)[:, None], 0.0)
+    # gradient change: dg_i = -2 w_ij dt_ij u_ij, and the opposite at j
+    force = -2.0 * (W[i, j] * dT)[:, :, None] * u[None]  # (B, P, d)
+    dg = np.zeros((len(dT), m, d))
+    np.add.at(dg, (slice(None), i), force)
+    np.add.at(dg, (slice(None), j), -force)
+    dg = dg[:, free].reshape(len(dT), -1)
     cols = (free[:, None] * d + np.arange(d)[None, :]).ravel()
     H = stress_hessian(X, targets, W)[np.ix_(cols, cols)]
-    # gradient change of each free point: dg_i = -2 sum_j w_ij dt_ij u_ij
-    dg = -2.0 * np.einsum("ij,bij,ijk->bik", W, dT, U)[:, free].reshape(len(dT), -1)
     moves = np.zeros((len(dT), m, d))
     loose = np.zeros(m, dtype=bool)
     if not len(free):
