@@ -32,11 +32,26 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from threadpoolctl import ThreadpoolController
 
 from mappers.calibrated.cal_sma import CalibratedSMACOF, fit_calibration, log_floor
 from mappers.smacof import euclidean_distance_matrix, stress_response
 
 __all__ = ["has_linear_jackknife", "jackknife_targets", "linear_jackknife_covariances"]
+
+
+_controller: ThreadpoolController | None = None
+
+
+def _one_thread():
+    """BLAS and OpenMP held to one thread: the jackknife's products and its factorisation are
+    small (a few hundred rows), and threads competing for a shared machine's cores made them
+    ten times slower (measured at 300 objects). The controller is built once (scanning the
+    loaded libraries costs milliseconds), as :mod:`mappers.fitting` does for the maps."""
+    global _controller
+    if _controller is None:
+        _controller = ThreadpoolController()
+    return _controller.limit(limits=1)
 
 
 def has_linear_jackknife(est) -> bool:
@@ -54,9 +69,10 @@ def _block_grams(X: np.ndarray, n_steps: int, i: np.ndarray, j: np.ndarray
     per_step = X.shape[1] // n_steps
     block = max(1, math.ceil(math.sqrt(n_steps)))
     edges = np.unique(np.minimum(np.arange(0, n_steps + block, block), n_steps) * per_step)
+    steps = np.ascontiguousarray(X.T)  # a block of columns as contiguous rows: BLAS's matmul
     at_pairs, diag = [], []
     for a, b in zip(edges[:-1], edges[1:], strict=True):
-        G = X[:, a:b] @ X[:, a:b].T
+        G = steps[a:b].T @ steps[a:b]
         at_pairs.append(G[i, j])
         diag.append(np.diag(G).copy())
     return np.array(at_pairs), np.array(diag)
@@ -149,10 +165,11 @@ def linear_jackknife_covariances(est: CalibratedSMACOF, X: np.ndarray, n_steps: 
         objects the stress does not pin down) and an (M,) bool, True for objects seen in fewer
         than two blocks (the jackknife cannot measure their spread: NaN covariance).
     """
-    T, W, pairs, dt, few = jackknife_targets(est, X, n_steps)
-    m, nb = len(T), len(dt)
-    free = np.setdiff1d(np.arange(m), anchors)
-    moves, loose = stress_response(est.embedding_, T, W, free, pairs, dt)
+    with _one_thread():
+        T, W, pairs, dt, few = jackknife_targets(est, X, n_steps)
+        m, nb = len(T), len(dt)
+        free = np.setdiff1d(np.arange(m), anchors)
+        moves, loose = stress_response(est.embedding_, T, W, free, pairs, dt)
     dev = moves - moves.mean(axis=0)
     cov = np.einsum("bmi,bmj->mij", dev, dev) * (nb - 1) / nb
     cov[loose] = np.diag([np.inf, np.inf])
