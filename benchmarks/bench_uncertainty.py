@@ -9,7 +9,8 @@ anchors), seeds ``seed0, seed0 + 1, ...`` (fresh: never used to choose a setting
 true poses and layout (:mod:`bench_fusion_sim`'s sensors):
 
 * ``visibility``: the visibility bits of the walk's poses (the env's model, occlusion on),
-  mapped by the default (``CAL-SMA``; uncertainty by the bootstrap over steps);
+  mapped by the default (``CAL-SMA``; uncertainty by its linearised block jackknife,
+  ``--uncertainty bootstrap``: the bootstrap over steps);
 * ``bearing``: 360-degree bearings with 2 degrees of Gaussian noise (``BEARING-BA``; model);
 * ``range-bearing``: 360 degrees, 2 degrees and 2 cm of noise, fused (``LOC-SMA`` refined by its
   range-bearing adjustment; model);
@@ -18,12 +19,15 @@ true poses and layout (:mod:`bench_fusion_sim`'s sensors):
 * ``visibility-other-sim``: visibility from a second, independent world
   (:func:`bench_view_other_sim.other_sim`: uniform layout without spacing rule, no occlusion,
   its own walk, a 0.55 m visibility radius, 360-degree view), 50 objects, ``--steps`` steps —
-  the body of data the bootstrap's inflation
-  (:data:`mappers.covariances.BOOTSTRAP_INFLATION`) was chosen on; ``visibility`` confirms it.
+  the body of data the jackknife's and the bootstrap's inflations
+  (:data:`mappers.covariances.JACKKNIFE_INFLATION`, :data:`mappers.covariances.BOOTSTRAP_INFLATION`)
+  were chosen on; ``visibility`` confirms them.
 
 The line ``inflation for 0.95`` printed per set is the factor on the covariances that would put
-95 % of its landmarks inside their regions (how :data:`mappers.covariances.BOOTSTRAP_INFLATION`
-was chosen, on ``visibility-other-sim``).
+95 % of its landmarks inside their regions: with ``--no-inflation``, how
+:data:`mappers.covariances.JACKKNIFE_INFLATION` (the visibility default's, ``--uncertainty
+true``) and :data:`mappers.covariances.BOOTSTRAP_INFLATION` (``--uncertainty bootstrap``) were
+chosen, on ``visibility-other-sim`` (seeds 13000-13014).
 
 ``mrclam``: every MRCLAM run under ``--data`` mapped from range and bearing fused (the logged-run
 default, ``LOC-SMA``), scored against motion capture. ``mrclam-inflated`` asks what a calibrated
@@ -80,7 +84,7 @@ import lfmdr_gym  # noqa: F401  (registers the env ids)
 from lfmdr_gym import collect
 from lfmdr_gym.atomic import atomic_write_text
 from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
-from mappers import build_map
+from mappers import build_map, covariances
 from mappers.core.uncertainty import chi2_quantile, mahalanobis_squared, rms_radius
 
 SETS = ("visibility", "bearing", "range-bearing", "bearing-view90", "visibility-other-sim",
@@ -133,8 +137,10 @@ def score(positions, cov, truth, objects) -> tuple[int, int, float, float]:
     q = mahalanobis_squared(truth[objects] - positions[objects], cov[objects])
     radius = rms_radius(cov[objects])
     err = np.linalg.norm(positions[objects] - truth[objects], axis=1)
+    # an object without a covariance (NaN: e.g. seen in fewer than two of the jackknife's
+    # blocks) counts as a miss and is left out of the mean radius
     return (len(objects), int(np.sum(q <= chi2_quantile(positions.shape[1]))),
-            float(np.mean(radius)),
+            float(np.nanmean(radius)),
             float(np.mean(err)))
 
 
@@ -147,9 +153,9 @@ def informative(positions, cov, truth, objects, anchors_xyz) -> dict:
     a = np.asarray(anchors_xyz, dtype=float)
     extent = float(np.max(np.linalg.norm(a[:, None] - a[None], axis=2)))
     radius = rms_radius(cov[objects])
-    wide = ~(radius <= extent)
+    wide = radius > extent
     err = np.linalg.norm(positions[objects] - truth[objects], axis=1)
-    keep = ~wide
+    keep = radius <= extent  # (neither: an object without a covariance, NaN)
     return {"n_wide": int(wide.sum()),
             "rms_radius_informative": float(np.mean(radius[keep])) if keep.any() else math.nan,
             "mpe_informative": float(np.mean(err[keep])) if keep.any() else math.nan}
@@ -312,11 +318,20 @@ def main(argv=None) -> int:
     ap.add_argument("--setups", default="s3",
                     help="the STAR-loc setups the starloc sets map (comma-separated: s1,s2,s3)")
     ap.add_argument("--csv", type=Path, default=None)
-    ap.add_argument("--uncertainty", choices=("true", "anchors"), default="true",
-                    help="the simulated sets' mode: True, or 'anchors' (held-out anchors' check)")
+    ap.add_argument("--uncertainty", choices=("true", "anchors", "jackknife", "bootstrap"),
+                    default="true",
+                    help="the simulated sets' mode: True, 'anchors' (held-out anchors' check), "
+                         "or 'jackknife' / 'bootstrap' (visibility: the linearised jackknife, the "
+                         "default, or the bootstrap over steps)")
+    ap.add_argument("--no-inflation", action="store_true",
+                    help="the jackknife's and the bootstrap's covariances without their "
+                         "inflation (JACKKNIFE_INFLATION, BOOTSTRAP_INFLATION at 1): how the "
+                         "factors are chosen")
     args = ap.parse_args(argv)
+    if args.no_inflation:
+        covariances.JACKKNIFE_INFLATION = covariances.BOOTSTRAP_INFLATION = 1.0
     global UNCERTAINTY
-    UNCERTAINTY = True if args.uncertainty == "true" else "anchors"
+    UNCERTAINTY = True if args.uncertainty == "true" else args.uncertainty
     sets = [s for s in args.sets.split(",") if s]
     unknown = set(sets) - set(SETS)
     if unknown:

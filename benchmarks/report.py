@@ -316,7 +316,15 @@ UNCERTAINTY = (
            "--csv docs/results/uncertainty/mrclam.csv"),
     Source("docs/results/uncertainty/calibration.csv",
            "python benchmarks/bench_uncertainty.py --layouts 15 --seed0 13000 "
-           "--sets visibility-other-sim --csv docs/results/uncertainty/calibration.csv"),
+           "--sets visibility-other-sim --no-inflation "
+           "--csv docs/results/uncertainty/calibration.csv"),
+    Source("docs/results/uncertainty/calibration-other-sim.csv",
+           "python benchmarks/bench_uncertainty.py --layouts 25 --seed0 13100 "
+           "--sets visibility-other-sim --csv docs/results/uncertainty/calibration-other-sim.csv"),
+    Source("docs/results/uncertainty/calibration-bootstrap.csv",
+           "python benchmarks/bench_uncertainty.py --layouts 15 --seed0 13000 "
+           "--sets visibility-other-sim --uncertainty bootstrap --no-inflation "
+           "--csv docs/results/uncertainty/calibration-bootstrap.csv"),
     Source("docs/results/uncertainty/real.csv",
            "python benchmarks/bench_uncertainty.py --sets starloc,starloc-anchors,starloc-floor "
            "--csv docs/results/uncertainty/real.csv"),
@@ -333,8 +341,14 @@ UNCERTAINTY_NOTES = {
     "the covariances times the factor that holds 95 % on the other runs (leave-one-run-out); "
     "`mrclam-anchors`: `uncertainty=\"anchors\"` (the held-out anchors' check); `mrclam-floor`: "
     "`uncertainty=\"floor\"` (the model plus the systematic floor chosen on STAR-loc s3).",
-    "docs/results/uncertainty/calibration.csv": "The body of data the bootstrap's inflation "
-    "(`BOOTSTRAP_INFLATION`) was chosen on: a second simulator, run with the factor at 1.",
+    "docs/results/uncertainty/calibration.csv": "The body of data the visibility default's "
+    "inflation (`JACKKNIFE_INFLATION`, CAL-SMA's linearised jackknife) was chosen on: a second "
+    "simulator, run with the factor at 1.",
+    "docs/results/uncertainty/calibration-other-sim.csv": "The jackknife's inflation confirmed "
+    "on fresh layouts of the second simulator (seeds 13100-13124), with the factor.",
+    "docs/results/uncertainty/calibration-bootstrap.csv": "The body of data the bootstrap's "
+    "inflation (`BOOTSTRAP_INFLATION`) was chosen on, run with the factor at 1 "
+    "(`uncertainty=\"bootstrap\"`; `True` before the jackknife).",
     "docs/results/uncertainty/real.csv": "STAR-loc stereo (s3 sequences, SPATIAL-BA, 3-D) with "
     "`uncertainty=True`, `\"anchors\"` (the covariances checked and scaled by the held-out "
     "anchors, `mappers.core.held_out_anchors`) and `\"floor\"` (the model plus the systematic "

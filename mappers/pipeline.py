@@ -91,9 +91,12 @@ def build_map(
         random_state: seed handed to methods that take one (and to the bootstrap's draws).
         uncertainty: False (the default): no covariances, ``Map.covariances`` is None and nothing
             else changes; ``"model"``: from the normal equations of the method's bundle
-            adjustment (``BEARING-BA``, ``LOC-SMA`` refined, ``SPATIAL-BA``); ``"bootstrap"``: from replicate maps
+            adjustment (``BEARING-BA``, ``LOC-SMA`` refined, ``SPATIAL-BA``); ``"jackknife"``:
+            CAL-SMA's linearised block jackknife (complete visibility histories, dense CAL-SMA;
+            a fraction of a map's time); ``"bootstrap"``: from replicate maps
             of a moving-block bootstrap over the steps (any method; about 20 maps' time);
-            True: ``"model"`` where the method has one, else ``"bootstrap"``
+            True: ``"model"`` where the method has one, else ``"jackknife"`` where it applies,
+            else ``"bootstrap"``
             (:mod:`mappers.covariances`); ``"anchors"``: True's covariances checked by the
             anchors, each held out in turn, and scaled when they miss them
             (:mod:`mappers.core.held_out_anchors`; for a method with an adjustment each anchor

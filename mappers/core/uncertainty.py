@@ -39,10 +39,11 @@ __all__ = [
     "transform_covariances",
 ]
 
-UNCERTAINTY_MODES = (False, True, "model", "bootstrap", "anchors", "floor")
+UNCERTAINTY_MODES = (False, True, "model", "jackknife", "bootstrap", "anchors", "floor")
 """The values ``build_map(uncertainty=...)`` takes: none, the method's own (``True``), from the
-normal equations (``"model"``), from a bootstrap over steps (``"bootstrap"``), the method's own
-checked and scaled by the held-out anchors (``"anchors"``,
+normal equations (``"model"``), from CAL-SMA's linearised block jackknife (``"jackknife"``,
+:mod:`mappers.calibrated.cal_sma_uncertainty`), from a bootstrap over steps (``"bootstrap"``),
+the method's own checked and scaled by the held-out anchors (``"anchors"``,
 :mod:`mappers.core.held_out_anchors`), the normal equations' with a floor for a logged sensor's
 systematic errors (``"floor"``, :func:`systematic_floor`)."""
 

@@ -126,7 +126,7 @@ def test_range_bearing_model():
 def test_bootstrap_of_a_visibility_map():
     P, poses = layout(12, 4), walk(150, seed=4)
     X = (sensed(P, poses)[0] < 0.4).astype(float)
-    m = _quiet(X, ANCHORS, P[ANCHORS], uncertainty=True)
+    m = _quiet(X, ANCHORS, P[ANCHORS], uncertainty="bootstrap")  # (True: the jackknife)
     assert m.method == "CAL-SMA"
     _check_shape(m, len(P))
     # centimetres of spread for centimetres of error, not metres or microns
