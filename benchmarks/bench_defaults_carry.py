@@ -79,10 +79,14 @@ def _other(seed: int):
     return X, mask, ANCHORS, P[ANCHORS], P
 
 
-def view_part(runs: int, passes: int = 1) -> None:
+SIMULATORS = {"world": ("project's world", _world, 1000), "other": ("other simulator", _other, 0)}
+"""``--simulators``: (name, history maker, first seed) of each simulator of the view part."""
+
+
+def view_part(runs: int, passes: int = 1, simulators=tuple(SIMULATORS)) -> None:
     print(f"## VIEW-BA's 90-degree view: default map, {runs} fresh layouts per simulator; "
           f"MPE [m] mean (largest run), goal <= {VIEW_GOAL}")
-    for name, make, seed0 in (("project's world", _world, 1000), ("other simulator", _other, 0)):
+    for name, make, seed0 in (SIMULATORS[k] for k in simulators):
         rows: dict[str, list[float]] = {"view mask": [], "log of sightings": []}
         labels: dict[str, set[str]] = {k: set() for k in rows}
         unmapped, fallbacks = dict.fromkeys(rows, 0), dict.fromkeys(rows, 0)
@@ -161,10 +165,12 @@ def main(argv=None) -> None:
     ap.add_argument("--view-passes", type=int, default=1,
                     help="with > 1: the view masks mapped by VIEW-BA(passes=N) instead of the "
                          "default (docs/dead-ends.md, 'Defaults that carry')")
+    ap.add_argument("--simulators", nargs="+", default=list(SIMULATORS), choices=list(SIMULATORS),
+                    help="the view part's simulators (default both)")
     args = ap.parse_args(argv)
     with threadpool_limits(limits=1):
         if "view" in args.parts:
-            view_part(args.runs, args.view_passes)
+            view_part(args.runs, args.view_passes, args.simulators)
         if "mrclam" in args.parts:
             mrclam_part(args.data)
 
