@@ -83,16 +83,18 @@ SIMULATORS = {"world": ("project's world", _world, 1000), "other": ("other simul
 """``--simulators``: (name, history maker, first seed) of each simulator of the view part."""
 
 
-def view_part(runs: int, passes: int = 1, simulators=tuple(SIMULATORS)) -> None:
+def view_part(runs: int, passes: int = 1, simulators=tuple(SIMULATORS),
+              sightings: bool = True) -> None:
     print(f"## VIEW-BA's 90-degree view: default map, {runs} fresh layouts per simulator; "
           f"MPE [m] mean (largest run), goal <= {VIEW_GOAL}")
     for name, make, seed0 in (SIMULATORS[k] for k in simulators):
-        rows: dict[str, list[float]] = {"view mask": [], "log of sightings": []}
+        rows: dict[str, list[float]] = {"view mask": [], **({"log of sightings": []} if sightings
+                                                            else {})}
         labels: dict[str, set[str]] = {k: set() for k in rows}
         unmapped, fallbacks = dict.fromkeys(rows, 0), dict.fromkeys(rows, 0)
         for seed in range(seed0, seed0 + runs):
             X, mask, ids, apos, P = make(seed)
-            for kind, m in (("view mask", mask), ("log of sightings", mask & (X > 0.5))):
+            for kind, m in (("view mask", mask), ("log of sightings", mask & (X > 0.5)))[:len(rows)]:
                 e, label, lost, fell_back = _mpe(X, m, ids, apos, P,
                                                  passes if kind == "view mask" else 1)
                 rows[kind].append(e)
@@ -167,10 +169,12 @@ def main(argv=None) -> None:
                          "default (docs/dead-ends.md, 'Defaults that carry')")
     ap.add_argument("--simulators", nargs="+", default=list(SIMULATORS), choices=list(SIMULATORS),
                     help="the view part's simulators (default both)")
+    ap.add_argument("--no-sightings", action="store_true",
+                    help="the view masks only (not the same histories read as logs of sightings)")
     args = ap.parse_args(argv)
     with threadpool_limits(limits=1):
         if "view" in args.parts:
-            view_part(args.runs, args.view_passes, args.simulators)
+            view_part(args.runs, args.view_passes, args.simulators, not args.no_sightings)
         if "mrclam" in args.parts:
             mrclam_part(args.data)
 
