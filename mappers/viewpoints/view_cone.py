@@ -313,8 +313,8 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         passes: adjustments in a row, each from the map of the one before with the view's
             width (unless given), the radius and the viewpoints found afresh on it; a pass that
             does not lower its start's loss ends them and the map before it stands. A second
-            pass corrects a width misread on a poor start map (measured on two simulators, not
-            yet the default: ``docs/dead-ends.md``, "Defaults that carry").
+            pass corrects a width misread on a poor start map (three passes measured on two
+            simulators, not yet the default: ``docs/dead-ends.md``, "Defaults that carry").
         random_state: handed to the start methods.
 
     Attributes:
