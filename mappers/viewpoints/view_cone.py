@@ -393,14 +393,15 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         return self
 
     def _check_starts(self, first: str) -> tuple[str, ...]:
-        """The fallback labels, checked: neither they nor the first start may be VIEW-BA."""
+        """The fallback labels, checked (neither they nor the first start may be VIEW-BA), the
+        first start's own label left out."""
         fallbacks = () if self.fallback_starts is None else tuple(self.fallback_starts)
         for name, label in (("start", first), *(("fallback_starts", f) for f in fallbacks)):
             if not isinstance(label, str):
                 raise ValueError(f"{name} must hold method labels, got {label!r}")
             if label.strip().upper() == "VIEW-BA":
                 raise ValueError(f"{name} must name another method than 'VIEW-BA'")
-        return fallbacks
+        return tuple(f for f in fallbacks if f.strip().upper() != first.strip().upper())
 
     def _fallback(self, labels, caught, X, mask, ids, pos, timeline, obs, seen):
         """After the first start's map was judged no view cone: the passes from each of

@@ -286,11 +286,11 @@ def test_a_start_that_is_no_view_cone_is_retried_from_the_fallback_start(monkeyp
 def test_when_no_fallback_start_looks_like_a_cone_the_first_verdict_stands(monkeypatch):
     P, X, fit = _fallback_case()
     _failing_first_start(monkeypatch, ("DROPOUT-BLEND", "COVIS-SPARSE"))
-    va = ViewAdjustment(fov_deg=90)
+    va = ViewAdjustment(fov_deg=90, fallback_starts=("dropout-blend", "COVIS-SPARSE"))
     with pytest.warns(ViewAdjustmentWarning, match="no fallback start map looked like a view "
                                                    "cone either: COVIS-SPARSE"):
         Q = va.fit_transform(X, **fit)
-    assert va.starts_tried_ == ["DROPOUT-BLEND", "COVIS-SPARSE"]
+    assert va.starts_tried_ == ["DROPOUT-BLEND", "COVIS-SPARSE"]  # the first start not again
     assert va.start_method_ == "DROPOUT-BLEND" and va.cone_rejected_ and not va.refined_
     assert np.array_equal(Q, va.start_)
 
