@@ -8,7 +8,9 @@ Two parts (``--parts``):
   (``bench_view_other_sim.py``: its own layouts, walk and no occlusion, seeds from 0), and the
   same histories read as a log of sightings (the mask set to the sightings, as a table of
   detections gives it: what was in view but not seen is not said). Goal: mean non-anchor MPE
-  <= 0.05 m on both simulators.
+  <= 0.05 m on both simulators. Each line also counts the maps VIEW-BA adjusted from a fallback
+  start map (its first start's map did not look like a view cone) and the objects left unmapped
+  (the MPE is over the placed ones).
 - ``mrclam``: each MRCLAM run's range and visibility maps with no setting given, the way a user
   would get them: ``lfmdr mrclam RUN`` (the defaults for logged runs, ``logged=True``) and ``lfmdr
   map`` of the run's observation table as ``lfmdr convert mrclam`` writes it (the library
@@ -46,15 +48,23 @@ VIEW_GOAL = 0.05
 MRCLAM_GOALS = {"range": 0.30, "visibility": 0.70}
 
 
-def _mpe(X, mask, ids, apos, truth, passes: int = 1) -> tuple[float, str]:
-    """(non-anchor MPE [m], the label build_map chose) of the default map; ``passes`` > 1:
-    VIEW-BA with that many passes instead."""
+FALLBACK_NOTE = "the map is adjusted from it"
+"""Part of VIEW-BA's note when it started again from a fallback start map."""
+
+
+def _mpe(X, mask, ids, apos, truth, passes: int = 1) -> tuple[float, str, int, bool]:
+    """(non-anchor MPE [m] over the placed objects, the label build_map chose, the unmapped
+    non-anchor objects, whether VIEW-BA started again from a fallback start map) of the default
+    map; ``passes`` > 1: VIEW-BA with that many passes instead."""
     method, params = (None, {}) if passes == 1 else ("VIEW-BA", {"passes": passes})
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         m = mappers.build_map(X, ids, apos, method, sensor="visibility", mask=mask, **params)
     keep = np.setdiff1d(np.arange(len(truth)), ids)
-    return mappers.mean_position_error(m.positions[keep], truth[keep]), m.method
+    placed = keep[np.all(np.isfinite(m.positions[keep]), axis=1)]
+    fallback = any(FALLBACK_NOTE in w for w in m.warnings)
+    return (mappers.mean_position_error(m.positions[placed], truth[placed]), m.method,
+            len(keep) - len(placed), fallback)
 
 
 def _world(seed: int):
@@ -69,25 +79,36 @@ def _other(seed: int):
     return X, mask, ANCHORS, P[ANCHORS], P
 
 
-def view_part(runs: int, passes: int = 1) -> None:
+SIMULATORS = {"world": ("project's world", _world, 1000), "other": ("other simulator", _other, 0)}
+"""``--simulators``: (name, history maker, first seed) of each simulator of the view part."""
+
+
+def view_part(runs: int, passes: int = 1, simulators=tuple(SIMULATORS),
+              sightings: bool = True) -> None:
     print(f"## VIEW-BA's 90-degree view: default map, {runs} fresh layouts per simulator; "
           f"MPE [m] mean (largest run), goal <= {VIEW_GOAL}")
-    for name, make, seed0 in (("project's world", _world, 1000), ("other simulator", _other, 0)):
-        rows: dict[str, list[float]] = {"view mask": [], "log of sightings": []}
+    for name, make, seed0 in (SIMULATORS[k] for k in simulators):
+        rows: dict[str, list[float]] = {"view mask": [], **({"log of sightings": []} if sightings
+                                                            else {})}
         labels: dict[str, set[str]] = {k: set() for k in rows}
+        unmapped, fallbacks = dict.fromkeys(rows, 0), dict.fromkeys(rows, 0)
         for seed in range(seed0, seed0 + runs):
             X, mask, ids, apos, P = make(seed)
-            for kind, m in (("view mask", mask), ("log of sightings", mask & (X > 0.5))):
-                e, label = _mpe(X, m, ids, apos, P, passes if kind == "view mask" else 1)
+            for kind, m in (("view mask", mask), ("log of sightings", mask & (X > 0.5)))[:len(rows)]:
+                e, label, lost, fell_back = _mpe(X, m, ids, apos, P,
+                                                 passes if kind == "view mask" else 1)
                 rows[kind].append(e)
                 labels[kind].add(label)
+                unmapped[kind] += lost
+                fallbacks[kind] += fell_back
             print(f"  {name} seed {seed}: " + "  ".join(f"{k} {v[-1]:.4f}" for k, v in rows.items()),
                   flush=True)
         for kind, v in rows.items():
             a = np.array(v)
             verdict = ("met" if a.mean() <= VIEW_GOAL else "NOT met") if kind == "view mask" else ""
             print(f"{name:16s} {kind:17s} {a.mean():.4f} ({a.max():.4f})  "
-                  f"[{', '.join(sorted(labels[kind]))}] {verdict}")
+                  f"[{', '.join(sorted(labels[kind]))}; {fallbacks[kind]} from a fallback start, "
+                  f"{unmapped[kind]} objects unmapped] {verdict}")
 
 
 def mrclam_part(data: Path) -> None:
@@ -146,10 +167,14 @@ def main(argv=None) -> None:
     ap.add_argument("--view-passes", type=int, default=1,
                     help="with > 1: the view masks mapped by VIEW-BA(passes=N) instead of the "
                          "default (docs/dead-ends.md, 'Defaults that carry')")
+    ap.add_argument("--simulators", nargs="+", default=list(SIMULATORS), choices=list(SIMULATORS),
+                    help="the view part's simulators (default both)")
+    ap.add_argument("--no-sightings", action="store_true",
+                    help="the view masks only (not the same histories read as logs of sightings)")
     args = ap.parse_args(argv)
     with threadpool_limits(limits=1):
         if "view" in args.parts:
-            view_part(args.runs, args.view_passes)
+            view_part(args.runs, args.view_passes, args.simulators, not args.no_sightings)
         if "mrclam" in args.parts:
             mrclam_part(args.data)
 

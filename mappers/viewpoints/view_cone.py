@@ -35,7 +35,10 @@ is not below the start's (viewpoints fitted to the start map) or anything is not
 start map is returned, with a :class:`ViewAdjustmentWarning`. So is it when the view is wider
 than :data:`MAX_FOV_DEG` (the sets say little about a heading), and when the mask does not look
 like a view cone: its loss per pair from the best viewpoints of the start map above
-``max_start_loss`` (a 360-degree view with a range limit, say).
+``max_start_loss`` (a 360-degree view with a range limit, say). A poor start map gives that
+verdict too (its objects misplaced, no viewpoint explains the sets), so before it is accepted
+the adjustment starts again from each of ``fallback_starts`` in turn and keeps the first that
+does look like a view cone (a drawn start only: a given ``start_positions`` has none).
 
 *Assumes*: the mask is a view cone centred on the heading (every object inside it observed at
 any distance, none outside: a range limit is not modelled); visibility is a range threshold up
@@ -67,7 +70,7 @@ from mappers.viewpoints import view_cone_kernels as view_kernels
 from mappers.viewpoints.engine import Damping, damped_step, joint_step
 from mappers.viewpoints.start_map import anchored_start, fit_start, free_objects, keep_if_better
 
-__all__ = ["MAX_FOV_DEG", "MAX_FREE_OBJECTS", "VIEWPOINT_SEARCH_CONSTRAINTS", "ConeProblem",
+__all__ = ["FALLBACK_STARTS", "MAX_FOV_DEG", "MAX_FREE_OBJECTS", "VIEWPOINT_SEARCH_CONSTRAINTS", "ConeProblem",
            "ViewAdjustment", "ViewAdjustmentWarning", "estimate_fov", "search_cells", "search_poses",
            "view_cone_score"]
 
@@ -95,8 +98,16 @@ steps of each viewpoint alone), shared by VIEW-BA and FRUSTUM-BA
 (:class:`mappers.spatial.FrustumAdjustment`)."""
 
 _PASS_ATTRS = ("embedding_", "refined_", "fov_deg_", "radius_", "poses_", "loss_",
-               "start_loss_")
+               "start_loss_", "cone_rejected_")
 """What one pass of :meth:`ViewAdjustment.fit` sets."""
+
+_FIT_ATTRS = (*_PASS_ATTRS, "start_", "start_method_")
+"""What the passes from one start map set (compared between a start and its fallbacks)."""
+
+FALLBACK_STARTS = ("COVIS-SPARSE",)
+"""VIEW-BA's default ``fallback_starts``: the start maps tried, in turn, when the first start's
+map does not look like a view cone (chosen on a second simulator, confirmed on the project's
+world: ``docs/dead-ends.md``, "Defaults that carry")."""
 
 _MAX_SCORE_ENTRIES = 5e8
 """Largest steps x candidate viewpoints the grid search holds (float64: 4 GB)."""
@@ -292,18 +303,27 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         max_start_loss: the loss per pair of the start map (viewpoints fitted) above which the
             mask is not read as a view cone and the start map is kept (between a cone's mask
             and a range limit's: ``docs/imperfect-sensing.md``, section "VIEW-BA", Guards).
+        fallback_starts: labels of the methods whose start maps are tried, in turn, when the
+            first start's map does not look like a view cone (its loss per pair from the best
+            viewpoints above ``max_start_loss``): the first whose map does is adjusted and kept,
+            with a warning naming it; when none does, the first start's verdict stands. Only
+            for a drawn start (not ``start_positions``); None or ``()``: none tried. Each is
+            drawn only when needed (on the project's world never: ``docs/dead-ends.md``,
+            "Defaults that carry").
         passes: adjustments in a row, each from the map of the one before with the view's
             width (unless given), the radius and the viewpoints found afresh on it; a pass that
             does not lower its start's loss ends them and the map before it stands. A second
-            pass corrects a width misread on a poor start map (measured on two simulators, not
-            yet the default: ``docs/dead-ends.md``, "Defaults that carry").
+            pass corrects a width misread on a poor start map (three passes measured on two
+            simulators, not yet the default: ``docs/dead-ends.md``, "Defaults that carry").
         random_state: handed to the start methods.
 
     Attributes:
         embedding_ (M, 2) in world coordinates; start_ the start map; start_method_ its label;
         fov_deg_ the view's width used; radius_ the fitted visibility radius; poses_ (N, 3) the
         viewpoints (NaN rows: steps left out); loss_, start_loss_ (per pair, of the last pass
-        kept); refined_ (False: the start map was kept).
+        kept); refined_ (False: the start map was kept); cone_rejected_ (True: the observed sets
+        did not look like a view cone from the kept start); starts_tried_ the labels of the
+        start maps adjusted, in order (the first, then any fallbacks).
     """
 
     _parameter_constraints: dict = {
@@ -315,6 +335,7 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         "miss_rate": [Interval(Real, 0, 1, closed="left")],
         **VIEWPOINT_SEARCH_CONSTRAINTS,
         "max_start_loss": [Interval(Real, 0, None, closed="neither")],
+        "fallback_starts": [tuple, list, None],
         "passes": [Interval(Integral, 1, None, closed="left")],
         "random_state": ["random_state"],
     }
@@ -322,14 +343,12 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
     def __init__(self, *, start: str | None = None, fov_deg: float | None = None,
                  rounds: int = 6, softness: float = 0.05, range_softness: float = 0.02,
                  miss_rate: float = 0.1, grid: int = 10, headings: int = 24,
-                 pose_iters: int = 3, max_start_loss: float = 0.35, passes: int = 1,
+                 pose_iters: int = 3, max_start_loss: float = 0.35,
+                 fallback_starts: tuple[str, ...] | None = FALLBACK_STARTS, passes: int = 1,
                  random_state=0) -> None:
         store_params(self, locals())
 
-    def _start_map(self, X, mask, ids, pos, timeline) -> np.ndarray:
-        label = localisation_free("visibility", True)[0] if self.start is None else self.start
-        if label.strip().upper() == "VIEW-BA":
-            raise ValueError("start must name another method than 'VIEW-BA'")
+    def _start_map(self, label, X, mask, ids, pos, timeline) -> np.ndarray:
         spec = METHODS.get(label) or {k.lower(): v for k, v in METHODS.items()}.get(
             label.strip().lower())
         if spec is not None and "masked" not in spec.histories:
@@ -356,12 +375,73 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
         if mask.shape != X.shape:
             raise ValueError(f"mask must have the history's shape {X.shape}, got {mask.shape}")
         self.start_method_ = None if start_positions is None else "given"
+        first = localisation_free("visibility", True)[0] if self.start is None else self.start
+        fallbacks = self._check_starts(first)
         ids, pos, P0 = anchored_start(
             "VIEW-BA", anchor_ids, anchor_positions, X.shape[0], start_positions,
-            lambda ids, pos: self._start_map(X, mask, ids, pos, timeline),
+            lambda ids, pos: self._start_map(first, X, mask, ids, pos, timeline),
         )
-        self.start_ = P0.copy()
         obs, seen = mask.T, (X.T > 0.5) & mask.T
+        self.starts_tried_ = [self.start_method_]
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            self._passes(P0, ids, obs, seen)
+        if start_positions is None and self.cone_rejected_ and fallbacks:
+            caught = self._fallback(fallbacks, caught, X, mask, ids, pos, timeline, obs, seen)
+        for w in caught:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        return self
+
+    def _check_starts(self, first: str) -> tuple[str, ...]:
+        """The fallback labels, checked (neither they nor the first start may be VIEW-BA), the
+        first start's own label left out."""
+        fallbacks = () if self.fallback_starts is None else tuple(self.fallback_starts)
+        for name, label in (("start", first), *(("fallback_starts", f) for f in fallbacks)):
+            if not isinstance(label, str):
+                raise ValueError(f"{name} must hold method labels, got {label!r}")
+            if label.strip().upper() == "VIEW-BA":
+                raise ValueError(f"{name} must name another method than 'VIEW-BA'")
+        return tuple(f for f in fallbacks if f.strip().upper() != first.strip().upper())
+
+    def _fallback(self, labels, caught, X, mask, ids, pos, timeline, obs, seen):
+        """After the first start's map was judged no view cone: the passes from each of
+        ``labels``' start maps in turn until one is judged a cone; returns the warnings to
+        issue (the first start's, and a note, when none is)."""
+        first = {k: getattr(self, k) for k in _FIT_ATTRS}
+        tried = []
+        for label in labels:
+            with warnings.catch_warnings(record=True) as again:
+                warnings.simplefilter("always")
+                try:
+                    P0 = self._start_map(label, X, mask, ids, pos, timeline)
+                except ValueError as exc:  # this start cannot map the history: the next one
+                    tried.append(f"{label} failed ({exc})")
+                    continue
+                P0 = np.array(P0, dtype=float)
+                P0[ids] = pos  # the anchors at their known positions, as anchored_start does
+                self.starts_tried_.append(self.start_method_)
+                self._passes(P0, ids, obs, seen)
+                if not self.cone_rejected_:
+                    warnings.warn(
+                        f"from {first['start_method_']}'s start map the observed sets did not "
+                        f"look like a view cone (loss {first['start_loss_']:.3g} per pair, "
+                        f"above max_start_loss = {self.max_start_loss:g}); from "
+                        f"{self.start_method_}'s they do ({self.start_loss_:.3g}): the map is "
+                        "adjusted from it", ViewAdjustmentWarning, stacklevel=2)
+                    return list(again)
+            tried.append(f"{self.start_method_} {self.start_loss_:.3g} per pair")
+        for k, v in first.items():
+            setattr(self, k, v)
+        with warnings.catch_warnings(record=True) as note:
+            warnings.simplefilter("always")
+            warnings.warn(f"no fallback start map looked like a view cone either: "
+                          f"{'; '.join(tried)}", ViewAdjustmentWarning, stacklevel=2)
+        return [*caught, *note]
+
+    def _passes(self, P0, ids, obs, seen) -> None:
+        """The adjustments from the start map ``P0`` (``passes`` in a row); sets ``start_`` and
+        the fitted attributes of the last pass kept."""
+        self.start_ = P0.copy()
         self._adjust(P0, ids, obs, seen)
         for _ in range(self.passes - 1):  # the view's width and viewpoints afresh on the map
             if not self.refined_:
@@ -376,7 +456,6 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
                 break
             for w in caught:
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        return self
 
     def _adjust(self, P0, ids, obs, seen) -> None:
         """One pass from the map ``P0``: the view's width (unless given), the viewpoints and the
@@ -392,6 +471,7 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
             self.fov_deg_ = 2.0 * float(_FOV_HALVES[int(np.argmax(widths))])
         self.radius_ = float("nan")
         self.poses_ = np.full((obs.shape[0], 3), np.nan)
+        self.cone_rejected_ = False
         free_objects(placed, ids, "VIEW-BA", 2, MAX_FREE_OBJECTS,
                      "DROPOUT-BLEND (build_map's default above 500 objects)")
         if self.fov_deg_ > MAX_FOV_DEG:
@@ -410,7 +490,7 @@ class ViewAdjustment(TransformerMixin, BaseEstimator):
                           f"viewpoints the cone's loss is {self.start_loss_:.3g} per pair "
                           f"(above max_start_loss = {self.max_start_loss:g}); the start map is "
                           "kept", ViewAdjustmentWarning, stacklevel=3)
-            self.embedding_, self.refined_ = P0.copy(), False
+            self.embedding_, self.refined_, self.cone_rejected_ = P0.copy(), False, True
             return
         self.refined_, self.embedding_ = keep_if_better(
             P, P0.copy(), placed, self.loss_ if np.isfinite(loss) else np.inf,

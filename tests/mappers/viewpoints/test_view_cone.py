@@ -240,3 +240,80 @@ def test_many_objects_go_to_dropout_blend_and_view_ba_refuses_too_many(monkeypat
     with pytest.raises(ValueError, match="26 is above 10: map this history with DROPOUT-BLEND"):
         ViewAdjustment(fov_deg=90).fit(X, mask=mask, anchor_ids=ANCHORS,
                                        anchor_positions=P[ANCHORS], start_positions=P)
+
+
+
+def _failing_first_start(monkeypatch, bad_labels=("DROPOUT-BLEND",)):
+    """Make the start maps of ``bad_labels`` objects scattered at random (a start that has
+    failed as a whole, drawn without running the method); the other labels draw their real
+    maps."""
+    from mappers.viewpoints import view_cone as view_adjustment
+
+    real = view_adjustment.fit_start
+
+    def fit_start(label, X, ids, pos, **kw):
+        if label in bad_labels:
+            return np.random.default_rng(1).uniform(-1.2, 1.2, (X.shape[0], 2)), label
+        return real(label, X, ids, pos, **kw)
+
+    monkeypatch.setattr(view_adjustment, "fit_start", fit_start)
+
+
+def _fallback_case():
+    P, _, X, mask = _camera(90, n_steps=800, seed=3, radius=1.0)
+    return P, X, {"mask": mask, "anchor_ids": ANCHORS, "anchor_positions": P[ANCHORS]}
+
+
+def test_a_start_that_is_no_view_cone_is_retried_from_the_fallback_start(monkeypatch):
+    """The first start's map explains no cone (scattered objects); COVIS-SPARSE's does: the
+    map is adjusted from it, with a warning naming both, and it is better than the start kept."""
+    P, X, fit = _fallback_case()
+    _failing_first_start(monkeypatch)
+    alone = ViewAdjustment(fov_deg=90, fallback_starts=None)
+    with pytest.warns(ViewAdjustmentWarning, match="do not look like a view cone"):
+        alone.fit(X, **fit)
+    assert alone.cone_rejected_ and not alone.refined_ and alone.starts_tried_ == ["DROPOUT-BLEND"]
+    va = ViewAdjustment(fov_deg=90)
+    assert va.fallback_starts == ("COVIS-SPARSE",)
+    with pytest.warns(ViewAdjustmentWarning, match="from COVIS-SPARSE's they do"):
+        va.fit(X, **fit)
+    assert va.starts_tried_ == ["DROPOUT-BLEND", "COVIS-SPARSE"]
+    assert va.start_method_ == "COVIS-SPARSE" and va.refined_ and not va.cone_rejected_
+    assert va.start_loss_ <= va.max_start_loss < alone.start_loss_
+    assert _mpe(va.embedding_, P) < 0.3 * _mpe(alone.embedding_, P)  # 0.13 against 0.86 m
+
+
+def test_when_no_fallback_start_looks_like_a_cone_the_first_verdict_stands(monkeypatch):
+    P, X, fit = _fallback_case()
+    _failing_first_start(monkeypatch, ("DROPOUT-BLEND", "COVIS-SPARSE"))
+    va = ViewAdjustment(fov_deg=90, fallback_starts=("dropout-blend", "COVIS-SPARSE"))
+    with pytest.warns(ViewAdjustmentWarning, match="no fallback start map looked like a view "
+                                                   "cone either: COVIS-SPARSE"):
+        Q = va.fit_transform(X, **fit)
+    assert va.starts_tried_ == ["DROPOUT-BLEND", "COVIS-SPARSE"]  # the first start not again
+    assert va.start_method_ == "DROPOUT-BLEND" and va.cone_rejected_ and not va.refined_
+    assert np.array_equal(Q, va.start_)
+
+
+def test_a_given_start_and_a_start_that_is_a_cone_draw_no_fallback(monkeypatch):
+    """Fallbacks are for drawn starts judged no cone: a good drawn start adjusts as without
+    fallbacks (bit for bit), and a given start map's verdict stands."""
+    P, X, fit = _fallback_case()
+    with_fb = ViewAdjustment(fov_deg=90, start="COVIS-SPARSE",
+                             fallback_starts=("DROPOUT-BLEND",)).fit(X, **fit)
+    without = ViewAdjustment(fov_deg=90, start="COVIS-SPARSE", fallback_starts=()).fit(X, **fit)
+    assert with_fb.starts_tried_ == ["COVIS-SPARSE"] and with_fb.refined_
+    assert np.array_equal(with_fb.embedding_, without.embedding_)
+    scattered = np.random.default_rng(1).uniform(-1.2, 1.2, P.shape)
+    va = ViewAdjustment(fov_deg=90)
+    with pytest.warns(ViewAdjustmentWarning, match="do not look like a view cone"):
+        va.fit(X, **fit, start_positions=scattered)
+    assert va.starts_tried_ == ["given"] and va.cone_rejected_
+
+
+@pytest.mark.parametrize("bad", [("VIEW-BA",), (3,), "COVIS-SPARSE"])
+def test_bad_fallback_starts_are_refused(bad):
+    P, _, X, mask = _camera(90, n_steps=100)
+    with pytest.raises(ValueError, match="fallback_starts"):
+        ViewAdjustment(fallback_starts=bad).fit(X, mask=mask, anchor_ids=ANCHORS,
+                                                anchor_positions=P[ANCHORS])
