@@ -183,6 +183,29 @@ class FrustumProblem:
             C = state
         return C, loss
 
+    def object_steps(self, P, C, iters: int):
+        """``(P, loss)`` after up to ``iters`` damped Newton steps of the free objects alone,
+        the viewpoints ``C`` held (each object's 3 x 3 block: the objects do not couple)."""
+        loss, lam = self.cost(P, C), 1e-2
+        free = self.free_index >= 0
+        diag = np.arange(3)
+        for _ in range(iters):
+            _, _, V, _, _, h = self.blocks(P, C)
+
+            def trial(lam, V=V, h=h, P=P):
+                A = V.copy()
+                A[:, diag, diag] *= 1.0 + lam
+                A[:, diag, diag] += 1e-9
+                P2 = P.copy()
+                P2[free] -= np.linalg.solve(A, h[..., None])[..., 0]
+                return P2, self.cost(P2, C)
+
+            state, loss, lam, moved = damped_step(trial, loss, lam, DAMPING)
+            if not moved:
+                break
+            P = state
+        return P, loss
+
     def joint(self, P, C, rounds: int):
         """``(P, C, loss)`` after up to ``rounds`` joint Levenberg-Marquardt rounds."""
         loss, lam = self.cost(P, C), 1e-2
