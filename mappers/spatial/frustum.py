@@ -9,7 +9,8 @@ inside the frustum of that step's viewpoint, the others (unless hidden or missed
 This method estimates each step's planar viewpoint ``(x, y, heading)`` as a latent variable
 and the objects' 3-D positions with them, a frustum bundle adjustment. No motion model, no
 odometry: the steps are independent viewpoints, found from the sightings alone; the poses are
-estimated, never read.
+estimated, never read. (FRUSTUM-BA-WALK, :mod:`mappers.spatial.frustum_walk`, adds a motion
+prior: the steps of a walk, consecutive viewpoints close together.)
 
 The model per (step, object) pair (:mod:`mappers.spatial.frustum_kernels`): five soft margins
 (the image's four sides and the range limit), ``q`` the product of their sigmoids; a sighting
