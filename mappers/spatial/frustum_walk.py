@@ -114,7 +114,8 @@ def walk_viewpoints(P, seen, camera: FrustumCamera, *, softness: float, range_so
             beta = move(E[t + 1] * beta)
             beta /= max(float(beta.max()), 1e-300)
         post = alpha[t] * beta
-        post /= post.sum()
+        total = float(post.sum())
+        post = post / total if total > 0 else alpha[t]  # float32 underflow: the filtered one
         out[t, 0] = float(post.sum(axis=(1, 2)) @ xs)
         out[t, 1] = float(post.sum(axis=(0, 2)) @ ys)
         ph = post.sum(axis=(0, 1))
