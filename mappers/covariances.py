@@ -39,6 +39,7 @@ from mappers.core.uncertainty import (
     moving_blocks,
     sample_covariances,
     sample_size_factor,
+    systematic_floor,
     transform_covariances,
 )
 from mappers.fitting import Map
@@ -137,16 +138,20 @@ def with_covariances(result: Map, uncertainty, *, est: Any, mapped: np.ndarray, 
         return result
     if mode in (True, "anchors"):  # ("anchors": build_map scales these afterwards)
         mode = "model" if has_model_covariances(est) else "bootstrap"
+    floor = mode == "floor"  # the model's, with the systematic floor (calibrated on it alone)
     notes: list[str] = []
-    if mode == "model":
+    if mode in ("model", "floor"):
         if not has_model_covariances(est):
             raise ValueError(
-                f"uncertainty='model' needs a method that ends with a bundle adjustment "
+                f"uncertainty={mode!r} needs a method that ends with a bundle adjustment "
                 f"(BEARING-BA, LOC-SMA refined, SPATIAL-BA), not {result.method!r}: use 'bootstrap' or True")
         cov = _model(result, est, mapped, _rows(X, mapped), _rows(mask, mapped), timeline)
     else:
         cov = _bootstrap(result, n_steps, refit, random_state, notes)
-    return dataclasses.replace(result, covariances=_finish(result, cov),
+    cov = _finish(result, cov)
+    if floor:
+        cov = systematic_floor(cov, result.positions, result.anchor_ids)
+    return dataclasses.replace(result, covariances=cov,
                                warnings=(*result.warnings, *notes))
 
 
