@@ -125,7 +125,7 @@ def run_one(seed: int, sensor: str, steps: int, bearing_noise_deg: float,
     method, params = None, {}
     if sensor == "visibility" and visibility_method:
         method = row["method"] = visibility_method
-        if visibility_method.upper() == "FRUSTUM-BA":
+        if visibility_method.upper() in ("FRUSTUM-BA", "FRUSTUM-BA-WALK"):
             params = camera_calibration(extra)
     cpu = time.process_time()
     try:

@@ -3,7 +3,8 @@
 Rays (and ranges) -> SPATIAL-BA, the 6-DoF viewpoint bundle adjustment started from frames
 registered to one another by their common objects; sightings -> COVIS-3D, co-observation
 embedded in three dimensions, or FRUSTUM-BA, the frustum adjustment of a planar robot's
-calibrated camera; ranges alone -> RANGE-3D, the range-only adjustment of the objects and the
+calibrated camera (FRUSTUM-BA-WALK: with the walk prior on the viewpoints of an ordered
+walk); ranges alone -> RANGE-3D, the range-only adjustment of the objects and the
 viewpoints' positions. No odometry, no motion model.
 """
 
@@ -12,6 +13,7 @@ from __future__ import annotations
 from mappers.spatial.adjustment import AdjustmentResult, adjust_viewpoints
 from mappers.spatial.covisibility_3d import CoVisibility3D
 from mappers.spatial.frustum import FrustumAdjustment
+from mappers.spatial.frustum_walk import FrustumWalkAdjustment
 from mappers.spatial.pipeline_3d import METHODS_3D, anchor_dimension, build_map_3d
 from mappers.spatial.range_3d import Range3D
 from mappers.spatial.rays import RAY_COLUMNS, RayObservations, ray_observations
@@ -24,7 +26,7 @@ from mappers.spatial.registration import (
 from mappers.spatial.spatial_ba import SpatialAdjustment
 
 __all__ = [
-    "AdjustmentResult", "adjust_viewpoints", "CoVisibility3D", "FrustumAdjustment",
+    "AdjustmentResult", "adjust_viewpoints", "CoVisibility3D", "FrustumAdjustment", "FrustumWalkAdjustment",
     "METHODS_3D", "anchor_dimension", "build_map_3d", "Range3D",
     "RAY_COLUMNS", "RayObservations", "ray_observations",
     "orthogonal_iteration", "register_points", "register_rays", "triangulate",

@@ -9,7 +9,8 @@ inside the frustum of that step's viewpoint, the others (unless hidden or missed
 This method estimates each step's planar viewpoint ``(x, y, heading)`` as a latent variable
 and the objects' 3-D positions with them, a frustum bundle adjustment. No motion model, no
 odometry: the steps are independent viewpoints, found from the sightings alone; the poses are
-estimated, never read.
+estimated, never read. (FRUSTUM-BA-WALK, :mod:`mappers.spatial.frustum_walk`, adds a motion
+prior: the steps of a walk, consecutive viewpoints close together.)
 
 The model per (step, object) pair (:mod:`mappers.spatial.frustum_kernels`): five soft margins
 (the image's four sides and the range limit), ``q`` the product of their sigmoids; a sighting
@@ -182,6 +183,29 @@ class FrustumProblem:
                 break
             C = state
         return C, loss
+
+    def object_steps(self, P, C, iters: int):
+        """``(P, loss)`` after up to ``iters`` damped Newton steps of the free objects alone,
+        the viewpoints ``C`` held (each object's 3 x 3 block: the objects do not couple)."""
+        loss, lam = self.cost(P, C), 1e-2
+        free = self.free_index >= 0
+        diag = np.arange(3)
+        for _ in range(iters):
+            _, _, V, _, _, h = self.blocks(P, C)
+
+            def trial(lam, V=V, h=h, P=P):
+                A = V.copy()
+                A[:, diag, diag] *= 1.0 + lam
+                A[:, diag, diag] += 1e-9
+                P2 = P.copy()
+                P2[free] -= np.linalg.solve(A, h[..., None])[..., 0]
+                return P2, self.cost(P2, C)
+
+            state, loss, lam, moved = damped_step(trial, loss, lam, DAMPING)
+            if not moved:
+                break
+            P = state
+        return P, loss
 
     def joint(self, P, C, rounds: int):
         """``(P, C, loss)`` after up to ``rounds`` joint Levenberg-Marquardt rounds."""
