@@ -172,14 +172,14 @@ def _grow(obs, piece, noise, loss, max_angle):
     (:mod:`mappers.spatial.regrow`, as SPATIAL-BA grows its map from the anchors); until a round
     places nothing new."""
     none = np.zeros(0, dtype=np.int64)
-    piece = register_rays(obs, none, np.zeros((0, 3)), start=piece)
+    piece = register_rays(obs, none, np.zeros((0, 3)), start=piece, max_rms=max_angle)
     for _ in range(_GROW_ROUNDS):
         placed, posed = _size(piece), int(np.isfinite(piece[2][:, 0]).sum())
         P, R, C = (x.copy() for x in _adjust(obs, piece, noise, loss))
         off = step_ray_errors(obs, P, R, C) > max_angle
         R[off], C[off] = np.nan, np.nan
         P = intersect_by_consensus(obs, P, R, C, max_angle)
-        piece = register_rays(obs, none, np.zeros((0, 3)), start=(P, R, C))
+        piece = register_rays(obs, none, np.zeros((0, 3)), start=(P, R, C), max_rms=max_angle)
         if _size(piece) <= placed and np.isfinite(piece[2][:, 0]).sum() <= posed:
             break
     return _adjust(obs, piece, noise, loss)
