@@ -54,8 +54,8 @@ _MAX_TRIPLES = 300
 """RANSAC hypotheses (triples of shared objects) at most per merge; fewer shared objects: every
 triple."""
 
-_GROW_ROUNDS = 3
-"""Rounds of adjusting and growing a piece at most (:func:`_grow`)."""
+_GROW_ROUNDS = 20
+"""Rings of growing and adjusting a piece at most (:func:`_grow`)."""
 
 _MIN_OBJECTS = 4
 """Objects a piece must hold to be kept (three fix nothing beyond a seed)."""
@@ -164,25 +164,47 @@ def _join(big, small):
     return P, R, C, new_s
 
 
+def _object_ray_errors(obs, P, R, C) -> np.ndarray:
+    """(M,) the median angle [rad] between each placed object and the rays of the posed steps
+    that saw it (NaN: not placed or seen from no posed step)."""
+    use = np.all(np.isfinite(P[obs.obj]), axis=1) & np.isfinite(C[obs.step, 0])
+    out = np.full(len(P), np.nan)
+    if not use.any():
+        return out
+    v = np.einsum("kji,kj->ki", R[obs.step[use]], P[obs.obj[use]] - C[obs.step[use]])
+    cos = np.einsum("kj,kj->k", v, obs.ray[use]) / np.maximum(np.linalg.norm(v, axis=1), 1e-12)
+    angle = np.arccos(np.clip(cos, -1.0, 1.0))
+    obj = obs.obj[use]
+    for i in np.unique(obj):
+        out[i] = np.median(angle[obj == i])
+    return out
+
+
 def _grow(obs, piece, noise, loss, max_angle):
-    """The piece grown in its own frame: resection and intersection
-    (:func:`~mappers.spatial.registration.register_rays`), then up to ``_GROW_ROUNDS`` rounds of
-    adjusting it, unposing the steps whose rays miss it by a median angle above ``max_angle``,
-    intersecting the objects left out by consensus and resecting again
-    (:mod:`mappers.spatial.regrow`, as SPATIAL-BA grows its map from the anchors); until a round
-    places nothing new."""
+    """The piece grown in its own frame a ring at a time: one round of resection and
+    intersection (:func:`~mappers.spatial.registration.register_rays`, a step resected when its
+    rays fit to ``max_angle``), the piece adjusted, the steps and objects whose rays miss it by a
+    median angle above ``max_angle`` dropped, the objects left out intersected by consensus
+    (:mod:`mappers.spatial.regrow`); ``_GROW_ROUNDS`` rounds at most, until a round places
+    nothing new. Adjusting after every ring keeps a wrong resection from sending the next ring's
+    intersections far off (grown in one go and adjusted once, a piece of zigzag_s3 was a metre
+    off in shape)."""
     none = np.zeros(0, dtype=np.int64)
-    piece = register_rays(obs, none, np.zeros((0, 3)), start=piece, max_rms=max_angle)
+    best = (_size(piece), int(np.isfinite(piece[2][:, 0]).sum()))
     for _ in range(_GROW_ROUNDS):
-        placed, posed = _size(piece), int(np.isfinite(piece[2][:, 0]).sum())
+        piece = register_rays(obs, none, np.zeros((0, 3)), start=piece, max_rms=max_angle,
+                              rounds=1)
         P, R, C = (x.copy() for x in _adjust(obs, piece, noise, loss))
         off = step_ray_errors(obs, P, R, C) > max_angle
         R[off], C[off] = np.nan, np.nan
+        P[_object_ray_errors(obs, P, R, C) > max_angle] = np.nan
         P = intersect_by_consensus(obs, P, R, C, max_angle)
-        piece = register_rays(obs, none, np.zeros((0, 3)), start=(P, R, C), max_rms=max_angle)
-        if _size(piece) <= placed and np.isfinite(piece[2][:, 0]).sum() <= posed:
+        piece = (P, R, C)
+        now = (_size(piece), int(np.isfinite(C[:, 0]).sum()))
+        if now[0] <= best[0] and now[1] <= best[1]:
             break
-    return _adjust(obs, piece, noise, loss)
+        best = (max(best[0], now[0]), max(best[1], now[1]))
+    return piece
 
 
 def _try_merge(obs, big, small, merge_tol, max_angle, rng):
