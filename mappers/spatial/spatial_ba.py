@@ -66,9 +66,13 @@ class SpatialAdjustment(EmbeddingTransformer, BaseEstimator):
             intersection grown from the anchors (:func:`~mappers.spatial.registration.register_rays`);
             (default); ``"global"`` global structure from motion, the anchors only placing it
             (:func:`mappers.spatial.global_start.register_global`), then grown as from the
-            anchors (from the anchors alone where its structure holds fewer than three). Rays
-            with ranges always start from the registered frames. Measured in
-            ``docs/guide/3d.md``: neither start wins everywhere, so the default stays.
+            anchors (from the anchors alone where its structure holds fewer than three);
+            ``"incremental"`` incremental structure from motion with merging: many two-step
+            seeds grown in their own frames, merged by their shared objects, placed by the
+            anchors (:func:`mappers.spatial.incremental.register_incremental`), then grown as
+            from the anchors (from the anchors alone where no piece holds three). Rays with
+            ranges always start from the registered frames. Measured in ``docs/guide/3d.md``:
+            no start wins everywhere, so the default stays.
 
     Attributes (after fit): ``embedding_`` (M, 3) world positions, NaN for objects it could not
     place or placed inconsistently (``inconsistent_``, see ``max_ray_error``); ``rotations_`` (N, 3, 3) and ``positions_`` (N, 3) the steps' poses (NaN: step not
@@ -167,8 +171,9 @@ class SpatialAdjustment(EmbeddingTransformer, BaseEstimator):
     @staticmethod
     def _rays_start(obs, ids, pos, how, noise):
         """Rays alone: ``how`` = "global": the global structure from motion
-        (:func:`~mappers.spatial.global_start.register_global`) grown by resection and
-        intersection; "anchors" or where the global one places nothing: resection and
+        (:func:`~mappers.spatial.global_start.register_global`), "incremental": the merged
+        pieces (:func:`~mappers.spatial.incremental.register_incremental`), grown by resection
+        and intersection; "anchors" or where the global one places nothing: resection and
         intersection from the anchors; where that leaves steps
         unplaced, the sightings' 3-D map (COVIS-3D) stands in for the objects' positions to
         resect them roughly (their rays to it within 30 degrees), and the objects are intersected
