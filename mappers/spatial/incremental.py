@@ -5,7 +5,7 @@ by two steps and grown in its own frame, joined by their shared objects, placed 
    from the rays alone (:mod:`mappers.spatial.relative_rotations`: the eight-point essential
    matrix) fitting to a few times the noise and their objects seen at a parallax of at least
    ``min_parallax`` (else the depths are not fixed); best first (most objects agreeing).
-2. A piece per seed whose steps no piece holds yet: the two steps' and their objects' positions
+2. A piece per seed neither of whose steps a piece holds yet: the two steps' and their objects' positions
    from the known rotations (:mod:`mappers.spatial.known_rotations`), then grown by resection and
    intersection in its own frame (:func:`mappers.spatial.registration.register_rays`: a step
    that sees three or more of the piece's objects is resected, an object seen from two of its
@@ -270,7 +270,7 @@ def register_incremental(obs: RayObservations, anchor_ids: np.ndarray,
     order = np.flatnonzero(good)[np.lexsort((-pr.parallax[good], -pr.inliers[good]))]
     pieces, held = [], np.zeros(n, dtype=bool)
     for p in order:
-        if held[a[p]] and held[b[p]]:
+        if held[a[p]] or held[b[p]]:
             continue
         piece = _seed(obs, a[p], b[p], pr.rotation[p], noise)
         if piece is None:
