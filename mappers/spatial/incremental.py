@@ -47,8 +47,8 @@ from mappers.spatial.relative_rotations import relative_rotations, view_pairs
 __all__ = ["register_incremental"]
 
 _PIECE_PRIOR = 1.0
-"""Deviation (in the piece's own units, about a depth) of the prior that holds a piece's points
-while it is adjusted in its own frame: loose, it only fixes the gauge."""
+"""Deviation (in the piece's typical depths, :func:`_depth`) of the prior that holds a piece's
+points while it is adjusted in its own frame: loose, it only fixes the gauge."""
 
 _MAX_TRIPLES = 300
 """RANSAC hypotheses (triples of shared objects) at most per merge; fewer shared objects: every
@@ -84,7 +84,11 @@ def _spans(points: np.ndarray, size: float) -> bool:
 def _robust_similarity(src, dst, tol, rng):
     """``(R, s, t, inliers)`` taking ``src`` (k, 3) onto ``dst`` (k, 3) robustly: of the triples
     not on a line (all, or ``_MAX_TRIPLES`` random ones), the similarity that the most pairs
-    fit within ``tol``, refitted on those (Umeyama 1991); None when fewer than three fit."""
+    fit within ``tol``, refitted on those (Umeyama 1991); None when fewer than three fit.
+
+    By hand: scikit-learn's ``RANSACRegressor`` fits linear models, not similarities, and
+    scikit-image (whose ``ransac`` takes a ``SimilarityTransform``) is not a dependency; with
+    twelve or fewer shared objects every triple is tried, so the fit is deterministic."""
     k = len(src)
     size = float(np.sqrt(np.mean(np.sum((dst - dst.mean(axis=0)) ** 2, axis=1)))) or 1.0
     if k <= 12:
@@ -185,8 +189,8 @@ def _grow(obs, piece, noise, loss, max_angle):
     intersection (:func:`~mappers.spatial.registration.register_rays`, a step resected when its
     rays fit to ``max_angle``), the piece adjusted, the steps and objects whose rays miss it by a
     median angle above ``max_angle`` dropped, the objects left out intersected by consensus
-    (:mod:`mappers.spatial.regrow`); ``_GROW_ROUNDS`` rounds at most, until a round places
-    nothing new. Adjusting after every ring keeps a wrong resection from sending the next ring's
+    (:mod:`mappers.spatial.regrow`); ``_GROW_ROUNDS`` rounds at most, until a round places no
+    new object and poses under 1 % more steps. Adjusting after every ring keeps a wrong resection from sending the next ring's
     intersections far off (grown in one go and adjusted once, a piece of zigzag_s3 was a metre
     off in shape)."""
     none = np.zeros(0, dtype=np.int64)
@@ -201,7 +205,8 @@ def _grow(obs, piece, noise, loss, max_angle):
         P = intersect_by_consensus(obs, P, R, C, max_angle)
         piece = (P, R, C)
         now = (_size(piece), int(np.isfinite(C[:, 0]).sum()))
-        if now[0] <= best[0] and now[1] <= best[1]:
+        # no new object and under 1 % more steps: later rings only re-pose a few steps
+        if now[0] <= best[0] and now[1] <= best[1] + 0.01 * best[1]:
             break
         best = (max(best[0], now[0]), max(best[1], now[1]))
     return piece
