@@ -1,7 +1,7 @@
 """Per-landmark uncertainty (``build_map(uncertainty=True)``): is it calibrated, sharp and cheap?
 
     python benchmarks/bench_uncertainty.py [--layouts 25] [--steps 1000] [--seed0 12000]
-        [--sets visibility,bearing,range-bearing,bearing-view90,mrclam,starloc,...]
+        [--sets visibility,bearing,range-bearing,bearing-view90,mrclam,starloc,...] [--setups s3]
         [--uncertainty true|anchors] [--csv docs/results/uncertainty/uncertainty.csv]
 
 Simulated sets: each layout is one random walk of ``LFMDR-Bearing-v0`` (50 objects, 4 corner
@@ -9,7 +9,8 @@ anchors), seeds ``seed0, seed0 + 1, ...`` (fresh: never used to choose a setting
 true poses and layout (:mod:`bench_fusion_sim`'s sensors):
 
 * ``visibility``: the visibility bits of the walk's poses (the env's model, occlusion on),
-  mapped by the default (``CAL-SMA``; uncertainty by the bootstrap over steps);
+  mapped by the default (``CAL-SMA``; uncertainty by its linearised block jackknife,
+  ``--uncertainty bootstrap``: the bootstrap over steps);
 * ``bearing``: 360-degree bearings with 2 degrees of Gaussian noise (``BEARING-BA``; model);
 * ``range-bearing``: 360 degrees, 2 degrees and 2 cm of noise, fused (``LOC-SMA`` refined by its
   range-bearing adjustment; model);
@@ -18,12 +19,15 @@ true poses and layout (:mod:`bench_fusion_sim`'s sensors):
 * ``visibility-other-sim``: visibility from a second, independent world
   (:func:`bench_view_other_sim.other_sim`: uniform layout without spacing rule, no occlusion,
   its own walk, a 0.55 m visibility radius, 360-degree view), 50 objects, ``--steps`` steps —
-  the body of data the bootstrap's inflation
-  (:data:`mappers.covariances.BOOTSTRAP_INFLATION`) was chosen on; ``visibility`` confirms it.
+  the body of data the jackknife's and the bootstrap's inflations
+  (:data:`mappers.covariances.JACKKNIFE_INFLATION`, :data:`mappers.covariances.BOOTSTRAP_INFLATION`)
+  were chosen on; ``visibility`` confirms them.
 
 The line ``inflation for 0.95`` printed per set is the factor on the covariances that would put
-95 % of its landmarks inside their regions (how :data:`mappers.covariances.BOOTSTRAP_INFLATION`
-was chosen, on ``visibility-other-sim``).
+95 % of its landmarks inside their regions: with ``--no-inflation``, how
+:data:`mappers.covariances.JACKKNIFE_INFLATION` (the visibility default's, ``--uncertainty
+true``) and :data:`mappers.covariances.BOOTSTRAP_INFLATION` (``--uncertainty bootstrap``) were
+chosen, on ``visibility-other-sim`` (seeds 13000-13014).
 
 ``mrclam``: every MRCLAM run under ``--data`` mapped from range and bearing fused (the logged-run
 default, ``LOC-SMA``), scored against motion capture. ``mrclam-inflated`` asks what a calibrated
@@ -36,8 +40,15 @@ whether one factor carries from run to run).
 scaled by the held-out anchors, :mod:`mappers.core.held_out_anchors`). ``starloc`` and
 ``starloc-anchors``: every STAR-loc s3 sequence under ``--starloc`` mapped from stereo rays and
 ranges (SPATIAL-BA, :func:`lfmdr_gym.experiments.starloc.map_starloc`), its scored tags scored
-in 3-D (chi-squared(3)), with ``uncertainty=True`` and ``"anchors"``. ``--uncertainty anchors``
-asks the simulated sets for ``"anchors"`` instead of True.
+in 3-D (chi-squared(3)), with ``uncertainty=True`` and ``"anchors"``; ``--setups s1,s2`` maps
+the sequences of those setups instead of s3's. ``mrclam-floor`` and ``starloc-floor``: with
+``uncertainty="floor"`` (the model plus the systematic floor,
+:func:`mappers.core.uncertainty.systematic_floor`). For ``mrclam`` and ``starloc`` the line
+``floor for 0.95`` gives the smallest share of the anchors' extent (:data:`FLOOR_GRID`) whose
+floor puts 95 % of the set's landmarks inside their regions: how
+:data:`mappers.core.uncertainty.SYSTEMATIC_FLOOR` was chosen (on ``starloc``, the s3
+sequences). ``--uncertainty anchors`` asks the simulated sets for ``"anchors"`` instead of
+True.
 
 Per map: the share of non-anchor landmarks whose truth lies inside their 95 % region (squared
 Mahalanobis distance at most the chi-squared(2) 0.95 quantile), the mean RMS radius of their
@@ -73,12 +84,36 @@ import lfmdr_gym  # noqa: F401  (registers the env ids)
 from lfmdr_gym import collect
 from lfmdr_gym.atomic import atomic_write_text
 from lfmdr_gym.exploration.random_walk import RandomWalkPolicy
-from mappers import build_map
+from mappers import build_map, covariances
 from mappers.core.uncertainty import chi2_quantile, mahalanobis_squared, rms_radius
 
 SETS = ("visibility", "bearing", "range-bearing", "bearing-view90", "visibility-other-sim",
-        "mrclam", "mrclam-anchors", "starloc", "starloc-anchors")
-REAL = {"mrclam", "mrclam-anchors", "starloc", "starloc-anchors"}
+        "mrclam", "mrclam-anchors", "mrclam-floor", "starloc", "starloc-anchors", "starloc-floor")
+REAL = {"mrclam", "mrclam-anchors", "mrclam-floor", "starloc", "starloc-anchors", "starloc-floor"}
+FLOOR_GRID = np.round(np.arange(0.0005, 0.0201, 0.0005), 4)
+"""The shares of the anchors' extent ``floor for 0.95`` is sought among (module docstring)."""
+
+
+def real_mode(name: str) -> bool | str:
+    """The ``uncertainty`` a real set asks for: its name's suffix ("-anchors", "-floor"), else
+    True."""
+    return name.rsplit("-", 1)[1] if name.endswith(("-anchors", "-floor")) else True
+
+
+def floor_for(rows: list[dict], level: float = 0.95) -> float:
+    """The smallest share of :data:`FLOOR_GRID` whose systematic floor
+    (:func:`mappers.core.uncertainty.systematic_floor`) on the rows' covariances puts ``level``
+    of their pooled landmarks inside their 95 % regions (NaN: none does)."""
+    for share in FLOOR_GRID:
+        inside = n = 0
+        for r in rows:
+            cov = r["_c"] + (share * r["_ext"]) ** 2 * np.eye(r["_c"].shape[-1])
+            q = mahalanobis_squared(r["_e"], cov)
+            inside += int(np.sum(q <= chi2_quantile(r["_e"].shape[1])))
+            n += len(q)
+        if inside >= level * n:
+            return float(share)
+    return math.nan
 UNCERTAINTY: bool | str = True
 """What the simulated sets ask ``build_map`` for (``--uncertainty``)."""
 FIELDS = ("set", "layout", "method", "n_scored", "inside", "rms_radius", "mpe", "cpu_map",
@@ -102,8 +137,10 @@ def score(positions, cov, truth, objects) -> tuple[int, int, float, float]:
     q = mahalanobis_squared(truth[objects] - positions[objects], cov[objects])
     radius = rms_radius(cov[objects])
     err = np.linalg.norm(positions[objects] - truth[objects], axis=1)
+    # an object without a covariance (NaN: e.g. seen in fewer than two of the jackknife's
+    # blocks) counts as a miss and is left out of the mean radius
     return (len(objects), int(np.sum(q <= chi2_quantile(positions.shape[1]))),
-            float(np.mean(radius)),
+            float(np.nanmean(radius)),
             float(np.mean(err)))
 
 
@@ -116,9 +153,9 @@ def informative(positions, cov, truth, objects, anchors_xyz) -> dict:
     a = np.asarray(anchors_xyz, dtype=float)
     extent = float(np.max(np.linalg.norm(a[:, None] - a[None], axis=2)))
     radius = rms_radius(cov[objects])
-    wide = ~(radius <= extent)
+    wide = radius > extent
     err = np.linalg.norm(positions[objects] - truth[objects], axis=1)
-    keep = ~wide
+    keep = radius <= extent  # (neither: an object without a covariance, NaN)
     return {"n_wide": int(wide.sum()),
             "rms_radius_informative": float(np.mean(radius[keep])) if keep.any() else math.nan,
             "mpe_informative": float(np.mean(err[keep])) if keep.any() else math.nan}
@@ -173,17 +210,24 @@ def simulated_rows(seed: int, steps: int, sets) -> list[dict]:
     return rows
 
 
-def starloc_rows(data: Path, name: str) -> list[dict]:
-    """Every s3 sequence under ``data`` mapped from stereo (rays and ranges, SPATIAL-BA with
-    :data:`lfmdr_gym.experiments.starloc.STARLOC_PARAMS`), its scored tags scored in 3-D;
-    ``name`` "starloc": ``uncertainty=True``, "starloc-anchors": ``uncertainty="anchors"``."""
+def starloc_rows(data: Path, name: str, setups=("s3",)) -> list[dict]:
+    """Every sequence of the ``setups`` under ``data`` mapped from stereo (rays and ranges,
+    SPATIAL-BA with :data:`lfmdr_gym.experiments.starloc.STARLOC_PARAMS`), its scored tags
+    scored in 3-D; ``name`` "starloc": ``uncertainty=True``, "starloc-anchors":
+    ``uncertainty="anchors"``, "starloc-floor": ``"floor"``. A sequence that cannot be mapped
+    is skipped with a line saying so."""
     from lfmdr_gym.datasets.starloc import read_starloc, scored_tags, starloc_survey
     from lfmdr_gym.experiments.starloc import map_starloc
 
-    mode = "anchors" if name.endswith("-anchors") else True
+    mode = real_mode(name)
     rows = []
-    for seq in sorted(p for p in (data / "data").glob("*_s3") if p.is_dir()):
-        plain, cpu0, wall0 = _timed(lambda s=seq: map_starloc(s))
+    for seq in sorted(p for p in (data / "data").iterdir()
+                      if p.is_dir() and p.name.rsplit("_", 1)[-1] in setups):
+        try:
+            plain, cpu0, wall0 = _timed(lambda s=seq: map_starloc(s))
+        except ValueError as e:  # (a MappingError: loop-2d-fast_s2 places no step)
+            print(f"{seq.name}: not mapped ({e})", flush=True)
+            continue
         r, cpu1, wall1 = _timed(lambda s=seq: map_starloc(s, uncertainty=mode))
         xyz = starloc_survey(seq).set_index("landmark")[["x", "y", "z"]]
         tags = scored_tags(read_starloc(seq, "range-bearing"), starloc_survey(seq), r.anchors)
@@ -194,7 +238,10 @@ def starloc_rows(data: Path, name: str) -> list[dict]:
         cov = np.array([r.covariances[t] for t in tags])
         truth = xyz.loc[tags].to_numpy(dtype=float)
         n, inside, radius, mpe = score(pos, cov, truth, np.arange(len(tags)))
-        rows.append({"_q": mahalanobis_squared(truth - pos, cov), "set": name,
+        extent = np.array([r.positions[a] for a in r.anchors])
+        rows.append({"_q": mahalanobis_squared(truth - pos, cov), "_e": truth - pos, "_c": cov,
+                     "_ext": float(np.max(np.linalg.norm(extent[:, None] - extent[None],
+                                                         axis=2))), "set": name,
                      "layout": seq.name, "method": r.method, "n_scored": n, "inside": inside,
                      "rms_radius": radius, "mpe": mpe, "cpu_map": cpu0, "cpu_uncertainty": cpu1,
                      "wall_map": wall0, "wall_uncertainty": wall1,
@@ -206,7 +253,7 @@ def starloc_rows(data: Path, name: str) -> list[dict]:
 def mrclam_rows(data: Path, name: str = "mrclam") -> list[dict]:
     from lfmdr_gym.experiments.mrclam import map_mrclam_run
 
-    mode = "anchors" if name.endswith("-anchors") else True
+    mode = real_mode(name)
     rows, q_runs = [], {}
     for run_dir in sorted(p for p in data.glob("MRCLAM_Dataset*") if p.is_dir()):
         plain, cpu0, wall0 = _timed(lambda d=run_dir: map_mrclam_run(d, "range-bearing",
@@ -216,8 +263,12 @@ def mrclam_rows(data: Path, name: str = "mrclam") -> list[dict]:
         anchors = np.flatnonzero(np.isin(r.subjects, r.anchor_subjects))
         objects = np.setdiff1d(np.arange(len(r.subjects)), anchors)
         n, inside, radius, mpe = score(r.positions, r.covariances, r.truth, objects)
+        ok = objects[np.all(np.isfinite(r.positions[objects]), axis=1)]
+        a = r.positions[anchors]
         rows.append({"_q": mahalanobis_squared(r.truth[objects] - r.positions[objects],
                                                r.covariances[objects]),
+                     "_e": r.truth[ok] - r.positions[ok], "_c": r.covariances[ok],
+                     "_ext": float(np.max(np.linalg.norm(a[:, None] - a[None], axis=2))),
                      "set": name, "layout": run_dir.name, "method": r.method, "n_scored": n,
                      "inside": inside, "rms_radius": radius, "mpe": mpe, "cpu_map": cpu0,
                      "cpu_uncertainty": cpu1, "wall_map": wall0, "wall_uncertainty": wall1,
@@ -252,7 +303,7 @@ def write_csv(path: Path, rows: list[dict]) -> None:
     writer.writeheader()
     for r in rows:
         writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()
-                         if k != "_q"})
+                         if not k.startswith("_")})
     atomic_write_text(path, buf.getvalue())
 
 
@@ -264,12 +315,23 @@ def main(argv=None) -> int:
     ap.add_argument("--sets", default=",".join(SETS))
     ap.add_argument("--data", type=Path, default=Path("/work/shared/data/mrclam"))
     ap.add_argument("--starloc", type=Path, default=Path("/work/shared/data/starloc"))
+    ap.add_argument("--setups", default="s3",
+                    help="the STAR-loc setups the starloc sets map (comma-separated: s1,s2,s3)")
     ap.add_argument("--csv", type=Path, default=None)
-    ap.add_argument("--uncertainty", choices=("true", "anchors"), default="true",
-                    help="the simulated sets' mode: True, or 'anchors' (held-out anchors' check)")
+    ap.add_argument("--uncertainty", choices=("true", "anchors", "jackknife", "bootstrap"),
+                    default="true",
+                    help="the simulated sets' mode: True, 'anchors' (held-out anchors' check), "
+                         "or 'jackknife' / 'bootstrap' (visibility: the linearised jackknife, the "
+                         "default, or the bootstrap over steps)")
+    ap.add_argument("--no-inflation", action="store_true",
+                    help="the jackknife's and the bootstrap's covariances without their "
+                         "inflation (JACKKNIFE_INFLATION, BOOTSTRAP_INFLATION at 1): how the "
+                         "factors are chosen")
     args = ap.parse_args(argv)
+    if args.no_inflation:
+        covariances.JACKKNIFE_INFLATION = covariances.BOOTSTRAP_INFLATION = 1.0
     global UNCERTAINTY
-    UNCERTAINTY = True if args.uncertainty == "true" else "anchors"
+    UNCERTAINTY = True if args.uncertainty == "true" else args.uncertainty
     sets = [s for s in args.sets.split(",") if s]
     unknown = set(sets) - set(SETS)
     if unknown:
@@ -279,7 +341,8 @@ def main(argv=None) -> int:
         data = args.starloc if name.startswith("starloc") else args.data
         if not data.is_dir():
             ap.error(f"no {name.split('-')[0]} data at {data}")
-        rows += (starloc_rows if name.startswith("starloc") else mrclam_rows)(data, name)
+        rows += (starloc_rows(data, name, tuple(args.setups.split(",")))
+                 if name.startswith("starloc") else mrclam_rows(data, name))
         if args.csv:
             write_csv(args.csv, rows)
     for k in range(args.layouts if set(sets) - REAL else 0):
@@ -297,6 +360,9 @@ def main(argv=None) -> int:
         q = np.concatenate([r["_q"] for r in rows if r["set"] == name])
         d = 3 if name.startswith("starloc") else 2
         print(f"{name}: inflation for 0.95 = {np.nanquantile(q, 0.95) / chi2_quantile(d):.3f}")
+        if name in ("mrclam", "starloc"):
+            print(f"{name}: floor for 0.95 = "
+                  f"{floor_for([r for r in rows if r['set'] == name]):.4f} of the anchors' extent")
     return 0
 
 

@@ -7,6 +7,11 @@ Two sources, chosen by ``uncertainty``:
   ``SPATIAL-BA``): the objects' marginal covariances with the viewpoints eliminated and the
   anchors fixed, scaled by the robustly weighted residuals' variance
   (:mod:`mappers.viewpoints.marginals`, :mod:`mappers.spatial.marginals`);
+* ``"jackknife"`` — for the dense CAL-SMA of visibility histories (the visibility default): a
+  block jackknife over the steps whose replicates are carried to the map by the weighted stress
+  minimiser's linear response, not re-embedded
+  (:mod:`mappers.calibrated.cal_sma_uncertainty`, :mod:`mappers.smacof.stress_covariance`),
+  widened by :data:`JACKKNIFE_INFLATION`; a fraction of one map's time;
 * ``"bootstrap"`` — for every method: a moving-block bootstrap over the history's steps
   (Künsch 1989; blocks of ``ceil(sqrt(N))`` consecutive steps, since consecutive steps of a walk
   see nearly the same scene), :data:`BOOTSTRAP_REPLICATES` replicate histories each mapped by
@@ -15,10 +20,12 @@ Two sources, chosen by ``uncertainty``:
   :func:`mappers.core.uncertainty.sample_size_factor` for the few replicates it comes from, and
   by :data:`BOOTSTRAP_INFLATION` for the method's bias, which resampling cannot see.
 
-``True`` is ``"model"`` where there is one, else ``"bootstrap"``. The covariances are in the
+``True`` is ``"model"`` where there is one, else ``"jackknife"`` where it applies, else
+``"bootstrap"``. The covariances are in the
 map's frame (a method's embedding carried by the anchor fit's linear part), zero for the anchors
 (taken as exact: they fix the frame), NaN for unmapped objects. A bootstrap costs about
-``BOOTSTRAP_REPLICATES`` maps; the model a small fraction of one (docs/guide/uncertainty.md).
+``BOOTSTRAP_REPLICATES`` maps; the model and the jackknife a small fraction of one
+(docs/guide/uncertainty.md).
 """
 
 from __future__ import annotations
@@ -31,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from mappers.calibrated import has_linear_jackknife, linear_jackknife_covariances
 from mappers.core.errors import MappingError
 from mappers.core.held_out_anchors import held_out_factor
 from mappers.core.uncertainty import (
@@ -39,6 +47,7 @@ from mappers.core.uncertainty import (
     moving_blocks,
     sample_covariances,
     sample_size_factor,
+    systematic_floor,
     transform_covariances,
 )
 from mappers.fitting import Map
@@ -47,8 +56,8 @@ from mappers.spatial.spatial_ba import SpatialAdjustment
 from mappers.viewpoints import adjustment_covariances
 from mappers.viewpoints import has_model_covariances as _has_planar_model
 
-__all__ = ["BOOTSTRAP_INFLATION", "BOOTSTRAP_REPLICATES", "MIN_REPLICATES", "has_model_covariances",
-           "with_covariances", "with_held_out_check"]
+__all__ = ["BOOTSTRAP_INFLATION", "BOOTSTRAP_REPLICATES", "JACKKNIFE_INFLATION", "MIN_REPLICATES",
+           "has_model_covariances", "with_covariances", "with_held_out_check"]
 
 BOOTSTRAP_REPLICATES = 20
 """Replicate maps of a bootstrap."""
@@ -59,6 +68,15 @@ the factor that put 95 % of the landmarks inside their regions (1.697) on a seco
 simulator's visibility histories (``benchmarks/bench_uncertainty.py --sets
 visibility-other-sim --seed0 13000 --layouts 15``, run with the factor at 1), confirmed on fresh
 layouts of the project's world (``--sets visibility``; docs/guide/uncertainty.md)."""
+
+JACKKNIFE_INFLATION = 4.63
+"""Factor on every linearised-jackknife covariance (``"jackknife"``) for what the linearisation
+and the resampling cannot see (new neighbour pairs, a refitted calibration, the method's bias):
+the factor that put 95 % of the landmarks inside their regions (4.627; 0.606 inside without it)
+on the second simulator's visibility histories (``benchmarks/bench_uncertainty.py --sets
+visibility-other-sim --seed0 13000 --layouts 15 --no-inflation``, the bootstrap's body of
+data), confirmed on fresh layouts of the project's world (``--sets visibility``) and on fresh
+layouts of the second simulator (``--seed0 13100 --layouts 25``; docs/guide/uncertainty.md)."""
 
 MIN_REPLICATES = 10
 """An object placed in fewer replicates gets a NaN covariance (and a note)."""
@@ -92,6 +110,19 @@ def _model(result: Map, est, mapped: np.ndarray, X, mask, timeline) -> np.ndarra
     d = result.positions.shape[1]
     cov = np.full((len(result.positions), d, d), np.nan)
     cov[mapped] = cov_local
+    return transform_covariances(cov, np.asarray(result.affine)[:d])
+
+
+def _jackknife(result: Map, est, mapped: np.ndarray, X, n_steps: int,
+               notes: list[str]) -> np.ndarray:
+    local = np.searchsorted(mapped, np.asarray(result.anchor_ids, dtype=int))
+    cov_local, few = linear_jackknife_covariances(est, np.asarray(X)[mapped], n_steps, local)
+    if few.any():
+        notes.append(f"uncertainty: objects {mapped[few].tolist()} were seen in fewer than two "
+                     "of the jackknife's blocks of steps: their covariance is NaN")
+    d = result.positions.shape[1]
+    cov = np.full((len(result.positions), d, d), np.nan)
+    cov[mapped] = cov_local * JACKKNIFE_INFLATION
     return transform_covariances(cov, np.asarray(result.affine)[:d])
 
 
@@ -131,22 +162,35 @@ def with_covariances(result: Map, uncertainty, *, est: Any, mapped: np.ndarray, 
     as it is). ``est`` is the fitted estimator, ``mapped`` the rows it was fitted on, ``X`` and
     ``mask`` what it was fitted on (all rows; a mapping per sensor for fused histories);
     ``refit(steps)`` maps the history restricted to those steps (with repeats) and returns the
-    (M, d) positions; ``timeline`` the steps' (robot, tick), or None. ValueError for an unknown mode, or ``"model"`` for a method without one."""
+    (M, d) positions; ``timeline`` the steps' (robot, tick), or None. ValueError for an unknown
+    mode, ``"model"`` for a method without one, or ``"jackknife"`` for a map it does not cover."""
     mode = check_uncertainty(uncertainty)
     if mode is False:
         return result
+    jackknife = has_linear_jackknife(est) and mask is None and not isinstance(X, dict)
     if mode in (True, "anchors"):  # ("anchors": build_map scales these afterwards)
-        mode = "model" if has_model_covariances(est) else "bootstrap"
+        mode = ("model" if has_model_covariances(est) else "jackknife" if jackknife
+                else "bootstrap")
+    floor = mode == "floor"  # the model's, with the systematic floor (calibrated on it alone)
     notes: list[str] = []
-    if mode == "model":
+    if mode in ("model", "floor"):
         if not has_model_covariances(est):
             raise ValueError(
-                f"uncertainty='model' needs a method that ends with a bundle adjustment "
+                f"uncertainty={mode!r} needs a method that ends with a bundle adjustment "
                 f"(BEARING-BA, LOC-SMA refined, SPATIAL-BA), not {result.method!r}: use 'bootstrap' or True")
         cov = _model(result, est, mapped, _rows(X, mapped), _rows(mask, mapped), timeline)
+    elif mode == "jackknife":
+        if not jackknife:
+            raise ValueError(
+                f"uncertainty='jackknife' needs the dense CAL-SMA of complete visibility "
+                f"histories, not {result.method!r} here: use 'bootstrap' or True")
+        cov = _jackknife(result, est, mapped, X, n_steps, notes)
     else:
         cov = _bootstrap(result, n_steps, refit, random_state, notes)
-    return dataclasses.replace(result, covariances=_finish(result, cov),
+    cov = _finish(result, cov)
+    if floor:
+        cov = systematic_floor(cov, result.positions, result.anchor_ids)
+    return dataclasses.replace(result, covariances=cov,
                                warnings=(*result.warnings, *notes))
 
 

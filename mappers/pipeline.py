@@ -23,6 +23,7 @@ from mappers.core.uncertainty import check_uncertainty
 from mappers.covariances import has_model_covariances, with_covariances, with_held_out_check
 from mappers.defaults import choose_for_history
 from mappers.fitting import Map, check_inputs, fit_checked, fit_fused_method
+from mappers.spatial.marginals import spatial_held_out
 from mappers.spatial.pipeline_3d import (
     anchor_dimension,
     build_map_3d,
@@ -30,7 +31,8 @@ from mappers.spatial.pipeline_3d import (
     fit_map_3d,
     step_columns_3d,
 )
-from mappers.viewpoints import released_anchor
+from mappers.spatial.spatial_ba import SpatialAdjustment
+from mappers.viewpoints import held_out_anchors, released_anchor
 
 __all__ = ["Map", "MapWarning", "build_map", "default_method"]
 
@@ -89,12 +91,18 @@ def build_map(
         random_state: seed handed to methods that take one (and to the bootstrap's draws).
         uncertainty: False (the default): no covariances, ``Map.covariances`` is None and nothing
             else changes; ``"model"``: from the normal equations of the method's bundle
-            adjustment (``BEARING-BA``, ``LOC-SMA`` refined, ``SPATIAL-BA``); ``"bootstrap"``: from replicate maps
+            adjustment (``BEARING-BA``, ``LOC-SMA`` refined, ``SPATIAL-BA``); ``"jackknife"``:
+            CAL-SMA's linearised block jackknife (complete visibility histories, dense CAL-SMA;
+            a fraction of a map's time); ``"bootstrap"``: from replicate maps
             of a moving-block bootstrap over the steps (any method; about 20 maps' time);
-            True: ``"model"`` where the method has one, else ``"bootstrap"``
+            True: ``"model"`` where the method has one, else ``"jackknife"`` where it applies,
+            else ``"bootstrap"``
             (:mod:`mappers.covariances`); ``"anchors"``: True's covariances checked by the
-            anchors, each mapped in turn from the others, and scaled when they miss them
-            (:mod:`mappers.core.held_out_anchors`; about one map more per anchor). 3-D maps:
+            anchors, each held out in turn, and scaled when they miss them
+            (:mod:`mappers.core.held_out_anchors`; for a method with an adjustment each anchor
+            is released from it by one linearised step, else mapped again from the others);
+            ``"floor"``: the model's with a floor for a logged sensor's systematic errors
+            (:func:`mappers.core.uncertainty.systematic_floor`; methods with an adjustment). 3-D maps:
             the model for SPATIAL-BA, the bootstrap for COVIS-3D.
         **params: method parameters (``n_neighbors`` = K, ``sigma2``, ``degree``, ...).
 
@@ -313,21 +321,29 @@ def _held_out_checked(histories, anchor_ids, anchor_positions, method, **kwargs)
     (:func:`mappers.viewpoints.marginals.released_anchor`)."""
     ids = np.asarray(anchor_ids, dtype=int)
     pos = np.asarray(anchor_positions, dtype=float)
+    params = {k: kwargs.pop(k) for k in list(kwargs)
+              if k not in ("sensor", "mask", "timeline", "normalize", "random_state")}
     if anchor_dimension(anchor_positions) == 3:
-        result, release = build_map(histories, anchor_ids, anchor_positions, method,
-                                    uncertainty=True, **kwargs), None
+        result, est, X3, mask3, sensor3 = fit_map_3d(histories, ids, pos, method,
+                                                     sensor=kwargs["sensor"],
+                                                     mask=kwargs["mask"], **params)
+        result = _with_covariances_3d(result, True, est, X3, mask3, sensor3, ids, pos,
+                                      kwargs["random_state"])
+        release = None
+        linear = spatial_held_out(est, pos) if isinstance(est, SpatialAdjustment) else None
     else:
-        params = {k: kwargs.pop(k) for k in list(kwargs)
-                  if k not in ("sensor", "mask", "timeline", "normalize", "random_state")}
         result, est, mapped = _build_2d(histories, anchor_ids, anchor_positions, method,
                                         kwargs["sensor"], kwargs["mask"], kwargs["timeline"],
                                         kwargs["normalize"], kwargs["random_state"], True, params)
-        for note in result.warnings:
-            warnings.warn(note, MapWarning, stacklevel=3)
-        kwargs = {**kwargs, **params}
-        release = _releaser(result, est, mapped, histories, ids, pos, kwargs)
+        release, linear = _releaser(result, est, mapped, histories, ids, pos,
+                                    {**kwargs, **params})
+    for note in result.warnings:
+        warnings.warn(note, MapWarning, stacklevel=3)
+    kwargs = {**kwargs, **params}
 
     def held_out(j):
+        if linear is not None:  # the method's adjustment, linearised: no map again
+            return linear[0][j], linear[1][j]
         keep = np.arange(len(ids)) != j
         try:
             m = build_map(histories, ids[keep], pos[keep], method, uncertainty=True, **kwargs)
@@ -348,10 +364,13 @@ def _held_out_checked(histories, anchor_ids, anchor_positions, method, **kwargs)
 
 
 def _releaser(result, est, mapped, histories, ids, pos, kwargs):
-    """``release(j)``: anchor ``j`` held out of ``est``'s adjustment, in the map's frame
-    (:func:`mappers.viewpoints.marginals.released_anchor`); None when ``est`` has none."""
+    """``(release, linear)``: ``release(j)`` anchor ``j`` held out of ``est``'s adjustment, in
+    the map's frame (:func:`mappers.viewpoints.marginals.released_anchor`), and ``linear`` every
+    anchor held out of it linearised, ``(positions (A, 2), covariances (A, 2, 2))`` in the map's
+    frame (:func:`mappers.viewpoints.held_out_anchors`); ``(None, None)`` when ``est`` has no
+    adjustment."""
     if not has_model_covariances(est) or np.any(~np.isin(ids, mapped)):
-        return None
+        return None, None
     parts = getattr(histories, "parts", None)
     timeline = kwargs["timeline"]
     if isinstance(parts, Mapping) and not isinstance(histories, Mapping):
@@ -373,4 +392,5 @@ def _releaser(result, est, mapped, histories, ids, pos, kwargs):
         p, c = released_anchor(est, rows(X), rows(M), local, pos, j, timeline)
         return np.r_[p, 1.0] @ T, T[:2].T @ c @ T[:2]
 
-    return release
+    p, c = held_out_anchors(est, rows(X), rows(M), local, timeline)
+    return release, (p @ T[:2] + T[2], np.einsum("ji,ajk,kl->ail", T[:2], c, T[:2]))

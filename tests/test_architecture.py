@@ -269,11 +269,12 @@ def family_breaches(root: Path) -> list[str]:
     methods by entry points and imports none), and a family importing another family's
     sub-module instead of the names its package declares."""
     found = []
-    for module, path in modules_of(root, "mappers").items():
+    modules = modules_of(root, "mappers")  # once: walking the tree per import took most of the time
+    for module, path in modules.items():
         parts = module.split(".")
         own = parts[1] if len(parts) > 1 else None
         for base, names, line in imports_in(path, module):
-            for name in sorted(_named(base, names, modules_of(root, "mappers"))):
+            for name in sorted(_named(base, names, modules)):
                 target = name.split(".")
                 if target[0] != "mappers" or len(target) < 2:
                     continue

@@ -16,9 +16,8 @@ Pairs can be *censored*: known only to be at least as far as every measured pair
 from __future__ import annotations
 
 import numpy as np
-from sklearn import config_context
-from sklearn.isotonic import IsotonicRegression
 
+from mappers.smacof.isotonic import isotonic_fit
 from mappers.smacof.weighted import GuttmanTransform, euclidean_distance_matrix, weighted_smacof
 
 __all__ = ["bounded_smacof", "nonmetric_smacof", "power_link_smacof"]
@@ -71,15 +70,12 @@ def nonmetric_smacof(
         raise ValueError("nonmetric_smacof needs at least 2 measured (weighted, uncensored) pairs")
     X, span = _start(init, fixed, fixed_positions)
     guttman = _guttman(W, X, fixed)
-    iso = IsotonicRegression(increasing=True)
     scale = np.sqrt(np.sum(w[obs | cen]))
+    x_obs, w_obs = delta[iu][obs], w[obs]
     for _ in range(max_iter):
         d = np.linalg.norm(X[iu[0]] - X[iu[1]], axis=1)
         dh = np.zeros_like(d)
-        # the inputs are this loop's own finite arrays: scikit-learn's checks of them (more than
-        # half of a fit's time at a few hundred pairs) are skipped, the fit is the same
-        with config_context(assume_finite=True, skip_parameter_validation=True):
-            dh[obs] = iso.fit_transform(delta[iu][obs], d[obs], sample_weight=w[obs])
+        dh[obs] = isotonic_fit(x_obs, d[obs], w_obs)
         if cen.any():
             t = dh[obs].max()
             dh[cen] = np.clip(d[cen], t, max(2 * t, 1.5 * span))

@@ -21,6 +21,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from mappers.spatial import adjustment_kernels as kernels
 from mappers.spatial.rays import RayObservations
 from mappers.viewpoints import (
     DENSE_COUPLING_MAX_BYTES,
@@ -111,7 +112,8 @@ def adjust_viewpoints(obs: RayObservations, P0: np.ndarray, R0: np.ndarray, C0: 
                       max_iter: int = 100, tol: float = 1e-10,
                       fit_range_scale: bool = False, scale_rounds: int = 4,
                       anchor_noise: float | None = None,
-                      dense_coupling_bytes: float = DENSE_COUPLING_MAX_BYTES) -> AdjustmentResult:
+                      dense_coupling_bytes: float = DENSE_COUPLING_MAX_BYTES,
+                      gain_tol: float = 0.0) -> AdjustmentResult:
     """Adjust the points and the steps' poses to the sightings (see the module's docstring).
 
     Args:
@@ -125,6 +127,10 @@ def adjust_viewpoints(obs: RayObservations, P0: np.ndarray, R0: np.ndarray, C0: 
         loss: "cauchy", "huber" or None (least squares), at ``loss_scale`` noise units.
         max_iter, tol: at most this many iterations; stop when the cost falls by less than
             ``tol`` of itself.
+        gain_tol: also stop when an iteration lowers the cost by at most this share of the cost
+            the adjustment started from (as BEARING-BA's ``gain_tol``; 0: only ``tol``): the
+            sightings are explained no better, while a robust loss's reweighting and a
+            weakly fixed pose can keep the cost creeping down for dozens of iterations.
         fit_range_scale: also estimate one factor of all ranges (a stereo camera's depth is
             ``focal * baseline / disparity``, so an error of its calibration scales every range
             alike; STAR-loc's are 1.5-3 % short): after each adjustment the ranges are
@@ -139,8 +145,10 @@ def adjust_viewpoints(obs: RayObservations, P0: np.ndarray, R0: np.ndarray, C0: 
     """
     if anchor_noise is not None and not anchor_noise > 0:
         raise ValueError(f"anchor_noise must be None or > 0, got {anchor_noise!r}")
+    if not 0.0 <= gain_tol < 1.0:
+        raise ValueError(f"gain_tol must be in [0, 1), got {gain_tol!r}")
     result = _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, loss,
-                     loss_scale, max_iter, tol, anchor_noise, dense_coupling_bytes)
+                     loss_scale, max_iter, tol, anchor_noise, dense_coupling_bytes, gain_tol)
     has_r = np.isfinite(obs.range)
     factor = 1.0
     for _ in range(scale_rounds if fit_range_scale and has_r.any() else 0):
@@ -153,7 +161,7 @@ def adjust_viewpoints(obs: RayObservations, P0: np.ndarray, R0: np.ndarray, C0: 
         factor *= k
         obs = obs._replace(range=obs.range * k)
         result = _adjust(obs, P, R, C, fixed, bearing_noise, range_noise, range_growth, loss,
-                         loss_scale, max_iter, tol, anchor_noise, dense_coupling_bytes)
+                         loss_scale, max_iter, tol, anchor_noise, dense_coupling_bytes, gain_tol)
         if abs(k - 1.0) < 1e-4:
             break
     return result._replace(range_scale=factor)
@@ -161,7 +169,7 @@ def adjust_viewpoints(obs: RayObservations, P0: np.ndarray, R0: np.ndarray, C0: 
 
 def _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, loss, loss_scale,
             max_iter, tol, anchor_noise=None,
-            dense_coupling_bytes=DENSE_COUPLING_MAX_BYTES) -> AdjustmentResult:
+            dense_coupling_bytes=DENSE_COUPLING_MAX_BYTES, gain_tol=0.0) -> AdjustmentResult:
     """One adjustment of :func:`adjust_viewpoints` (the ranges as they are)."""
     if loss not in ("cauchy", "huber", None):
         raise ValueError(f"loss must be 'cauchy', 'huber' or None, got {loss!r}")
@@ -170,7 +178,10 @@ def _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, lo
     P, R, C = P0.copy(), R0.copy(), C0.copy()
     placed = np.all(np.isfinite(P), axis=1)
     posed = np.all(np.isfinite(C), axis=1)
-    keep = placed[obs.obj] & posed[obs.step]
+    keep = np.flatnonzero(placed[obs.obj] & posed[obs.step])
+    # by step (ray_observations gives them so): the compiled step takes each step's sightings
+    # as one run
+    keep = keep[np.argsort(obs.step[keep], kind="stable")]
     prob = _Problem(obs, keep, bearing_noise, range_noise, range_growth)
     fixed = np.asarray(fixed, dtype=bool)
     free = placed & (~fixed if anchor_noise is None else np.ones(len(P), dtype=bool))
@@ -183,34 +194,45 @@ def _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, lo
     step_index[steps] = np.arange(steps.size)
     sparse = use_sparse_coupling(steps.size, 6, 3, int(free.sum()), dense_coupling_bytes)
 
-    def cost_of(P, R, C):
-        e = prob.residuals(P, R, C)[0]
-        prior = 0.0 if not soft.size else 0.5 * np.sum((P[soft] - target) ** 2) / anchor_noise**2
-        return float(robust_cost(np.linalg.norm(e, axis=1), loss_scale, loss).sum()) + prior
+    t_rows = step_index[prob.t]
+    if not sparse:
+        indptr = np.zeros(steps.size + 1, dtype=np.int64)
+        np.cumsum(np.bincount(t_rows, minlength=steps.size), out=indptr[1:])
 
-    cost, lam, it = cost_of(P, R, C), 1e-3, 0
+    def cost_of(P, R, C):
+        res = prob.residuals(P, R, C)
+        prior = 0.0 if not soft.size else 0.5 * np.sum((P[soft] - target) ** 2) / anchor_noise**2
+        return float(robust_cost(np.linalg.norm(res[0], axis=1), loss_scale, loss).sum()) + prior, res
+
+    cost, res = cost_of(P, R, C)
+    first, lam, it = cost, 1e-3, 0
     for it in range(1, max_iter + 1):  # noqa: B007 - the count is returned
-        e, v, nv, vh = prob.residuals(P, R, C)
+        e, v, nv, vh = res
         w = robust_weights(np.linalg.norm(e, axis=1), loss_scale, loss)
-        Jc, Jp = prob.jacobians(R, v, nv, vh)
-        step_blocks = _normal_blocks(prob, e, w, Jc, Jp, step_index[prob.t], free_index,
-                                     steps.size, int(free.sum()), sparse)
+        if sparse:
+            Jc, Jp = prob.jacobians(R, v, nv, vh)
+            step_blocks = _normal_blocks(prob, e, w, Jc, Jp, t_rows, free_index, steps.size,
+                                         int(free.sum()), True)
+        else:
+            step_blocks = _compiled_blocks(prob, res, w, R, t_rows, free_index, indptr,
+                                           steps.size, int(free.sum()))
         if soft.size:  # the anchors' prior: (p - anchor) / anchor_noise, Jacobian I / noise
             step_blocks[1][free_index[soft]] += np.eye(3) / anchor_noise**2
             step_blocks[4][free_index[soft]] += (P[soft] - target) / anchor_noise**2
 
         def trial(lam, step_blocks=step_blocks, P=P, R=R, C=C):
-            dc, dp = schur_step(*step_blocks, lam)
+            dc, dp = (schur_step if sparse else _compiled_step)(*step_blocks, lam)
             Pn, Rn, Cn = P.copy(), R.copy(), C.copy()
             Pn[free] += dp
             Rn[steps] = R[steps] @ Rotation.from_rotvec(dc[:, :3]).as_matrix()
             Cn[steps] += dc[:, 3:]
-            return (Pn, Rn, Cn), cost_of(Pn, Rn, Cn)
+            new, res_n = cost_of(Pn, Rn, Cn)
+            return (Pn, Rn, Cn, res_n), new
 
         state, new, lam, improved = damped_step(trial, cost, lam, DAMPING)
         if improved:
-            P, R, C = state
-        if not improved or cost - new <= tol * cost:
+            P, R, C, res = state
+        if not improved or cost - new <= max(tol * cost, gain_tol * first):
             cost = new if improved else cost
             break
         cost = new
@@ -235,3 +257,57 @@ def _normal_blocks(prob, e, w, Jc, Jp, t, free_index, n_steps, n_free, sparse=Fa
     # once: an assignment, the same numbers as np.add.at at a fraction of its cost
     W[t[k], :, f[k], :] = w[k, None, None] * np.einsum("kri,krj->kij", Jc[k], Jp[k])
     return U, V, W.reshape(n_steps, 6, 3 * n_free), g, h
+
+
+class _SightingCoupling(NamedTuple):
+    """The pose-point coupling of the compiled step: one (6, 3) block per kept sighting (zero
+    for a fixed object), ordered by step, with its free object's row (-1: fixed) and where each
+    step's sightings start (``indptr`` (N + 1,))."""
+
+    blocks: np.ndarray
+    free: np.ndarray
+    indptr: np.ndarray
+
+
+def _compiled_blocks(prob, res, w, R, t, free_index, indptr, n_steps, n_free):
+    """:func:`_normal_blocks` by one compiled loop over the sightings
+    (:func:`mappers.spatial.adjustment_kernels.normal_equations`; equal to rounding), the
+    coupling per sighting (:class:`_SightingCoupling`) for :func:`_compiled_step`."""
+    e, v, nv, vh = res
+    U, g = np.zeros((n_steps, 6, 6)), np.zeros((n_steps, 6))
+    V, h = np.zeros((n_free, 3, 3)), np.zeros((n_free, 3))
+    W = np.empty((len(e), 6, 3))
+    f = np.ascontiguousarray(free_index[prob.i], dtype=np.int64)
+    kernels.normal_equations(np.ascontiguousarray(R), np.ascontiguousarray(prob.t, dtype=np.int64),
+                             np.ascontiguousarray(t, dtype=np.int64), f, v, nv, vh, e,
+                             np.ascontiguousarray(w, dtype=np.float64), prob.B, prob.has_r,
+                             np.ascontiguousarray(prob.sr, dtype=np.float64), float(prob.sb),
+                             U, g, V, h, W)
+    return U, V, _SightingCoupling(W, f, indptr), g, h
+
+
+def _compiled_step(U, V, W: _SightingCoupling, g, h, lam):
+    """The damped Gauss-Newton step of :func:`mappers.viewpoints.schur_step` (the same damping
+    ``diag *= 1 + lam`` and the same 1e-12 added to the diagonals) with the objects' reduced
+    system summed step by step over each step's own sightings
+    (:mod:`mappers.spatial.adjustment_kernels`): the same step to rounding, at a fraction of
+    the dense coupling's cost."""
+    n, f = U.shape[0], V.shape[0]
+    diag = np.arange(6)
+    U = U.copy()
+    U[:, diag, diag] *= 1.0 + lam
+    U[:, diag, diag] += 1e-12
+    Ui = np.linalg.inv(U)
+    S = np.zeros((3 * f, 3 * f))
+    Vd = V * np.where(np.eye(3, dtype=bool), 1.0 + lam, 1.0)
+    idx = 3 * np.arange(f)
+    for r in range(3):
+        for c in range(3):
+            S[idx + r, idx + c] = Vd[:, r, c]
+    rhs = -h.reshape(-1)
+    kernels.reduced_system(Ui, W.blocks, W.free, W.indptr, g, S, rhs)
+    S[np.diag_indices(3 * f)] += 1e-12
+    dp = np.linalg.solve(S, rhs).reshape(f, 3)
+    dc = np.empty((n, 6))
+    kernels.pose_steps(Ui, W.blocks, W.free, W.indptr, g, dp, dc)
+    return dc, dp

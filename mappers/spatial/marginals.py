@@ -26,23 +26,26 @@ from __future__ import annotations
 
 import numpy as np
 
+from mappers.core.align_3d import umeyama
 from mappers.spatial.adjustment import _normal_blocks, _Problem
 from mappers.viewpoints import (
     DENSE_COUPLING_MAX_BYTES,
     model_covariances,
+    released_steps,
     robust_weights,
     schur_information,
     step_blocks,
     use_sparse_coupling,
 )
 
-__all__ = ["spatial_covariances"]
+__all__ = ["spatial_covariances", "spatial_held_out"]
 
 
-def spatial_covariances(est) -> np.ndarray:
-    """(M, 3, 3) model covariances of a fitted :class:`~mappers.spatial.spatial_ba.SpatialAdjustment`
-    ``est`` in its output frame (module docstring): zero for the anchors, NaN for the objects it
-    did not place. ValueError for an estimator that was not fitted."""
+def _parts(est, unknown_anchors: bool):
+    """The linearisation of a fitted SPATIAL-BA at its solution (before the similarity):
+    ``(parts, placed, free, index)``, ``parts`` as :func:`mappers.viewpoints.released_steps`
+    takes it, its unknowns the free objects (and the anchors, ``unknown_anchors``), ``index``
+    each object's row among them (-1: none)."""
     if not hasattr(est, "adjusted_"):
         raise ValueError(f"{type(est).__name__} is not fitted: no model covariances")
     obs, res, ids = est.observations_, est.adjusted_, est.anchor_ids_
@@ -53,8 +56,10 @@ def spatial_covariances(est) -> np.ndarray:
     prob = _Problem(obs, keep, est.bearing_noise, est.range_noise, est.range_growth)
     free = placed.copy()
     free[np.asarray(ids, dtype=int)] = False
-    free_index = np.full(len(P), -1)
-    free_index[free] = np.arange(free.sum())
+    unknown = placed if unknown_anchors else free
+    index = np.full(len(P), -1)
+    index[unknown] = np.arange(unknown.sum())
+    n_unknown = int(unknown.sum())
     steps = np.flatnonzero(posed)
     step_index = np.full(len(C), -1)
     step_index[steps] = np.arange(steps.size)
@@ -64,28 +69,73 @@ def spatial_covariances(est) -> np.ndarray:
     Jc, Jp = prob.jacobians(R, v, nv, vh)
     t = step_index[prob.t]
     limit = getattr(est, "dense_coupling_bytes", DENSE_COUPLING_MAX_BYTES)
-    if use_sparse_coupling(steps.size, 6, 3, int(free.sum()), limit):
+    if use_sparse_coupling(steps.size, 6, 3, n_unknown, limit):
         raise ValueError(
             f"model covariances of SPATIAL-BA hold the dense (N, 6, 3F) coupling, "
-            f"{8 * 18 * steps.size * int(free.sum()) / 2**30:.2f} GiB for N = {steps.size} steps "
-            f"and F = {int(free.sum())} free objects (above its dense_coupling_bytes, "
+            f"{8 * 18 * steps.size * n_unknown / 2**30:.2f} GiB for N = {steps.size} steps "
+            f"and F = {n_unknown} free objects (above its dense_coupling_bytes, "
             f"{limit:.3g}); use fewer steps")
-    U, V, Wf, _, _ = _normal_blocks(prob, e, w, Jc, Jp, t, free_index, steps.size,
-                                    int(free.sum()))
-    S = schur_information(U, V, Wf)
+    U, V, Wf, g, h = _normal_blocks(prob, e, w, Jc, Jp, t, index, steps.size, n_unknown)
     we = w[:, None] * e
     g_pose = np.einsum("kri,kr->ki", Jc, we)
     g_obj = np.einsum("kri,kr->ki", Jp, we)
     blocks = np.unique(step_blocks(obs.n_steps)[steps], return_inverse=True)[1].ravel()
     n_rows = 2 * len(e) + int(prob.has_r.sum())
-    cov = model_covariances(S, U, Wf, (t, free_index[prob.i], g_pose, g_obj, blocks),
-                            float(np.sum(w * np.sum(e * e, axis=1))), n_rows,
-                            6 * steps.size + 3 * int(free.sum()), np.where(
-                                placed[:, None], P, np.nan), free)
+    parts = (U, V, Wf, g, h, (t, index[prob.i], g_pose, g_obj, blocks),
+             float(np.sum(w * np.sum(e * e, axis=1))), n_rows,
+             6 * steps.size + 3 * int(free.sum()), index)
+    return parts, placed, free, index
+
+
+def _to_output(est, cov: np.ndarray) -> np.ndarray:
+    """Covariances (M, 3, 3) of the adjusted map carried by its similarity onto the anchors."""
     Rs, scale, _ = est.similarity_
     A = scale * np.asarray(Rs)
+    cov = np.array(cov, dtype=float)
     finite = np.all(np.isfinite(cov), axis=(1, 2))
     cov[finite] = np.einsum("ij,mjk,lk->mil", A, cov[finite], A)
     cov[np.any(np.isinf(cov), axis=(1, 2))] = np.inf  # unbounded in some direction: in any frame
+    return cov
+
+
+def spatial_covariances(est) -> np.ndarray:
+    """(M, 3, 3) model covariances of a fitted :class:`~mappers.spatial.spatial_ba.SpatialAdjustment`
+    ``est`` in its output frame (module docstring): zero for the anchors, NaN for the objects it
+    did not place. ValueError for an estimator that was not fitted."""
+    parts, placed, free, _ = _parts(est, False)
+    U, V, Wf, _, _, sandwich, dof, n_rows, n_unknowns, _ = parts
+    P = np.where(placed[:, None], est.adjusted_.points, np.nan)
+    cov = _to_output(est, model_covariances(schur_information(U, V, Wf), U, Wf, sandwich, dof,
+                                            n_rows, n_unknowns, P, free))
     cov[~np.all(np.isfinite(est.embedding_), axis=1)] = np.nan
     return cov
+
+
+def spatial_held_out(est, anchor_positions) -> tuple[np.ndarray, np.ndarray]:
+    """Each anchor of a fitted SPATIAL-BA held out, linearised: its position (A, 3) and
+    covariance (A, 3, 3) in the output frame when it alone is released from the adjustment, by
+    Gauss-Newton steps from the solution (:func:`mappers.viewpoints.released_steps`). Anchors
+    held exactly: the others stay. With ``anchor_noise``: the released anchor loses its prior,
+    the others keep theirs and move with it, and the similarity onto the anchors is fitted
+    again to the others (``anchor_positions`` (A, 3), what ``est`` was fitted with). The
+    covariance is the model's with the other anchors fixed (as :func:`spatial_covariances`),
+    carried by the similarity. NaN rows for an anchor its readings do not pin down (a
+    non-finite covariance)."""
+    parts, _, free, index = _parts(est, True)
+    ids = np.asarray(est.anchor_ids_, dtype=int)
+    target = np.asarray(anchor_positions, dtype=float)
+    soft = est.anchor_noise is not None
+    steps, covs = released_steps(parts, index[free], index[ids],
+                                 est.anchor_noise ** -2.0 if soft else None)
+    covs = _to_output(est, covs)
+    Rs, scale, shift = est.similarity_
+    pos = np.full((len(ids), 3), np.nan)
+    for j in range(len(ids)):
+        moved = est.adjusted_.points[ids] + steps[j]
+        if soft and len(ids) > 3:  # the similarity onto the other anchors, as a map without j
+            keep = np.arange(len(ids)) != j
+            Rs, scale, shift = umeyama(moved[keep], target[keep], True)
+        pos[j] = scale * moved[j] @ np.asarray(Rs).T + shift
+    bad = ~np.all(np.isfinite(covs), axis=(1, 2)) | ~np.all(np.isfinite(pos), axis=1)
+    pos[bad], covs[bad] = np.nan, np.nan
+    return pos, covs

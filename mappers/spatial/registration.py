@@ -74,7 +74,8 @@ def register_points(obs: RayObservations, anchor_ids: np.ndarray, anchor_positio
     P = np.full((m, 3), np.nan)
     R = np.full((n, 3, 3), np.nan)
     C = np.full((n, 3), np.nan)
-    todo = np.array([g.size >= 3 and _spans(pts[g]) for g in groups])
+    ranged = np.flatnonzero(np.isfinite(obs.range))
+    todo = _spans_batch(obs.step[ranged], pts[ranged], n)  # the steps with 3 points off a line
     pending = todo.copy()
     pieces = []
     while todo.any():
@@ -123,24 +124,29 @@ def _grow_piece(obs, pts, groups, todo, seed):
     poses = {seed: (np.eye(3), np.zeros(3))}
     todo[seed] = False
     g = groups[seed]
-    np.add.at(total, obs.obj[g], pts[g])
-    np.add.at(count, obs.obj[g], 1)
+    # a step sees an object once, so each of its objects is added to once: an indexed add,
+    # the same numbers as np.add.at
+    total[obs.obj[g]] += pts[g]
+    count[obs.obj[g]] += 1
+    ranged = np.concatenate(groups) if groups else np.zeros(0, np.int64)
     while True:
         known = count > 0
-        shared = {t: g[known[obs.obj[g]]] for t in np.flatnonzero(todo)
-                  for g in [groups[t]]}
-        ready = [t for t, s in shared.items() if s.size >= 3 and _spans(pts[s])]
-        if not ready:
+        # the steps left that share three placed objects not on a line, all at once
+        # (_spans_batch), the most shared first (ties by step)
+        k = ranged[todo[obs.step[ranged]] & known[obs.obj[ranged]]]
+        shared = np.bincount(obs.step[k], minlength=obs.n_steps)
+        ready = np.flatnonzero(_spans_batch(obs.step[k], pts[k], obs.n_steps))
+        if not ready.size:
             break
-        for t in sorted(ready, key=lambda t: -shared[t].size):
-            s = shared[t]
+        for t in ready[np.argsort(-shared[ready], kind="stable")]:
+            g = groups[t]
+            s = g[known[obs.obj[g]]]  # the objects placed when the pass began
             here = total[obs.obj[s]] / count[obs.obj[s], None]
             Rt, _, ct = umeyama(pts[s], here, False)
             poses[t] = (Rt, ct)
             todo[t] = False
-            g = groups[t]
-            np.add.at(total, obs.obj[g], pts[g] @ Rt.T + ct)
-            np.add.at(count, obs.obj[g], 1)
+            total[obs.obj[g]] += pts[g] @ Rt.T + ct
+            count[obs.obj[g]] += 1
     return total, count, poses
 
 
@@ -207,19 +213,20 @@ def _pair_distances(obs, pts, groups) -> dict[tuple[int, int], float]:
     those steps of the distance between their points (the law of cosines). Keyed ``(a, b)`` in
     the order the step lists them, in the order the pairs are first met (the pose fit of
     :func:`_fit_piece` reads them in that order)."""
-    first, second, dist = [], [], []
-    for g in groups:
-        if g.size < 2:
-            continue
-        d = np.linalg.norm(pts[g][:, None] - pts[g][None], axis=2)
-        o = obs.obj[g]
-        a, b = np.triu_indices(g.size, 1)
-        first.append(o[a])
-        second.append(o[b])
-        dist.append(d[a, b])
-    if not dist:
+    # every pair (a, b), a before b, of each step's sightings, step by step in the order
+    # np.triu_indices lists a step's pairs: the j-th of a step's n sightings pairs with the
+    # n - 1 - j after it
+    many = [g for g in groups if g.size >= 2]
+    if not many:
         return {}
-    first, second, dist = np.concatenate(first), np.concatenate(second), np.concatenate(dist)
+    sightings = np.concatenate(many)
+    sizes = np.array([g.size for g in many])
+    place = np.arange(sightings.size) - np.repeat(np.cumsum(sizes) - sizes, sizes)
+    after = np.repeat(sizes, sizes) - 1 - place
+    a = np.repeat(np.arange(sightings.size), after)
+    b = a + 1 + np.arange(a.size) - np.repeat(np.cumsum(after) - after, after)
+    first, second = obs.obj[sightings[a]], obs.obj[sightings[b]]
+    dist = np.linalg.norm(pts[sightings[a]] - pts[sightings[b]], axis=1)
     code = first.astype(np.int64) * obs.n_objects + second
     order = np.lexsort((dist, code))  # by pair, each pair's distances sorted
     code_s, dist_s = code[order], dist[order]

@@ -4,15 +4,19 @@ images*, IEEE TPAMI 22(6), 2000), for all the steps together.
 
 :func:`mappers.spatial.registration.orthogonal_iteration` resects one step; a map of 2,000
 steps called it in a Python loop per step and per round, which cost tens of seconds. Here the
-steps' sightings are segments of one array: the sums over a step's sightings are one sparse
-matrix product, the 3 x 3 fits one batched SVD, and a step stops moving once it has converged
-(as the one-step version does), so the poses are those of the one-step version to rounding.
+steps' sightings are segments of one array: the start and the final translations and errors are
+sums over a step's sightings (one sparse matrix product) and a batched SVD; the iterations run
+as one compiled loop per step (:mod:`mappers.spatial.resection_kernels`), each step stopping
+once it has converged (as the one-step version does), so the poses are those of the one-step
+version to rounding.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from scipy import sparse
+
+from mappers.spatial import resection_kernels as kernels
 
 __all__ = ["orthogonal_iteration_batch"]
 
@@ -35,12 +39,13 @@ def _kabsch(G, seg, n, src, dst):
 
 
 def orthogonal_iteration_batch(seg: np.ndarray, p: np.ndarray, u: np.ndarray, n_seg: int,
-                               iters: int = 60):
+                               iters: int = 60, tol: float = 1e-10):
     """``(R, c, rms)`` per segment (``seg`` (K,) in 0..n_seg-1, each with three or more rows):
     the pose (rotation sensor -> world (S, 3, 3), position (S, 3)) of a sensor that sees the
     known points ``p`` (K, 3) along the unit rays ``u`` (K, 3), and the root mean square of its
     rays' angle errors [rad] (S,); as :func:`mappers.spatial.registration.orthogonal_iteration`
-    for each segment, ``iters`` iterations at most."""
+    for each segment, ``iters`` iterations at most; a segment stops once no entry of its rotation
+    moves by ``tol`` or more in an iteration (1e-10: as the one-step version)."""
     k = len(seg)
     G = sparse.csc_matrix((np.ones(k), (seg, np.arange(k))), shape=(n_seg, k))
     n = np.asarray(G.sum(axis=1)).ravel()
@@ -59,17 +64,15 @@ def orthogonal_iteration_batch(seg: np.ndarray, p: np.ndarray, u: np.ndarray, n_
                       / n[:, None])
         return pc, t
 
-    moving = np.ones(n_seg, dtype=bool)
-    for _ in range(iters):
-        pc, t = translation(Rcw)
-        q = np.einsum("kij,kj->ki", V, pc + t[seg])
-        new = _kabsch(G, seg, n, p, q)
-        new[~moving] = Rcw[~moving]  # a converged step stays where it stopped
-        done = np.abs(new - Rcw).max(axis=(1, 2)) < 1e-10
-        Rcw = new
-        moving &= ~done
-        if not moving.any():
-            break
+    # the iterations: one compiled loop per segment (mappers.spatial.resection_kernels), each
+    # until its rotation stops moving
+    order = np.argsort(seg, kind="stable")
+    indptr = np.zeros(n_seg + 1, dtype=np.int64)
+    np.cumsum(np.bincount(seg, minlength=n_seg), out=indptr[1:])
+    Rcw = np.ascontiguousarray(Rcw)
+    kernels.orthogonal_iterations(np.ascontiguousarray(p[order], dtype=np.float64),
+                                  np.ascontiguousarray(V[order]), indptr,
+                                  np.ascontiguousarray(F), Rcw, int(iters), float(tol))
     pc, t = translation(Rcw)
     cam = pc + t[seg]
     cos = np.einsum("kj,kj->k", cam, u) / np.maximum(np.linalg.norm(cam, axis=1), 1e-12)

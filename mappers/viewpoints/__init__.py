@@ -9,8 +9,10 @@ from mappers.viewpoints.engine import *  # noqa: F403 (its __all__, re-exported 
 from mappers.viewpoints.marginals import (
     adjustment_covariances,
     has_model_covariances,
+    held_out_anchors,
     model_covariances,
     released_anchor,
+    released_steps,
     schur_information,
     step_blocks,
 )
@@ -38,8 +40,8 @@ from mappers.viewpoints.walk_prior import forward_backward, gaussian_taps
 __all__ = [
     "BearingAdjustment", "BearingAdjustmentWarning",
     *engine.__all__,
-    "adjustment_covariances", "has_model_covariances", "model_covariances",
-    "released_anchor", "schur_information", "step_blocks",
+    "adjustment_covariances", "has_model_covariances", "held_out_anchors", "model_covariances",
+    "released_anchor", "released_steps", "schur_information", "step_blocks",
     "RangeBearingAdjustment",
     "anchored_start", "fit_start", "free_objects", "keep_if_better",
     "MAX_FOV_DEG", "MAX_FREE_OBJECTS", "VIEWPOINT_SEARCH_CONSTRAINTS", "ConeProblem",

@@ -36,6 +36,7 @@ say about them. Steps the adjustment left out (no pose) contribute nothing.
 from __future__ import annotations
 
 import numpy as np
+import scipy.linalg
 import scipy.sparse as sp
 
 from mappers.core.uncertainty import block_marginals
@@ -53,8 +54,9 @@ from mappers.viewpoints.engine import (
 from mappers.viewpoints.range_bearing import RangeBearingAdjustment
 
 __all__ = [
-    "adjustment_covariances", "has_model_covariances", "model_covariances", "released_anchor",
-    "sandwich_covariances", "schur_information", "step_blocks",
+    "adjustment_covariances", "block_gradients", "has_model_covariances", "held_out_anchors", "model_covariances",
+    "released_anchor", "released_steps", "sandwich_covariances", "schur_information",
+    "step_blocks",
 ]
 
 
@@ -104,15 +106,13 @@ def step_blocks(n_steps: int, timeline=None) -> np.ndarray:
     return out
 
 
-def sandwich_covariances(Sinv, U, Wf, t, f, g_pose, g_obj, blocks) -> np.ndarray:
-    """The (F, d, d) cluster-robust covariances (module docstring), generic over the pose size
-    ``p`` and the map's dimension ``d``: ``Sinv`` (dF, dF) the inverse of the objects' reduced
-    information, ``U`` (N, p, p) and ``Wf`` (N, p, dF) the poses' blocks, ``g_pose`` (K, p) and
-    ``g_obj`` (K, d) each reading's gradient, ``t`` its step (row of ``U``), ``f`` its free
-    object (-1: none) and ``blocks`` (N,) each step's block."""
+def block_gradients(U, Wf, t, f, g_pose, g_obj, blocks, n_cols) -> np.ndarray:
+    """(B, n_cols) the reduced gradient of the readings of each block (the objects' part, the
+    poses' part eliminated): the ``z_b`` of :func:`sandwich_covariances`, whose arguments these
+    are (``n_cols``: d times the number of unknown objects)."""
     n, p, d = len(U), U.shape[1], g_obj.shape[1]
     n_blocks = int(blocks.max()) + 1 if len(blocks) else 0
-    Z = np.zeros((n_blocks, Sinv.shape[0]))
+    Z = np.zeros((n_blocks, n_cols))
     k = f >= 0
     for c in range(d):
         np.add.at(Z, (blocks[t[k]], d * f[k] + c), g_obj[k, c])
@@ -120,6 +120,18 @@ def sandwich_covariances(Sinv, U, Wf, t, f, g_pose, g_obj, blocks) -> np.ndarray
     np.add.at(gp, t, g_pose)
     y = np.linalg.solve(U + 1e-12 * np.eye(p), gp[..., None])[..., 0]
     np.add.at(Z, blocks, -np.einsum("nij,ni->nj", Wf, y))
+    return Z
+
+
+def sandwich_covariances(Sinv, U, Wf, t, f, g_pose, g_obj, blocks) -> np.ndarray:
+    """The (F, d, d) cluster-robust covariances (module docstring), generic over the pose size
+    ``p`` and the map's dimension ``d``: ``Sinv`` (dF, dF) the inverse of the objects' reduced
+    information, ``U`` (N, p, p) and ``Wf`` (N, p, dF) the poses' blocks, ``g_pose`` (K, p) and
+    ``g_obj`` (K, d) each reading's gradient, ``t`` its step (row of ``U``), ``f`` its free
+    object (-1: none) and ``blocks`` (N,) each step's block."""
+    d = g_obj.shape[1]
+    Z = block_gradients(U, Wf, t, f, g_pose, g_obj, blocks, Sinv.shape[0])
+    n_blocks = len(Z)
     A = (Z @ Sinv).reshape(n_blocks, -1, d)
     return np.einsum("bfi,bfj->fij", A, A) * n_blocks / max(n_blocks - 1, 1)
 
@@ -144,15 +156,23 @@ def model_covariances(S, U, Wf, sandwich_args, dof_resid, n_residuals, n_unknown
     return cov
 
 
-def _bearing(est: BearingAdjustment, X, mask, anchor_ids, blocks) -> np.ndarray:
-    P, C, phi, used, placed, free, free_index = _frame(est, anchor_ids)
+def _bearing_parts(est: BearingAdjustment, X, mask, anchor_ids, blocks, unknown):
+    """The linearisation of a fitted bearing adjustment at its solution, ``unknown`` ((M,) bool)
+    the objects taken as unknowns (its free objects; with the anchors too for
+    :func:`held_out_anchors`): ``(U, V, Wf, g, h, sandwich_args, dof_resid, n_residuals,
+    n_unknowns, index)`` (``index``: each object's row among the unknowns, -1 for none;
+    ``n_unknowns`` counts the adjustment's own: its poses and free objects)."""
+    P, C, phi, used, placed, free, _ = _frame(est, anchor_ids)
+    unknown = unknown & placed
+    index = np.full(len(P), -1)
+    index[unknown] = np.arange(unknown.sum())
     limit = getattr(est, "dense_coupling_bytes", DENSE_COUPLING_MAX_BYTES)
-    if use_sparse_coupling(len(C), 3, 2, int(free.sum()), limit):
+    if use_sparse_coupling(len(C), 3, 2, int(unknown.sum()), limit):
         raise ValueError(
             f"model covariances of BEARING-BA hold the dense (N, 3, 2F) coupling, "
-            f"{8 * 6 * len(C) * int(free.sum()) / 2**30:.1f} GiB for N = {len(C)} steps and "
-            f"F = {int(free.sum())} free objects (above its dense_coupling_bytes, {limit:.3g}); "
-            "use uncertainty='bootstrap' or fewer steps")
+            f"{8 * 6 * len(C) * int(unknown.sum()) / 2**30:.1f} GiB for N = {len(C)} steps and "
+            f"F = {int(unknown.sum())} free objects (above its dense_coupling_bytes, "
+            f"{limit:.3g}); use uncertainty='bootstrap' or fewer steps")
     if sp.issparse(X):  # a compact history of a size the dense coupling fits
         X, mask = X.toarray(), (mask.toarray() if sp.issparse(mask) else mask)
     theta, seen = bearing_angles(X, mask)
@@ -161,43 +181,127 @@ def _bearing(est: BearingAdjustment, X, mask, anchor_ids, blocks) -> np.ndarray:
     obs = (t, i, theta[t, i])
     res, _ = bearing_residuals(P, C, phi, obs)
     w = robust_weights(res, est.scale_, est.loss)
-    U, V, Wf, _, _ = normal_blocks(P, C, phi, obs, w, free_index, int(free.sum()))
-    S = schur_information(U, V, Wf)
+    U, V, Wf, g, h = normal_blocks(P, C, phi, obs, w, index, int(unknown.sum()))
     a = pose_jacobian(bearing_residuals(P, C, phi, obs)[1])
-    g = (w * res)[:, None] * a
-    return model_covariances(S, U, Wf, (t, free_index[i], g, -g[:, :2], blocks),
-                        float(np.sum(w * res * res)), len(t),
-                        3 * int(used.sum()) + 2 * int(free.sum()), est.embedding_, free)
+    gk = (w * res)[:, None] * a
+    return (U, V, Wf, g, h, (t, index[i], gk, -gk[:, :2], blocks), float(np.sum(w * res * res)),
+            len(t), 3 * int(used.sum()) + 2 * int(free.sum()), index)
 
 
-def _range_bearing(est: RangeBearingAdjustment, X, masks, anchor_ids, blocks) -> np.ndarray:
+def _range_bearing_parts(est: RangeBearingAdjustment, X, masks, anchor_ids, blocks, unknown):
+    """:func:`_bearing_parts` of a fitted range-bearing adjustment."""
     masks = dict(masks or {})
     theta, seen = bearing_angles(X["bearing"], masks.get("bearing"))
     R = np.asarray(X["range"], dtype=float).T
     if masks.get("range") is not None:
         seen &= np.asarray(masks["range"], dtype=bool).T
     seen &= np.isfinite(R) & (R > 0)
-    P, C, phi, used, placed, free, free_index = _frame(est, anchor_ids)
+    P, C, phi, used, placed, free, _ = _frame(est, anchor_ids)
+    unknown = unknown & placed
+    index = np.full(len(P), -1)
+    index[unknown] = np.arange(unknown.sum())
     seen &= used[:, None] & placed[None, :]
     t, i = np.nonzero(seen)
     obs = (t, i, theta[t, i], R[t, i])
     wb = np.ones(len(t))
     # the adjustment's own blocks: scaled angle and range residuals, robust weights inside
-    U, V, Wf, _, _ = est._blocks(P, C, phi, obs, wb, est.scales_, free_index, int(free.sum()))
+    U, V, Wf, g, h = est._blocks(P, C, phi, obs, wb, est.scales_, index, int(unknown.sum()))
     ra, rr, d = rb.bearing_residuals(P, C, phi, obs)
     ua, ur = ra / est.scales_[0], rr / est.scales_[1]
     wa = robust_weights(ua, est.robust_scale, est.loss)
     wr = robust_weights(ur, est.robust_scale, est.loss)
-    S = schur_information(U, V, Wf)
     # each reading's gradient, as the adjustment's blocks build it: J^T W u over both residuals
     dist = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
     ga = (wa * ua / est.scales_[0])[:, None] * pose_jacobian(d)
     gr = (wr * ur / est.scales_[1])[:, None] * np.column_stack(
         [-d[:, 0] / dist, -d[:, 1] / dist, np.zeros_like(dist)])
-    g = ga + gr
-    return model_covariances(S, U, Wf, (t, free_index[i], g, -g[:, :2], blocks),
-                        float(np.sum(wa * ua * ua + wr * ur * ur)), 2 * len(t),
-                        3 * int(used.sum()) + 2 * int(free.sum()), est.embedding_, free)
+    gk = ga + gr
+    return (U, V, Wf, g, h, (t, index[i], gk, -gk[:, :2], blocks),
+            float(np.sum(wa * ua * ua + wr * ur * ur)), 2 * len(t),
+            3 * int(used.sum()) + 2 * int(free.sum()), index)
+
+
+def _covariances(parts, P, free) -> np.ndarray:
+    U, V, Wf, _, _, sandwich, dof, n_rows, n_unknowns, _ = parts
+    return model_covariances(schur_information(U, V, Wf), U, Wf, sandwich, dof, n_rows,
+                             n_unknowns, P, free)
+
+
+def released_steps(parts, free_rows, held_rows, prior: float | None = None
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """For each of ``held_rows`` (rows of the unknowns of ``parts``, a linearisation as
+    :func:`_bearing_parts` gives it, whose objects the adjustment held): the undamped
+    Gauss-Newton steps from the solution when it alone is released, the objects of
+    ``free_rows`` free, and its covariance then, the other held rows fixed
+    (:func:`model_covariances`, the same noise scale). ``(steps (H, H, d), covariances
+    (H, d, d))``: ``steps[j, k]`` the step of held row ``k`` when row ``j`` is released (zero
+    for the others when they are held exactly, ``prior`` None; with ``prior``, the information
+    ``prior * I`` of a held row's prior, as the adjustment with ``anchor_noise`` holds its
+    anchors, the others move too and row ``j`` loses its prior). Generic over the pose's size
+    and the map's dimension.
+
+    At the solution the free objects' and the poses' gradients vanish (and a held row's
+    readings balance its prior), so the step is what the released object's own readings pull
+    it by, through the rest of the adjustment: the linearised leave-one-out prediction of a
+    held object (the outlier test of a constraint, Baarda 1968; Koch, *Parameter Estimation
+    and Hypothesis Testing in Linear Models*, 1999, §4.4), at the cost of a small solve instead
+    of an adjustment again."""
+    U, V, Wf, g, h, (t, f_all, gp, go, blocks), dof, n_rows, n_unknowns, _ = parts
+    d = V.shape[1]
+    free_rows = np.asarray(free_rows, dtype=int)
+    held_rows = np.asarray(held_rows, dtype=int)
+    # the poses eliminated once for all unknowns: a subset's reduced information and gradient
+    # are the rows (and columns) of these
+    S = schur_information(U, V, Wf)
+    Ui = np.linalg.inv(U + 1e-12 * np.eye(U.shape[1]))
+    z = h.reshape(-1) - Wf.reshape(-1, S.shape[0]).T @ np.einsum("nij,nj->ni", Ui, g).ravel()
+    Z = block_gradients(U, Wf, t, f_all, gp, go, blocks, S.shape[0])
+    n_blocks = len(Z)
+    sigma2 = dof / max(n_rows - n_unknowns, 1)
+    cols_of = lambda rows: (np.asarray(rows)[:, None] * d + np.arange(d)[None, :]).ravel()  # noqa: E731
+    F, A = cols_of(free_rows), cols_of(held_rows)
+    steps = np.zeros((len(held_rows), len(held_rows), d))
+    covs = np.full((len(held_rows), d, d), np.nan)
+    SFF = 0.5 * (S[np.ix_(F, F)] + S[np.ix_(F, F)].T)
+    try:  # the free objects' block factored once; each released row is then a d x d Schur
+        GS = scipy.linalg.cho_solve(scipy.linalg.cho_factor(SFF, lower=True), S[np.ix_(F, A)])
+    except np.linalg.LinAlgError:  # a free object the readings do not pin down: its null
+        GS = scipy.linalg.pinvh(SFF) @ S[np.ix_(F, A)]  # directions left out (pseudo-inverse)
+    T = S[np.ix_(A, A)] - S[np.ix_(A, F)] @ GS  # the held rows' information, free ones eliminated
+    y = z[A] - GS.T @ z[F]  # and their reduced gradient
+    ZA = Z[:, A] - Z[:, F] @ GS  # each block's reduced gradient of the held rows
+    for n in range(len(held_rows)):
+        k = slice(n * d, (n + 1) * d)
+        M = 0.5 * (T[k, k] + T[k, k].T)
+        if not np.linalg.eigvalsh(M)[0] > 1e-12 * max(float(np.abs(M).max()), 1e-300):
+            covs[n] = np.inf  # released, the row is not pinned down
+            continue
+        Minv = np.linalg.inv(M)
+        if prior is None:
+            steps[n, n] = -Minv @ y[k]
+        else:  # the other held rows keep their prior; their readings balance it (y = 0)
+            T2 = T + prior * np.eye(len(A))
+            T2[k, k] = T[k, k]
+            y2 = np.zeros(len(A))
+            y2[k] = y[k]
+            steps[n] = -np.linalg.solve(T2, y2).reshape(-1, d)
+        model = sigma2 * Minv
+        a = ZA[:, k] @ Minv
+        robust = a.T @ a * n_blocks / max(n_blocks - 1, 1)
+        covs[n] = robust if np.trace(robust) > np.trace(model) else model
+    return steps, covs
+
+
+def _bearing(est: BearingAdjustment, X, mask, anchor_ids, blocks) -> np.ndarray:
+    free = _frame(est, anchor_ids)[5]
+    return _covariances(_bearing_parts(est, X, mask, anchor_ids, blocks, free),
+                        est.embedding_, free)
+
+
+def _range_bearing(est: RangeBearingAdjustment, X, masks, anchor_ids, blocks) -> np.ndarray:
+    free = _frame(est, anchor_ids)[5]
+    return _covariances(_range_bearing_parts(est, X, masks, anchor_ids, blocks, free),
+                        est.embedding_, free)
 
 
 def _adjustment(est):
@@ -258,3 +362,31 @@ def adjustment_covariances(est, X, mask, anchor_ids, timeline=None) -> np.ndarra
     if isinstance(X, dict):  # a fused map refined by the bearing-only adjustment
         X, mask = X["bearing"], (mask or {}).get("bearing")
     return _bearing(adj, X, mask, anchor_ids, blocks)
+
+
+def held_out_anchors(est, X, mask, anchor_ids, timeline=None) -> tuple[np.ndarray, np.ndarray]:
+    """Each anchor of the fitted adjustment in ``est`` held out, linearised: its position
+    (A, 2) and covariance (A, 2, 2) in the adjustment's frame when it alone is released and the
+    other anchors held (:func:`released_steps`; one step from the solution, no adjustment
+    again). Arguments as for :func:`adjustment_covariances`. An anchor its readings do not pin
+    down (a non-finite covariance) gets NaN rows."""
+    adj = _adjustment(est)
+    if adj is None:
+        raise ValueError(f"{type(est).__name__} holds no bundle adjustment")
+    blocks = step_blocks(len(adj.poses_), timeline)
+    if isinstance(adj, RangeBearingAdjustment):
+        make = _range_bearing_parts
+    else:
+        make = _bearing_parts
+        if isinstance(X, dict):  # a fused map refined by the bearing-only adjustment
+            X, mask = X["bearing"], (mask or {}).get("bearing")
+    ids = np.asarray(anchor_ids, dtype=int)
+    P, _, _, _, placed, free, _ = _frame(adj, ids)
+    parts = make(adj, X, mask, ids, blocks, placed)
+    index = parts[-1]
+    steps, covs = released_steps(parts, index[free], index[ids])
+    pos = np.asarray(adj.embedding_, dtype=float)[ids] + np.diagonal(steps).T
+    bad = ~np.all(np.isfinite(covs), axis=(1, 2)) | ~np.all(np.isfinite(pos), axis=1)
+    pos[bad], covs[bad] = np.nan, np.nan
+    return pos, covs
+

@@ -22,7 +22,7 @@ from mappers import METHODS
 SMALL = ["--sensor", "visibility", "--layouts", "1", "--poses", "2", "--steps", "200",
          "--every", "100", "--methods", "LPCA", "SMA(WGT)", "ISOMAP", "--no-progress"]
 # Longer, for the interrupt tests: enough units that a kill lands in the middle.
-LONGER = ["--sensor", "visibility", "--layouts", "1", "--poses", "2", "--steps", "300",
+LONGER = ["--sensor", "visibility", "--layouts", "1", "--poses", "2", "--steps", "200",
           "--every", "50", "--methods", "LPCA,SMA(WGT),ISOMAP,LLE", "--no-progress"]
 
 
@@ -98,10 +98,19 @@ def test_reproduce_end_to_end(clean, capsys):
     assert "0 computed now" in capsys.readouterr().out
 
 
+def _without_report(mp: pytest.MonkeyPatch) -> None:
+    """The interrupt tests compare results.csv only: the report (a table and three figures,
+    about 5 s of CPU a run) is not drawn when they run the command in this process;
+    test_reproduce_end_to_end checks it."""
+    mp.setattr("lfmdr_gym.experiments.protocol.write_report", lambda config, out, rows: [])
+
+
 @pytest.fixture(scope="module")
 def clean_longer(tmp_path_factory):
     out = tmp_path_factory.mktemp("cli-longer")
-    assert main(["reproduce", *LONGER, "--out", str(out)]) == 0
+    with pytest.MonkeyPatch.context() as mp:
+        _without_report(mp)
+        assert main(["reproduce", *LONGER, "--out", str(out)]) == 0
     return _comparable(read_results(out / "results.csv"))
 
 
@@ -133,7 +142,9 @@ def _interrupt_then_resume(tmp_path: Path, sig: int, extra: list[str],
     # Resume with one process (the worker count is not a setting, so it may change), in this
     # one: the same command through main(), without starting Python and importing the package
     # again (3 s of CPU per test)
-    assert main(["reproduce", *LONGER, "--out", str(tmp_path)]) == 0
+    with pytest.MonkeyPatch.context() as mp:
+        _without_report(mp)
+        assert main(["reproduce", *LONGER, "--out", str(tmp_path)]) == 0
     return proc.returncode, rows_at_stop
 
 

@@ -59,6 +59,23 @@ def test_model_needs_an_adjustment():
         _quiet(X, ANCHORS, P[ANCHORS], uncertainty="exact")
 
 
+def test_floor_is_the_model_plus_a_share_of_the_anchors_extent():
+    from mappers.core.uncertainty import SYSTEMATIC_FLOOR
+
+    P, X = _bearing(2)
+    model = _quiet(X, ANCHORS, P[ANCHORS], uncertainty="model")
+    floor = _quiet(X, ANCHORS, P[ANCHORS], uncertainty="floor")
+    np.testing.assert_array_equal(floor.positions, model.positions)
+    np.testing.assert_array_equal(floor.covariances[ANCHORS], 0.0)
+    others = np.setdiff1d(np.arange(len(P)), [*ANCHORS, *model.unmapped])
+    extent = np.max(np.linalg.norm(P[ANCHORS][:, None] - P[ANCHORS][None], axis=2))
+    np.testing.assert_allclose(floor.covariances[others] - model.covariances[others],
+                               np.broadcast_to((SYSTEMATIC_FLOOR * extent) ** 2 * np.eye(2),
+                                               (len(others), 2, 2)), rtol=1e-9, atol=1e-15)
+    with pytest.raises(ValueError, match="uncertainty='floor' needs a method"):
+        _quiet(X, ANCHORS, P[ANCHORS], "CAL-SMA", uncertainty="floor")
+
+
 def test_model_covariances_beyond_the_dense_coupling_are_refused():
     """Issue 34: an adjustment on the sparse engine has no dense normal equations to invert."""
     P, X = _bearing(3)
@@ -109,7 +126,7 @@ def test_range_bearing_model():
 def test_bootstrap_of_a_visibility_map():
     P, poses = layout(12, 4), walk(150, seed=4)
     X = (sensed(P, poses)[0] < 0.4).astype(float)
-    m = _quiet(X, ANCHORS, P[ANCHORS], uncertainty=True)
+    m = _quiet(X, ANCHORS, P[ANCHORS], uncertainty="bootstrap")  # (True: the jackknife)
     assert m.method == "CAL-SMA"
     _check_shape(m, len(P))
     # centimetres of spread for centimetres of error, not metres or microns

@@ -14,6 +14,7 @@ from mappers.core.uncertainty import (
     rms_radius,
     sample_covariances,
     sample_size_factor,
+    systematic_floor,
     transform_covariances,
 )
 
@@ -106,3 +107,24 @@ def test_step_blocks_keep_robots_apart():
     b = step_blocks(8, timeline)  # blocks of 3 steps, each robot's own
     assert len(set(b[timeline[:, 0] == 0]) & set(b[timeline[:, 0] == 1])) == 0
     assert b[0] == b[2] == b[4] != b[6]
+
+
+def test_systematic_floor_adds_a_share_of_the_anchors_extent():
+    # anchors 0, 1, 2 at most 5 m apart: 0.3 % of 5 m = 1.5 cm per axis on the other objects;
+    # anchors, unbounded and NaN covariances kept; the floor scales with the map
+    pos = np.array([[0.0, 0.0], [3.0, 0.0], [3.0, 4.0], [1.0, 1.0], [2.0, 1.0], [2.0, 2.0]])
+    cov = np.zeros((6, 2, 2))
+    cov[3:] = 1e-4 * np.eye(2)
+    cov[4] = np.inf
+    cov[5] = np.nan
+    out = systematic_floor(cov, pos, [0, 1, 2], 0.003)
+    np.testing.assert_allclose(out[3], (1e-4 + 0.015**2) * np.eye(2), rtol=1e-12)
+    np.testing.assert_array_equal(out[:3], 0.0)
+    assert np.all(np.isinf(out[4])) and np.all(np.isnan(out[5]))
+    scaled = systematic_floor(4.0 * cov, 2.0 * pos, [0, 1, 2], 0.003)
+    np.testing.assert_allclose(scaled[3], 4.0 * out[3], rtol=1e-12)
+    np.testing.assert_array_equal(cov[3], 1e-4 * np.eye(2))  # the input is not changed
+    with pytest.raises(ValueError, match="two placed anchors"):
+        systematic_floor(cov, pos, [0], 0.003)
+    with pytest.raises(ValueError, match="share"):
+        systematic_floor(cov, pos, [0, 1], -0.1)
