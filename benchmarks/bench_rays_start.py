@@ -2,12 +2,13 @@
 and on ``LFMDR-Camera3D-v0``.
 
     python benchmarks/bench_rays_start.py [--sequences eight_s3,grid_s3,...] [--seeds 34000,34001]
-        [--starts anchors,global]
+        [--starts anchors,global,incremental]
 
 ``start="anchors"`` (the default) resects and intersects from the anchors; ``start="global"``
 is global structure from motion placed on the anchors at the end
-(:mod:`mappers.spatial.global_start`). Per sequence / layout and start: the non-anchor MPE, the
-share of scored tags mapped and the CPU seconds of the map. STAR-loc with the benchmark's
+(:mod:`mappers.spatial.global_start`); ``start="incremental"`` incremental structure from
+motion with merging (:mod:`mappers.spatial.incremental`). Per sequence / layout and start: the
+non-anchor MPE, the share of scored tags mapped and the CPU seconds of the map. STAR-loc with the benchmark's
 anchors, scoring and bearing parameters (:func:`lfmdr_gym.experiments.starloc.map_starloc`);
 ``LFMDR-Camera3D-v0`` as ``benchmarks/bench_camera3d.py --sensors bearing`` (N = 2000, 1
 degree). The data: ``<repo>/../shared/data/starloc`` (never copied into the repository).
@@ -51,23 +52,23 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sequences", default="eight_s3,grid_s3,loop-2d-fast_s3,loop-2d_s3,"
                                             "loop-3d_s3,zigzag_s3")
     ap.add_argument("--seeds", default="34000,34001,34002,34003,34004,34005")
-    ap.add_argument("--starts", default="anchors,global")
+    ap.add_argument("--starts", default="anchors,global,incremental")
     ap.add_argument("--data", type=Path, default=DATA)
     args = ap.parse_args(argv)
     starts = args.starts.split(",")
-    print(f"{'data':18s} {'start':8s} {'MPE [m]':>8s} {'mapped':>7s} {'CPU [s]':>7s}")
+    print(f"{'data':18s} {'start':11s} {'MPE [m]':>8s} {'mapped':>7s} {'CPU [s]':>7s}")
     for seq in [s for s in args.sequences.split(",") if s]:
         for start in starts:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 r = map_starloc(args.data / seq, "bearing",
                                 {**STARLOC_PARAMS["bearing"], "start": start})
-            print(f"{seq:18s} {start:8s} {r.mpe:8.4f} {r.mapped:7.0%} {r.cpu_seconds:7.2f}",
+            print(f"{seq:18s} {start:11s} {r.mpe:8.4f} {r.mapped:7.0%} {r.cpu_seconds:7.2f}",
                   flush=True)
     for seed in [int(s) for s in args.seeds.split(",") if s]:
         for start in starts:
             mpe, mapped, cpu = camera3d(seed, start)
-            print(f"{'camera3d ' + str(seed):18s} {start:8s} {mpe:8.4f} {mapped:7.0%} {cpu:7.2f}",
+            print(f"{'camera3d ' + str(seed):18s} {start:11s} {mpe:8.4f} {mapped:7.0%} {cpu:7.2f}",
                   flush=True)
     return 0
 

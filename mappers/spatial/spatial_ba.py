@@ -24,6 +24,7 @@ from mappers.core.validation import check_views
 from mappers.spatial.adjustment import adjust_viewpoints
 from mappers.spatial.covisibility_3d import CoVisibility3D
 from mappers.spatial.global_start import register_global
+from mappers.spatial.incremental import register_incremental
 from mappers.spatial.rays import ray_observations
 from mappers.spatial.registration import MIN_RAY_ANGLE, register_points, register_rays
 from mappers.spatial.regrow import intersect_by_consensus, step_ray_errors
@@ -72,9 +73,13 @@ class SpatialAdjustment(EmbeddingTransformer, BaseEstimator):
             intersection grown from the anchors (:func:`~mappers.spatial.registration.register_rays`);
             (default); ``"global"`` global structure from motion, the anchors only placing it
             (:func:`mappers.spatial.global_start.register_global`), then grown as from the
-            anchors (from the anchors alone where its structure holds fewer than three). Rays
-            with ranges always start from the registered frames. Measured in
-            ``docs/guide/3d.md``: neither start wins everywhere, so the default stays.
+            anchors (from the anchors alone where its structure holds fewer than three);
+            ``"incremental"`` incremental structure from motion with merging: many two-step
+            seeds grown in their own frames, merged by their shared objects, placed by the
+            anchors (:func:`mappers.spatial.incremental.register_incremental`), then grown as
+            from the anchors (from the anchors alone where no piece holds three). Rays with
+            ranges always start from the registered frames. Measured in ``docs/guide/3d.md``:
+            no start wins everywhere, so the default stays.
 
     Attributes (after fit): ``embedding_`` (M, 3) world positions, NaN for objects it could not
     place or placed inconsistently (``inconsistent_``, see ``max_ray_error``); ``rotations_`` (N, 3, 3) and ``positions_`` (N, 3) the steps' poses (NaN: step not
@@ -125,8 +130,9 @@ class SpatialAdjustment(EmbeddingTransformer, BaseEstimator):
         if anchor_ids is None or anchor_positions is None:
             raise ValueError("SPATIAL-BA needs anchors: anchor_ids and anchor_positions (A, 3)")
         ids, pos = check_anchors_3d(anchor_ids, anchor_positions, obs.n_objects)
-        if self.start not in ("anchors", "global"):
-            raise ValueError(f"start must be 'anchors' or 'global', got {self.start!r}")
+        if self.start not in ("anchors", "global", "incremental"):
+            raise ValueError(f"start must be 'anchors', 'global' or 'incremental', got "
+                             f"{self.start!r}")
         if not (isinstance(self.tol, (int, float)) and self.tol >= 0):
             raise ValueError(f"tol must be a number >= 0, got {self.tol!r}")
         if np.isfinite(obs.range).any():
@@ -176,14 +182,16 @@ class SpatialAdjustment(EmbeddingTransformer, BaseEstimator):
     @staticmethod
     def _rays_start(obs, ids, pos, how, noise):
         """Rays alone: ``how`` = "global": the global structure from motion
-        (:func:`~mappers.spatial.global_start.register_global`) grown by resection and
-        intersection; "anchors" or where the global one places nothing: resection and
+        (:func:`~mappers.spatial.global_start.register_global`), "incremental": the merged
+        pieces (:func:`~mappers.spatial.incremental.register_incremental`), grown by resection
+        and intersection; "anchors" or where the global one places nothing: resection and
         intersection from the anchors; where that leaves steps
         unplaced, the sightings' 3-D map (COVIS-3D) stands in for the objects' positions to
         resect them roughly (their rays to it within 30 degrees), and the objects are intersected
         again from those steps."""
-        if how == "global":
-            P, R, C = register_global(obs, ids, pos, noise=noise)
+        if how in ("global", "incremental"):
+            fn = register_global if how == "global" else register_incremental
+            P, R, C = fn(obs, ids, pos, noise=noise)
             if np.isfinite(C[:, 0]).any():
                 return register_rays(obs, ids, pos, start=(P, R, C))
         start = register_rays(obs, ids, pos)

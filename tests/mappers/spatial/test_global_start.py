@@ -143,7 +143,7 @@ def test_spatial_ba_global_start_maps_the_world():
 
 def test_spatial_ba_refuses_an_unknown_start():
     obs, X, _, _ = _world(n_steps=4, m=6)
-    with pytest.raises(ValueError, match="start must be 'anchors' or 'global'"):
+    with pytest.raises(ValueError, match="start must be 'anchors', 'global' or 'incremental'"):
         SpatialAdjustment(start="auto").fit(_history(obs), anchor_ids=np.arange(4),
                                             anchor_positions=X[:4])
 
