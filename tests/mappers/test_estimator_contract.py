@@ -29,7 +29,13 @@ from mappers.masked import (
 )
 from mappers.paper import LaplacianEigenmap, LocallyLinear, MaximumVarianceUnfolding
 from mappers.smacof import WeightedSMACOF
-from mappers.spatial import CoVisibility3D, FrustumAdjustment, Range3D, SpatialAdjustment
+from mappers.spatial import (
+    CoVisibility3D,
+    FrustumAdjustment,
+    FrustumWalkAdjustment,
+    Range3D,
+    SpatialAdjustment,
+)
 from mappers.viewpoints import (
     BearingAdjustment,
     RangeBearingAdjustment,
@@ -66,6 +72,7 @@ ESTIMATORS = [
     CoVisibility3D(),
     Range3D(),
     FrustumAdjustment(),
+    FrustumWalkAdjustment(),
 ]
 
 _FITTED = (
@@ -114,6 +121,9 @@ _CANNOT_FIT = {
              "anchors",
     FrustumAdjustment: "maps visibility (0/1) histories with 3-D anchors and the camera's "
                        "calibration; the checks give real-valued data, no anchors and no camera",
+    FrustumWalkAdjustment: "maps visibility (0/1) histories, steps in walk order, with 3-D anchors "
+                           "and the camera's calibration; the checks give real-valued data, no "
+                           "anchors and no camera",
 }
 _FUSED = {
     RangeBearingAdjustment: "maps fused range and bearing histories (a mapping sensor -> matrix, "
