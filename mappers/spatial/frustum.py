@@ -323,26 +323,23 @@ class FrustumAdjustment(EmbeddingTransformer, BaseEstimator):
         return self
 
     def _adjust(self, P0, ids, seen, camera: FrustumCamera, soft: np.ndarray) -> None:
+        """Adjust the start ``P0`` (the anchors in place) to the sightings ``seen`` (N, M) by
+        :meth:`_solve` on the placed objects; keep it if it explains them better."""
         placed = np.all(np.isfinite(P0), axis=1)
-        free = free_objects(placed, ids, "FRUSTUM-BA", 3, MAX_FREE_OBJECTS, "COVIS-3D")
+        free = free_objects(placed, ids, self._label, 3, MAX_FREE_OBJECTS, "COVIS-3D")
         use = np.flatnonzero(placed)
         free_index = np.full(len(use), -1, dtype=np.int64)
         n_free = int(free[use].sum())
         free_index[free[use]] = np.arange(n_free)
         S = np.ascontiguousarray(seen[:, use])
         P = np.ascontiguousarray(P0[use], dtype=float)
-        C = self._search(P, S, camera, float(soft[0]))
 
         def problem(s):
             return FrustumProblem(S, free_index, n_free,
                                   camera.args(float(s), self.range_softness, self.miss_rate))
 
-        start_C, start_loss = problem(soft[-1]).pose_steps(P, C.copy(), self.pose_iters)
-        loss = start_loss
-        for s in soft:
-            prob = problem(s)
-            C, loss = prob.pose_steps(P, C, self.pose_iters)
-            P, C, loss = prob.joint(P, C, self.rounds)
+        P, C, loss, start_C, start_loss = self._solve(P, S, camera, soft, problem,
+                                                      free_index >= 0, P0[ids])
         n_pairs = max(S.size, 1)
         self.loss_, self.start_loss_ = loss / n_pairs, start_loss / n_pairs
         out = np.full(P0.shape, np.nan)
@@ -352,6 +349,22 @@ class FrustumAdjustment(EmbeddingTransformer, BaseEstimator):
             out, P0.copy(), placed, self.loss_ if np.isfinite(loss) else np.inf,
             self.start_loss_, "sightings", FrustumAdjustmentWarning)
         self.poses_ = C if self.refined_ else start_C
+
+    _label = "FRUSTUM-BA"
+
+    def _solve(self, P, S, camera: FrustumCamera, soft: np.ndarray, problem, free, anchors):
+        """``(P, C, loss, start_C, start_loss)``: the placed objects and the viewpoints after the
+        grid search and, for each softness of ``soft``, pose steps and joint rounds
+        (``problem(s)`` is the :class:`FrustumProblem` at softness ``s``; ``free`` marks the free
+        objects, ``anchors`` the anchors' positions)."""
+        C = self._search(P, S, camera, float(soft[0]))
+        start_C, start_loss = problem(soft[-1]).pose_steps(P, C.copy(), self.pose_iters)
+        loss = start_loss
+        for s in soft:
+            prob = problem(s)
+            C, loss = prob.pose_steps(P, C, self.pose_iters)
+            P, C, loss = prob.joint(P, C, self.rounds)
+        return P, C, loss, start_C, start_loss
 
     def _search(self, P, S, camera: FrustumCamera, softness: float) -> np.ndarray:
         """Each step's best viewpoint among the grid's candidates (floor positions over the

@@ -36,14 +36,10 @@ from scipy.ndimage import gaussian_filter1d
 from sklearn.utils._param_validation import Interval
 
 from mappers.spatial.frustum import (
-    MAX_FREE_OBJECTS,
     FrustumAdjustment,
-    FrustumAdjustmentWarning,
     FrustumCamera,
-    FrustumProblem,
     view_log_prob,
 )
-from mappers.viewpoints import free_objects, keep_if_better
 
 __all__ = ["MAX_WALK_ENTRIES", "FrustumWalkAdjustment", "height_search", "walk_viewpoints"]
 
@@ -207,39 +203,23 @@ class FrustumWalkAdjustment(FrustumAdjustment):
                                step_sigma=self.step_sigma,
                                turn_sigma=math.radians(self.turn_sigma_deg))
 
-    def _adjust(self, P0, ids, seen, camera: FrustumCamera, soft: np.ndarray) -> None:
-        placed = np.all(np.isfinite(P0), axis=1)
-        free = free_objects(placed, ids, "FRUSTUM-BA-WALK", 3, MAX_FREE_OBJECTS, "COVIS-3D")
-        use = np.flatnonzero(placed)
-        free_index = np.full(len(use), -1, dtype=np.int64)
-        n_free = int(free[use].sum())
-        free_index[free[use]] = np.arange(n_free)
-        S = np.ascontiguousarray(seen[:, use])
-        P = np.ascontiguousarray(P0[use], dtype=float)
-        z = P0[ids, 2]
+    _label = "FRUSTUM-BA-WALK"
+
+    def _solve(self, P, S, camera: FrustumCamera, soft: np.ndarray, problem, free, anchors):
+        """For each softness: the walk's viewpoints, each free object's best height, its
+        Newton steps with the viewpoints held, and (but after the last) FRUSTUM-BA's joint
+        rounds; the start is the walk's viewpoints at the last softness."""
+        z = anchors[:, 2]
         heights = np.arange(z.min() - self.height_margin,
                             z.max() + self.height_margin + self.height_step / 2, self.height_step)
-
-        def problem(s):
-            return FrustumProblem(S, free_index, n_free,
-                                  camera.args(float(s), self.range_softness, self.miss_rate))
-
         start_C = self._walk(P, S, camera, float(soft[-1]))
         start_loss = loss = problem(soft[-1]).cost(P, start_C)
         C = start_C
         for k, s in enumerate(soft):
             C = self._walk(P, S, camera, float(s))
-            P = height_search(P, S, C, camera, free_index >= 0, heights, softness=float(s),
+            P = height_search(P, S, C, camera, free, heights, softness=float(s),
                               range_softness=self.range_softness, miss_rate=self.miss_rate)
             P, loss = problem(s).object_steps(P, C, self.rounds)
             if k < len(soft) - 1:  # the joint rounds move the map; the next walk search the
                 P, C, loss = problem(s).joint(P, C, self.joint_rounds)  # viewpoints again
-        n_pairs = max(S.size, 1)
-        self.loss_, self.start_loss_ = loss / n_pairs, start_loss / n_pairs
-        out = np.full(P0.shape, np.nan)
-        out[use] = P
-        out[ids] = P0[ids]
-        self.refined_, self.embedding_ = keep_if_better(
-            out, P0.copy(), placed, self.loss_ if np.isfinite(loss) else np.inf,
-            self.start_loss_, "sightings", FrustumAdjustmentWarning)
-        self.poses_ = C if self.refined_ else start_C
+        return P, C, loss, start_C, start_loss
