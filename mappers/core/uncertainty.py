@@ -51,10 +51,11 @@ SYSTEMATIC_FLOOR = 0.003
 """``uncertainty="floor"``'s standard deviation per axis of a landmark's systematic error, as a
 share of the anchors' extent (the largest distance between two anchors): 0.3 %, 1.2 cm for
 anchors 4 m apart. Chosen on STAR-loc's s3 sequences (stereo, SPATIAL-BA: the smallest share,
-in steps of 0.0005, that puts 95 % of their 181 scored tags inside their 95 % regions) and
+in steps of 0.0005, that put 95 % of their 181 scored tags inside their 95 % regions; 94.5 % with
+the maps of SPATIAL-BA's later ``gain_tol`` stop) and
 confirmed on bodies of data not used to choose it: MRCLAM's four runs (range and bearing,
 LOC-SMA: 0.932 inside, sharpness 1.95) and STAR-loc's s1 and s2 sequences (other calibrations:
-0.863, 0.92) — ``benchmarks/bench_uncertainty.py``, docs/guide/uncertainty.md."""
+0.863, 0.93) — ``benchmarks/bench_uncertainty.py``, docs/guide/uncertainty.md."""
 
 
 def check_uncertainty(value) -> bool | str:

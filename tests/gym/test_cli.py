@@ -158,8 +158,10 @@ def test_sigkill_then_rerun_gives_the_rows_of_a_clean_run(clean_longer, tmp_path
 
 @pytest.mark.xdist_group("cli-clean-longer")
 @pytest.mark.parametrize(("sig", "jobs", "group"),
-                         [(signal.SIGINT, "2", False), (signal.SIGINT, "2", True),
-                          (signal.SIGTERM, "1", False)],
+                         # SIGINT to the main process alone is in -m slow: Ctrl-C to the whole
+                         # group interrupts the same two workers through the same handler
+                         [pytest.param(signal.SIGINT, "2", False, marks=pytest.mark.slow),
+                          (signal.SIGINT, "2", True), (signal.SIGTERM, "1", False)],
                          ids=["ctrl-c-2-workers", "ctrl-c-to-the-process-group", "sigterm"])
 def test_ctrl_c_then_rerun_gives_the_rows_of_a_clean_run(clean_longer, tmp_path, sig, jobs, group):
     code, stopped = _interrupt_then_resume(tmp_path, sig, ["--jobs", jobs], group)

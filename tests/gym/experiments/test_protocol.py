@@ -233,6 +233,9 @@ def test_best_param_is_lowest_mean_mpe_and_penalises_failures():
     assert (best["runs"], best["failed"]) == (2, 0)
 
 
+# in the group of the two-worker test, which runs first: loky's worker processes are reused
+# (about 5 s of starting and importing spared)
+@pytest.mark.xdist_group("protocol-clean-run")
 def test_a_method_registered_in_this_process_reaches_the_worker_processes(tmp_path):
     """register_method in the user's script (the registry is per process): the protocol ships
     the spec to its workers, so jobs=2 gives the rows of jobs=1, not 'unknown method' errors."""
