@@ -442,6 +442,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _terminate(signum: int, frame: Any) -> None:
+    """SIGTERM stops like Ctrl-C: by whatever handles SIGINT now (a protocol's run remembers
+    the interrupt, so that one landing in a finaliser still stops it), else as an interrupt."""
+    handler = signal.getsignal(signal.SIGINT)
+    if callable(handler):
+        handler(signum, frame)
     raise KeyboardInterrupt(f"signal {signum}")
 
 

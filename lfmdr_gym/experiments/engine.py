@@ -9,6 +9,7 @@ on an interrupt the main process terminates its workers at once instead of waiti
 from __future__ import annotations
 
 import signal
+import sys
 import threading
 import warnings
 from collections.abc import Callable, Iterable, Iterator
@@ -128,14 +129,24 @@ class _Interrupt:
 @contextmanager
 def _remembered_interrupt() -> Iterator[_Interrupt]:
     """Remember a Ctrl-C as well as raising it. The KeyboardInterrupt a signal raises can land
-    inside a library's cleanup code (a finaliser, a callback) that reports and swallows it; the
-    remembered flag stops the run at the next result all the same."""
+    inside a library's cleanup code (a finaliser, a callback) that swallows it; the remembered
+    flag stops the run at the next result all the same, and Python's report of the swallowed
+    interrupt ("Exception ignored in ...", a traceback on stderr) is left out."""
     interrupt = _Interrupt()
     if threading.current_thread() is not threading.main_thread():
         yield interrupt
         return
     previous = signal.signal(signal.SIGINT, interrupt.handler)
+    previous_hook = sys.unraisablehook
+
+    def quiet_remembered_interrupt(unraisable: Any) -> None:
+        # the interrupt a finaliser swallowed is remembered: not reported as an error
+        if not (isinstance(unraisable.exc_value, KeyboardInterrupt) and interrupt.event.is_set()):
+            previous_hook(unraisable)
+
+    sys.unraisablehook = quiet_remembered_interrupt
     try:
         yield interrupt
     finally:
         signal.signal(signal.SIGINT, previous)
+        sys.unraisablehook = previous_hook
