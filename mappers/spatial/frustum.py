@@ -141,6 +141,16 @@ def view_log_prob(positions, viewpoints, camera: FrustumCamera, softness: float,
     return out + log_expit(ranged)
 
 
+def _damped_block_steps(A: np.ndarray, g: np.ndarray, lam: float) -> np.ndarray:
+    """Each block's Newton step ``x_i`` of ``(A_i + lam diag(A_i) + 1e-9 I) x_i = g_i``: the
+    blocks ``A`` (n, k, k) damped as Levenberg-Marquardt does, the gradients ``g`` (n, k)."""
+    A = A.copy()
+    diag = np.arange(A.shape[-1])
+    A[:, diag, diag] *= 1.0 + lam
+    A[:, diag, diag] += 1e-9
+    return np.linalg.solve(A, g[..., None])[..., 0]
+
+
 class FrustumProblem:
     """The frustum loss of fixed sightings ``seen`` ((N, M) bool) and its Gauss-Newton steps;
     ``free_index[j]`` is object j's row among the ``n_free`` free objects, or -1 (an anchor:
@@ -167,15 +177,11 @@ class FrustumProblem:
     def pose_steps(self, P, C, iters: int):
         """``(C, loss)`` after up to ``iters`` damped Newton steps of every viewpoint alone."""
         loss, lam = self.cost(P, C), 1e-2
-        diag = np.arange(3)
         for _ in range(iters):
             _, U, _, _, g, _ = self.blocks(P, C, objects=False)
 
             def trial(lam, U=U, g=g, C=C):
-                A = U.copy()
-                A[:, diag, diag] *= 1.0 + lam
-                A[:, diag, diag] += 1e-9
-                C2 = C - np.linalg.solve(A, g[..., None])[..., 0]
+                C2 = C - _damped_block_steps(U, g, lam)
                 return C2, self.cost(P, C2)
 
             state, loss, lam, moved = damped_step(trial, loss, lam, DAMPING)
@@ -189,16 +195,12 @@ class FrustumProblem:
         the viewpoints ``C`` held (each object's 3 x 3 block: the objects do not couple)."""
         loss, lam = self.cost(P, C), 1e-2
         free = self.free_index >= 0
-        diag = np.arange(3)
         for _ in range(iters):
             _, _, V, _, _, h = self.blocks(P, C)
 
             def trial(lam, V=V, h=h, P=P):
-                A = V.copy()
-                A[:, diag, diag] *= 1.0 + lam
-                A[:, diag, diag] += 1e-9
                 P2 = P.copy()
-                P2[free] -= np.linalg.solve(A, h[..., None])[..., 0]
+                P2[free] -= _damped_block_steps(V, h, lam)
                 return P2, self.cost(P2, C)
 
             state, loss, lam, moved = damped_step(trial, loss, lam, DAMPING)
