@@ -176,38 +176,36 @@ class FrustumProblem:
 
     def pose_steps(self, P, C, iters: int):
         """``(C, loss)`` after up to ``iters`` damped Newton steps of every viewpoint alone."""
-        loss, lam = self.cost(P, C), 1e-2
-        for _ in range(iters):
-            _, U, _, _, g, _ = self.blocks(P, C, objects=False)
-
-            def trial(lam, U=U, g=g, C=C):
-                C2 = C - _damped_block_steps(U, g, lam)
-                return C2, self.cost(P, C2)
-
-            state, loss, lam, moved = damped_step(trial, loss, lam, DAMPING)
-            if not moved:
-                break
-            C = state
+        _, C, loss = self._block_steps(P, C, iters, poses=True)
         return C, loss
 
     def object_steps(self, P, C, iters: int):
         """``(P, loss)`` after up to ``iters`` damped Newton steps of the free objects alone,
         the viewpoints ``C`` held (each object's 3 x 3 block: the objects do not couple)."""
+        P, _, loss = self._block_steps(P, C, iters, poses=False)
+        return P, loss
+
+    def _block_steps(self, P, C, iters: int, *, poses: bool):
+        """``(P, C, loss)`` after up to ``iters`` damped Newton steps of the viewpoints alone
+        (``poses``) or of the free objects alone, each on its own block."""
         loss, lam = self.cost(P, C), 1e-2
         free = self.free_index >= 0
         for _ in range(iters):
-            _, _, V, _, _, h = self.blocks(P, C)
+            _, U, V, _, g, h = self.blocks(P, C, objects=not poses)
 
-            def trial(lam, V=V, h=h, P=P):
-                P2 = P.copy()
-                P2[free] -= _damped_block_steps(V, h, lam)
-                return P2, self.cost(P2, C)
+            def trial(lam, U=U, V=V, g=g, h=h, P=P, C=C):
+                if poses:
+                    C2, P2 = C - _damped_block_steps(U, g, lam), P
+                else:
+                    C2, P2 = C, P.copy()
+                    P2[free] -= _damped_block_steps(V, h, lam)
+                return (P2, C2), self.cost(P2, C2)
 
             state, loss, lam, moved = damped_step(trial, loss, lam, DAMPING)
             if not moved:
                 break
-            P = state
-        return P, loss
+            P, C = state
+        return P, C, loss
 
     def joint(self, P, C, rounds: int):
         """``(P, C, loss)`` after up to ``rounds`` joint Levenberg-Marquardt rounds."""
