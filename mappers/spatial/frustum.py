@@ -176,49 +176,40 @@ class FrustumProblem:
 
     def pose_steps(self, P, C, iters: int):
         """``(C, loss)`` after up to ``iters`` damped Newton steps of every viewpoint alone."""
-        _, C, loss = self._block_steps(P, C, iters, poses=True)
+        _, C, loss = self._steps(P, C, iters, "poses")
         return C, loss
 
     def object_steps(self, P, C, iters: int):
         """``(P, loss)`` after up to ``iters`` damped Newton steps of the free objects alone,
         the viewpoints ``C`` held (each object's 3 x 3 block: the objects do not couple)."""
-        P, _, loss = self._block_steps(P, C, iters, poses=False)
+        P, _, loss = self._steps(P, C, iters, "objects")
         return P, loss
-
-    def _block_steps(self, P, C, iters: int, *, poses: bool):
-        """``(P, C, loss)`` after up to ``iters`` damped Newton steps of the viewpoints alone
-        (``poses``) or of the free objects alone, each on its own block."""
-        loss, lam = self.cost(P, C), 1e-2
-        free = self.free_index >= 0
-        for _ in range(iters):
-            _, U, V, _, g, h = self.blocks(P, C, objects=not poses)
-
-            def trial(lam, U=U, V=V, g=g, h=h, P=P, C=C):
-                if poses:
-                    C2, P2 = C - _damped_block_steps(U, g, lam), P
-                else:
-                    C2, P2 = C, P.copy()
-                    P2[free] -= _damped_block_steps(V, h, lam)
-                return (P2, C2), self.cost(P2, C2)
-
-            state, loss, lam, moved = damped_step(trial, loss, lam, DAMPING)
-            if not moved:
-                break
-            P, C = state
-        return P, C, loss
 
     def joint(self, P, C, rounds: int):
         """``(P, C, loss)`` after up to ``rounds`` joint Levenberg-Marquardt rounds."""
+        return self._steps(P, C, rounds, "joint")
+
+    def _steps(self, P, C, iters: int, which: str):
+        """``(P, C, loss)`` after up to ``iters`` damped steps of ``which``: the viewpoints
+        alone (``"poses"``), the free objects alone (``"objects"``), each on its own block, or
+        both (``"joint"``, the Schur-eliminated system)."""
         loss, lam = self.cost(P, C), 1e-2
         free = self.free_index >= 0
-        for _ in range(rounds):
-            _, U, V, W, g, h = self.blocks(P, C)
+        for _ in range(iters):
+            _, U, V, W, g, h = self.blocks(P, C, objects=which != "poses")
 
             def trial(lam, U=U, V=V, W=W, g=g, h=h, P=P, C=C):
-                dc, dp = schur_step(U, V, W, g, h, lam)
-                P2 = P.copy()
-                P2[free] += dp
-                C2 = C + dc
+                P2, C2 = P, C
+                if which == "joint":
+                    dc, dp = schur_step(U, V, W, g, h, lam)
+                    P2 = P.copy()
+                    P2[free] += dp
+                    C2 = C + dc
+                elif which == "poses":
+                    C2 = C - _damped_block_steps(U, g, lam)
+                else:
+                    P2 = P.copy()
+                    P2[free] -= _damped_block_steps(V, h, lam)
                 return (P2, C2), self.cost(P2, C2)
 
             state, loss, lam, moved = damped_step(trial, loss, lam, DAMPING)
