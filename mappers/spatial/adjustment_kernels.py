@@ -22,7 +22,22 @@ from mappers.core.jit import compiled_on_first_use
 
 __all__ = ["normal_equations", "pose_steps", "reduced_system"]  # noqa: F822
 
-__getattr__ = compiled_on_first_use(globals(), __all__)
+__getattr__ = compiled_on_first_use(globals(), __all__, helpers=("add_normal_block",))
+
+
+def add_normal_block(J, e, k, wk, g, U, row):  # pragma: no cover - compiled
+    """Adds ``wk J^T e[k]`` into ``g[row]`` and ``wk J^T J`` into ``U[row]`` (``J`` (3, n))."""
+    n = J.shape[1]
+    for a in range(n):
+        x = 0.0
+        for r in range(3):
+            x += J[r, a] * e[k, r]
+        g[row, a] += wk * x
+        for b in range(n):
+            x = 0.0
+            for r in range(3):
+                x += J[r, a] * J[r, b]
+            U[row, a, b] += wk * x
 
 
 def _normal_equations(R, step, t, f, v, nv, vh, e, w, B, has_r, sr, sb,
@@ -62,31 +77,13 @@ def _normal_equations(R, step, t, f, v, nv, vh, e, w, B, has_r, sr, sb,
             for c in range(3):
                 Jc[r, 3 + c] = -Jp[r, c]
         wk, tk, j = w[k], t[k], f[k]
-        for a6 in range(6):
-            x = 0.0
-            for r in range(3):
-                x += Jc[r, a6] * e[k, r]
-            g[tk, a6] += wk * x
-            for b6 in range(6):
-                x = 0.0
-                for r in range(3):
-                    x += Jc[r, a6] * Jc[r, b6]
-                U[tk, a6, b6] += wk * x
+        add_normal_block(Jc, e, k, wk, g, U, tk)
         if j < 0:
             for a6 in range(6):
                 for c in range(3):
                     W[k, a6, c] = 0.0
             continue
-        for a3 in range(3):
-            x = 0.0
-            for r in range(3):
-                x += Jp[r, a3] * e[k, r]
-            h[j, a3] += wk * x
-            for c in range(3):
-                x = 0.0
-                for r in range(3):
-                    x += Jp[r, a3] * Jp[r, c]
-                V[j, a3, c] += wk * x
+        add_normal_block(Jp, e, k, wk, h, V, j)
         for a6 in range(6):
             for c in range(3):
                 x = 0.0
