@@ -14,30 +14,23 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
-from threadpoolctl import ThreadpoolController
 
 from mappers.catalog import MethodSpec, check_size
 from mappers.core.align import apply_affine, check_anchors, check_not_collinear, fit_affine
 from mappers.core.errors import MappingError
 from mappers.core.sensors import COLUMNS_PER_STEP, check_matrix, check_values, sensor_name
+from mappers.core.threads import thread_limit
 
 __all__ = ["Map", "check_inputs", "fit_checked", "fit_fused_method"]
 
 # Up to this many objects one BLAS thread is fastest: the matrices are small and the machine's
 # other threads (or processes) only add contention. Above it, the BLAS library decides.
 _SINGLE_THREAD_MAX_OBJECTS = 500
-_controller: ThreadpoolController | None = None
 
 
 def _thread_limit(n_objects: int):
-    """Context limiting BLAS/OpenMP to one thread for small problems (no-op for large ones).
-
-    The controller is built once: scanning the loaded libraries costs ~5-10 ms per call.
-    """
-    global _controller
-    if _controller is None:
-        _controller = ThreadpoolController()
-    return _controller.limit(limits=1 if n_objects <= _SINGLE_THREAD_MAX_OBJECTS else None)
+    """Context limiting BLAS/OpenMP to one thread for small problems (no-op for large ones)."""
+    return thread_limit(1 if n_objects <= _SINGLE_THREAD_MAX_OBJECTS else None)
 
 
 @dataclass(frozen=True, eq=False)

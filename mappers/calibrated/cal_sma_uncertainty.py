@@ -32,26 +32,19 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from threadpoolctl import ThreadpoolController
 
 from mappers.calibrated.cal_sma import CalibratedSMACOF, fit_calibration, log_floor
+from mappers.core.threads import thread_limit
 from mappers.smacof import euclidean_distance_matrix, stress_response
 
 __all__ = ["has_linear_jackknife", "jackknife_targets", "linear_jackknife_covariances"]
 
 
-_controller: ThreadpoolController | None = None
-
-
 def _one_thread():
     """BLAS and OpenMP held to one thread: the jackknife's products and its factorisation are
     small (a few hundred rows), and threads competing for a shared machine's cores made them
-    ten times slower (measured at 300 objects). The controller is built once (scanning the
-    loaded libraries costs milliseconds), as :mod:`mappers.fitting` does for the maps."""
-    global _controller
-    if _controller is None:
-        _controller = ThreadpoolController()
-    return _controller.limit(limits=1)
+    ten times slower (measured at 300 objects)."""
+    return thread_limit(1)
 
 
 def has_linear_jackknife(est) -> bool:

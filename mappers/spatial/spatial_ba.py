@@ -16,10 +16,10 @@ from collections.abc import Mapping
 import numpy as np
 from scipy.sparse import issparse
 from sklearn.base import BaseEstimator
-from threadpoolctl import threadpool_limits
 
 from mappers.core.align_3d import check_anchors_3d, umeyama
 from mappers.core.embedding_transformer import EmbeddingTransformer
+from mappers.core.threads import thread_limit
 from mappers.core.validation import check_views
 from mappers.spatial.adjustment import adjust_viewpoints
 from mappers.spatial.covisibility_3d import CoVisibility3D
@@ -114,7 +114,7 @@ class SpatialAdjustment(EmbeddingTransformer, BaseEstimator):
         """Fit to a 3-D bearing history ``X`` (M, 3N) or fused histories ``{"bearing": rays,
         "range": ranges (M, N)}`` (``masks`` keyed alike), with 3-D anchors (held fixed)."""
         # the matrices are small (6 x 6 poses, 3F x 3F objects): one BLAS thread is fastest
-        with threadpool_limits(limits=1):
+        with thread_limit(1):
             return self._fit(X, mask, masks, anchor_ids, anchor_positions)
 
     def _fit(self, X, mask, masks, anchor_ids, anchor_positions):
