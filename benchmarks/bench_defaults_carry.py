@@ -52,19 +52,22 @@ FALLBACK_NOTE = "the map is adjusted from it"
 """Part of VIEW-BA's note when it started again from a fallback start map."""
 
 
-def _mpe(X, mask, ids, apos, truth, passes: int = 1) -> tuple[float, str, int, bool]:
+def _mpe(X, mask, ids, apos, truth,
+         passes: int | None = None) -> tuple[float, str, int, bool, float]:
     """(non-anchor MPE [m] over the placed objects, the label build_map chose, the unmapped
-    non-anchor objects, whether VIEW-BA started again from a fallback start map) of the default
-    map; ``passes`` > 1: VIEW-BA with that many passes instead."""
-    method, params = (None, {}) if passes == 1 else ("VIEW-BA", {"passes": passes})
+    non-anchor objects, whether VIEW-BA started again from a fallback start map, the CPU time
+    [s] of the map) of the default map; ``passes`` given: VIEW-BA with that many passes instead."""
+    method, params = (None, {}) if passes is None else ("VIEW-BA", {"passes": passes})
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
+        t0 = time.process_time()
         m = mappers.build_map(X, ids, apos, method, sensor="visibility", mask=mask, **params)
+        cpu = time.process_time() - t0
     keep = np.setdiff1d(np.arange(len(truth)), ids)
     placed = keep[np.all(np.isfinite(m.positions[keep]), axis=1)]
     fallback = any(FALLBACK_NOTE in w for w in m.warnings)
     return (mappers.mean_position_error(m.positions[placed], truth[placed]), m.method,
-            len(keep) - len(placed), fallback)
+            len(keep) - len(placed), fallback, cpu)
 
 
 def _world(seed: int):
@@ -83,21 +86,28 @@ SIMULATORS = {"world": ("project's world", _world, 1000), "other": ("other simul
 """``--simulators``: (name, history maker, first seed) of each simulator of the view part."""
 
 
-def view_part(runs: int, passes: int = 1, simulators=tuple(SIMULATORS),
-              sightings: bool = True) -> None:
-    print(f"## VIEW-BA's 90-degree view: default map, {runs} fresh layouts per simulator; "
+def view_part(runs: int, passes: int | None = None, simulators=tuple(SIMULATORS),
+              sightings: bool = True, seed0: int | None = None) -> None:
+    """The view part: ``runs`` layouts per simulator from its first seed (``seed0`` for every
+    simulator when given); ``passes`` given: the view masks mapped by VIEW-BA with that many
+    passes instead of the default map."""
+    what = "default map" if passes is None else f"VIEW-BA(passes={passes})"
+    print(f"## VIEW-BA's 90-degree view: {what}, {runs} fresh layouts per simulator; "
           f"MPE [m] mean (largest run), goal <= {VIEW_GOAL}")
-    for name, make, seed0 in (SIMULATORS[k] for k in simulators):
+    for name, make, first in (SIMULATORS[k] for k in simulators):
+        first = first if seed0 is None else seed0
         rows: dict[str, list[float]] = {"view mask": [], **({"log of sightings": []} if sightings
                                                             else {})}
         labels: dict[str, set[str]] = {k: set() for k in rows}
         unmapped, fallbacks = dict.fromkeys(rows, 0), dict.fromkeys(rows, 0)
-        for seed in range(seed0, seed0 + runs):
+        cpu: dict[str, list[float]] = {k: [] for k in rows}
+        for seed in range(first, first + runs):
             X, mask, ids, apos, P = make(seed)
             for kind, m in (("view mask", mask), ("log of sightings", mask & (X > 0.5)))[:len(rows)]:
-                e, label, lost, fell_back = _mpe(X, m, ids, apos, P,
-                                                 passes if kind == "view mask" else 1)
+                e, label, lost, fell_back, t = _mpe(X, m, ids, apos, P,
+                                                    passes if kind == "view mask" else None)
                 rows[kind].append(e)
+                cpu[kind].append(t)
                 labels[kind].add(label)
                 unmapped[kind] += lost
                 fallbacks[kind] += fell_back
@@ -108,7 +118,8 @@ def view_part(runs: int, passes: int = 1, simulators=tuple(SIMULATORS),
             verdict = ("met" if a.mean() <= VIEW_GOAL else "NOT met") if kind == "view mask" else ""
             print(f"{name:16s} {kind:17s} {a.mean():.4f} ({a.max():.4f})  "
                   f"[{', '.join(sorted(labels[kind]))}; {fallbacks[kind]} from a fallback start, "
-                  f"{unmapped[kind]} objects unmapped] {verdict}")
+                  f"{unmapped[kind]} objects unmapped; median CPU per map "
+                  f"{np.median(cpu[kind]):.2f} s] {verdict}")
 
 
 def mrclam_part(data: Path) -> None:
@@ -164,9 +175,12 @@ def main(argv=None) -> None:
     ap.add_argument("--parts", nargs="*", default=["view", "mrclam"], choices=["view", "mrclam"])
     ap.add_argument("--runs", type=int, default=25, help="layouts per simulator (default 25)")
     ap.add_argument("--data", type=Path, default=here.parent / "shared" / "data" / "mrclam")
-    ap.add_argument("--view-passes", type=int, default=1,
-                    help="with > 1: the view masks mapped by VIEW-BA(passes=N) instead of the "
-                         "default (docs/dead-ends.md, 'Defaults that carry')")
+    ap.add_argument("--view-passes", type=int, default=None,
+                    help="the view masks mapped by VIEW-BA(passes=N) instead of the default map "
+                         "(docs/dead-ends.md, 'Defaults that carry')")
+    ap.add_argument("--seed0", type=int, default=None,
+                    help="first seed of every simulator of the view part (default: the world's "
+                         "1000, the other simulator's 0); fresh layouts for a confirmation")
     ap.add_argument("--simulators", nargs="+", default=list(SIMULATORS), choices=list(SIMULATORS),
                     help="the view part's simulators (default both)")
     ap.add_argument("--no-sightings", action="store_true",
@@ -174,7 +188,8 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     with threadpool_limits(limits=1):
         if "view" in args.parts:
-            view_part(args.runs, args.view_passes, args.simulators, not args.no_sightings)
+            view_part(args.runs, args.view_passes, args.simulators, not args.no_sightings,
+                      args.seed0)
         if "mrclam" in args.parts:
             mrclam_part(args.data)
 
