@@ -15,8 +15,10 @@ radius, between updates instead:
   ``refit_growth`` above its VIEW-BA default, 1.25): whenever the steps have grown by a quarter
   since the last refit or refinement, VIEW-BA over the whole history from the current objects
   instead of a start map (:meth:`OnlineView.refine`): the view's width, the radius and every
-  viewpoint found afresh, then its rounds; about a third of a refit, whose start map
-  (``DROPOUT-BLEND``) is most of its cost and does not shrink with the steps;
+  viewpoint found afresh, then its rounds, in as many passes as the refit's estimator makes
+  (its parameters copied: three by default); a refit without its start map
+  (``DROPOUT-BLEND``), which does not shrink with the steps (about a third of a refit when
+  VIEW-BA made one pass);
 - *new steps*: each new step's viewpoint is searched on VIEW-BA's grid of candidates over the
   current objects and refined by its Newton steps, the objects fixed: O(k M G) for k new steps
   and G candidates;
