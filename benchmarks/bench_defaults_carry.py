@@ -22,6 +22,8 @@ It prints the mean non-anchor MPE [m] (largest run in brackets) per body of data
 
     python benchmarks/bench_defaults_carry.py                       # both parts (~15 min)
     python benchmarks/bench_defaults_carry.py --parts view --runs 10
+    python benchmarks/bench_defaults_carry.py --parts view --no-sightings --simulators other \
+        --seed0 100 --view-passes 1                               # fresh layouts, one pass
     python benchmarks/bench_defaults_carry.py --parts mrclam        # ~3 min
 """
 
