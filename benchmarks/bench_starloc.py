@@ -129,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
                          "sensor": sensor, "mapped_by": r.method, "mpe": f"{r.mpe:.4f}",
                          "mapped": f"{r.mapped:.3f}", "n_scored": r.n_scored,
                          "centroid_mpe": f"{base:.4f}", "cpu_s": f"{r.cpu_seconds:.2f}",
-                         "mappable": f"{r.mappable:.3f}"})
+                         "mappable": f"{r.mappable:.4f}"})
             print(f"{r.sequence:18s} {sensor:14s} {r.mpe:8.3f} {r.mapped:7.0%} {r.n_scored:6d} "
                   f"{base:8.3f} {r.cpu_seconds:7.2f} {r.mappable:8.0%}", flush=True)
     if args.out is not None:
