@@ -4,7 +4,7 @@ eliminated: the 3-D form of :mod:`mappers.viewpoints.marginals`.
 At the adjustment's solution (before the similarity onto the anchors, when ``anchor_noise`` is
 set) the Gauss-Newton normal blocks of the steps' poses (6 x 6: rotation vector and position)
 and of the free objects (3 x 3) are built once more, undamped, with the robust loss's weights
-at the final residuals (:func:`mappers.spatial.adjustment._normal_blocks`, the adjustment's own).
+at the final residuals (:func:`mappers.spatial.adjustment.normal_blocks`, the adjustment's own).
 The poses are eliminated by the Schur complement
 (:func:`mappers.viewpoints.marginals.schur_information`) and the (3, 3) diagonal blocks of the
 inverse, times the robustly weighted residuals' variance ``sum(w |e|²) / (K - p)`` (K residual
@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from mappers.core.align_3d import umeyama
-from mappers.spatial.adjustment import _normal_blocks, _Problem
+from mappers.spatial.adjustment import Problem, normal_blocks
 from mappers.viewpoints import (
     DENSE_COUPLING_MAX_BYTES,
     model_covariances,
@@ -53,7 +53,7 @@ def _parts(est, unknown_anchors: bool):
     placed = np.all(np.isfinite(P), axis=1)
     posed = np.all(np.isfinite(C), axis=1)
     keep = placed[obs.obj] & posed[obs.step]
-    prob = _Problem(obs, keep, est.bearing_noise, est.range_noise, est.range_growth)
+    prob = Problem(obs, keep, est.bearing_noise, est.range_noise, est.range_growth)
     free = placed.copy()
     free[np.asarray(ids, dtype=int)] = False
     unknown = placed if unknown_anchors else free
@@ -75,7 +75,7 @@ def _parts(est, unknown_anchors: bool):
             f"{8 * 18 * steps.size * n_unknown / 2**30:.2f} GiB for N = {steps.size} steps "
             f"and F = {n_unknown} free objects (above its dense_coupling_bytes, "
             f"{limit:.3g}); use fewer steps")
-    U, V, Wf, g, h = _normal_blocks(prob, e, w, Jc, Jp, t, index, steps.size, n_unknown)
+    U, V, Wf, g, h = normal_blocks(prob, e, w, Jc, Jp, t, index, steps.size, n_unknown)
     we = w[:, None] * e
     g_pose = np.einsum("kri,kr->ki", Jc, we)
     g_obj = np.einsum("kri,kr->ki", Jp, we)
