@@ -40,8 +40,9 @@ import numpy as np
 
 from mappers.calibrated import has_linear_jackknife, linear_jackknife_covariances
 from mappers.core.errors import MappingError
-from mappers.core.held_out_anchors import held_out_factor
+from mappers.core.held_out_anchors import held_out_factor, held_out_floor
 from mappers.core.uncertainty import (
+    SYSTEMATIC_FLOOR,
     check_uncertainty,
     mahalanobis_squared,
     moving_blocks,
@@ -57,7 +58,8 @@ from mappers.viewpoints import adjustment_covariances
 from mappers.viewpoints import has_model_covariances as _has_planar_model
 
 __all__ = ["BOOTSTRAP_INFLATION", "BOOTSTRAP_REPLICATES", "JACKKNIFE_INFLATION", "MIN_REPLICATES",
-           "has_model_covariances", "with_covariances", "with_held_out_check"]
+           "has_model_covariances", "with_covariances", "with_held_out_check",
+           "with_held_out_floor"]
 
 BOOTSTRAP_REPLICATES = 20
 """Replicate maps of a bootstrap."""
@@ -231,3 +233,38 @@ def with_held_out_check(result: Map, held_out: Callable[[int], tuple[np.ndarray,
             + ("the covariances pass the test (kept)" if factor == 1.0 else
                f"the covariances are multiplied by {factor:.3g}"))
     return dataclasses.replace(result, covariances=cov, warnings=(*result.warnings, note))
+
+
+def with_held_out_floor(result: Map, held_positions, held_covariances,
+                        anchor_positions) -> Map:
+    """``result`` (a map with the model's covariances) with the isotropic floor its held-out
+    anchors estimate added to the covariance of every non-anchor object
+    (:func:`mappers.core.held_out_anchors.held_out_floor`): ``held_positions`` (A, d) and
+    ``held_covariances`` (A, d, d) are each anchor's position and covariance in the map without
+    it, ``anchor_positions`` (A, d) where it is. What ``uncertainty=True`` gives a method with an
+    adjustment: about nothing added where the anchors land inside their regions (a history the
+    model describes), the systematic error's size where they do not (a logged run). With fewer
+    than two anchors that can be held out (an anchor seen along one ray, a sparse run) the floor
+    is ``"floor"``'s fixed share of the anchors' extent
+    (:data:`mappers.core.uncertainty.SYSTEMATIC_FLOOR`,
+    :func:`mappers.core.uncertainty.systematic_floor`). A note in ``Map.warnings`` says which."""
+    target = np.asarray(anchor_positions, dtype=float)
+    errors = np.asarray(held_positions, dtype=float) - target
+    covs = np.asarray(held_covariances, dtype=float)
+    ok = np.all(np.isfinite(errors), axis=1) & np.all(np.isfinite(covs), axis=(1, 2))
+    if ok.sum() < 2:
+        cov = systematic_floor(result.covariances, result.positions, result.anchor_ids)
+        note = (f"uncertainty: only {int(ok.sum())} of {len(target)} anchors could be held out: "
+                f"the covariances get the fixed systematic floor ({SYSTEMATIC_FLOOR:g} of the "
+                "anchors' extent per axis)")
+    else:
+        variance, used = held_out_floor(errors, covs)
+        cov = np.array(result.covariances, dtype=float)
+        rows = np.all(np.isfinite(cov), axis=(1, 2))
+        rows[list(result.anchor_ids)] = False
+        cov[rows] += variance * np.eye(cov.shape[-1])
+        note = (f"uncertainty: {used} held-out anchors miss their regions: a systematic floor "
+                f"of {math.sqrt(variance):.3g} per axis is added to the model's covariances"
+                if variance > 0 else None)
+    notes = (note,) if note else ()
+    return dataclasses.replace(result, covariances=cov, warnings=(*result.warnings, *notes))

@@ -20,7 +20,12 @@ from mappers.core.errors import MappingError
 from mappers.core.fused_histories import check_fused
 from mappers.core.sensors import COLUMNS_PER_STEP, check_sensor_set
 from mappers.core.uncertainty import check_uncertainty
-from mappers.covariances import has_model_covariances, with_covariances, with_held_out_check
+from mappers.covariances import (
+    has_model_covariances,
+    with_covariances,
+    with_held_out_check,
+    with_held_out_floor,
+)
 from mappers.defaults import choose_for_history
 from mappers.fitting import Map, check_inputs, fit_checked, fit_fused_method
 from mappers.spatial.marginals import spatial_held_out
@@ -115,10 +120,11 @@ def build_map(
         ValueError: bad input, naming the problem. MappingError (a ValueError) when the method
         itself fails (e.g. Hessian LLE's eigenproblem), naming the method and the cause.
     """
-    if check_uncertainty(uncertainty) == "anchors":
+    if check_uncertainty(uncertainty) in ("anchors", True):
         return _held_out_checked(histories, anchor_ids, anchor_positions, method, sensor=sensor,
                                  mask=mask, timeline=timeline, normalize=normalize,
-                                 random_state=random_state, **params)
+                                 random_state=random_state,
+                                 floor=check_uncertainty(uncertainty) is True, **params)
     if anchor_dimension(anchor_positions) == 3:
         uncertainty = check_uncertainty(uncertainty)
         result, est, X3, mask3, sensor3 = fit_map_3d(histories, anchor_ids, anchor_positions,
@@ -312,13 +318,19 @@ def _with_covariances_3d(result, uncertainty, est, X, mask, sensor, anchor_ids, 
                             random_state=random_state)
 
 
-def _held_out_checked(histories, anchor_ids, anchor_positions, method, **kwargs) -> Map:
+def _held_out_checked(histories, anchor_ids, anchor_positions, method, floor=False,
+                      **kwargs) -> Map:
     """``build_map(..., uncertainty="anchors")``: the map with its own covariances (``True``),
     scaled by its held-out anchors (:func:`mappers.covariances.with_held_out_check`): each
     anchor in turn mapped by the same method from the other anchors; where that map cannot place
     it (a sparse logged run) and the method ends with a planar adjustment, the adjustment alone
     is fitted again from the full map with that anchor free
-    (:func:`mappers.viewpoints.marginals.released_anchor`)."""
+    (:func:`mappers.viewpoints.marginals.released_anchor`).
+
+    ``floor`` (``uncertainty=True``): for a method with an adjustment, the model's covariances
+    plus the floor its anchors, released from the adjustment by one linearised step, estimate
+    (:func:`mappers.covariances.with_held_out_floor`); any other method's own covariances as
+    they are (no map again)."""
     ids = np.asarray(anchor_ids, dtype=int)
     pos = np.asarray(anchor_positions, dtype=float)
     params = {k: kwargs.pop(k) for k in list(kwargs)
@@ -337,16 +349,26 @@ def _held_out_checked(histories, anchor_ids, anchor_positions, method, **kwargs)
                                         kwargs["normalize"], kwargs["random_state"], True, params)
         release, linear = _releaser(result, est, mapped, histories, ids, pos,
                                     {**kwargs, **params})
+    if floor:
+        if has_model_covariances(est):
+            held = linear if linear is not None else (np.full_like(pos, np.nan),
+                                                      np.full((*pos.shape, pos.shape[1]), np.nan))
+            result = with_held_out_floor(result, held[0], held[1], pos)
+        for note in result.warnings:
+            warnings.warn(note, MapWarning, stacklevel=3)
+        return result
     for note in result.warnings:
         warnings.warn(note, MapWarning, stacklevel=3)
     kwargs = {**kwargs, **params}
+
+    own = "model" if has_model_covariances(est) else True  # (True would add its floor)
 
     def held_out(j):
         if linear is not None:  # the method's adjustment, linearised: no map again
             return linear[0][j], linear[1][j]
         keep = np.arange(len(ids)) != j
         try:
-            m = build_map(histories, ids[keep], pos[keep], method, uncertainty=True, **kwargs)
+            m = build_map(histories, ids[keep], pos[keep], method, uncertainty=own, **kwargs)
             p, c = m.positions[ids[j]], m.covariances[ids[j]]
             if np.all(np.isfinite(p)) and np.all(np.isfinite(c)):
                 return p, c
