@@ -88,16 +88,18 @@ from mappers import build_map, covariances
 from mappers.core.uncertainty import chi2_quantile, mahalanobis_squared, rms_radius
 
 SETS = ("visibility", "bearing", "range-bearing", "bearing-view90", "visibility-other-sim",
-        "mrclam", "mrclam-anchors", "mrclam-floor", "starloc", "starloc-anchors", "starloc-floor")
-REAL = {"mrclam", "mrclam-anchors", "mrclam-floor", "starloc", "starloc-anchors", "starloc-floor"}
+        "mrclam", "mrclam-model", "mrclam-anchors", "mrclam-floor", "starloc", "starloc-model",
+        "starloc-anchors", "starloc-floor")
+REAL = {"mrclam", "mrclam-model", "mrclam-anchors", "mrclam-floor", "starloc", "starloc-model",
+        "starloc-anchors", "starloc-floor"}
 FLOOR_GRID = np.round(np.arange(0.0005, 0.0201, 0.0005), 4)
 """The shares of the anchors' extent ``floor for 0.95`` is sought among (module docstring)."""
 
 
 def real_mode(name: str) -> bool | str:
-    """The ``uncertainty`` a real set asks for: its name's suffix ("-anchors", "-floor"), else
-    True."""
-    return name.rsplit("-", 1)[1] if name.endswith(("-anchors", "-floor")) else True
+    """The ``uncertainty`` a real set asks for: its name's suffix ("-model", "-anchors",
+    "-floor"), else True."""
+    return name.rsplit("-", 1)[1] if name.endswith(("-model", "-anchors", "-floor")) else True
 
 
 def floor_for(rows: list[dict], level: float = 0.95) -> float:
@@ -277,7 +279,7 @@ def mrclam_rows(data: Path, name: str = "mrclam") -> list[dict]:
         ok = objects[np.all(np.isfinite(r.positions[objects]), axis=1)]
         q_runs[run_dir.name] = mahalanobis_squared(r.truth[ok] - r.positions[ok],
                                                    r.covariances[ok])
-    for row in list(rows) if mode is True else []:  # leave-one-run-out (module docstring)
+    for row in list(rows) if mode == "model" else []:  # leave-one-run-out (module docstring)
         others = np.concatenate([q for name, q in q_runs.items() if name != row["layout"]])
         if not others.size:
             continue
@@ -318,7 +320,8 @@ def main(argv=None) -> int:
     ap.add_argument("--setups", default="s3",
                     help="the STAR-loc setups the starloc sets map (comma-separated: s1,s2,s3)")
     ap.add_argument("--csv", type=Path, default=None)
-    ap.add_argument("--uncertainty", choices=("true", "anchors", "jackknife", "bootstrap"),
+    ap.add_argument("--uncertainty", choices=("true", "model", "anchors", "jackknife",
+                                              "bootstrap"),
                     default="true",
                     help="the simulated sets' mode: True, 'anchors' (held-out anchors' check), "
                          "or 'jackknife' / 'bootstrap' (visibility: the linearised jackknife, the "
@@ -360,7 +363,7 @@ def main(argv=None) -> int:
         q = np.concatenate([r["_q"] for r in rows if r["set"] == name])
         d = 3 if name.startswith("starloc") else 2
         print(f"{name}: inflation for 0.95 = {np.nanquantile(q, 0.95) / chi2_quantile(d):.3f}")
-        if name in ("mrclam", "starloc"):
+        if name in ("mrclam-model", "starloc-model"):
             print(f"{name}: floor for 0.95 = "
                   f"{floor_for([r for r in rows if r['set'] == name]):.4f} of the anchors' extent")
     return 0
