@@ -21,7 +21,9 @@ Two sources, chosen by ``uncertainty``:
   by :data:`BOOTSTRAP_INFLATION` for the method's bias, which resampling cannot see.
 
 ``True`` is ``"model"`` where there is one, else ``"jackknife"`` where it applies, else
-``"bootstrap"``. The covariances are in the
+``"bootstrap"``; ``build_map`` then adds to the model's the systematic floor the map's anchors,
+each released from the adjustment in turn, estimate (:func:`with_held_out_floor`, issue 35: the
+model alone cannot see a logged run's calibration errors). The covariances are in the
 map's frame (a method's embedding carried by the anchor fit's linear part), zero for the anchors
 (taken as exact: they fix the frame), NaN for unmapped objects. A bootstrap costs about
 ``BOOTSTRAP_REPLICATES`` maps; the model and the jackknife a small fraction of one
@@ -59,7 +61,7 @@ from mappers.viewpoints import has_model_covariances as _has_planar_model
 
 __all__ = ["BOOTSTRAP_INFLATION", "BOOTSTRAP_REPLICATES", "JACKKNIFE_INFLATION", "MIN_REPLICATES",
            "has_model_covariances", "with_covariances", "with_held_out_check",
-           "with_held_out_floor"]
+           "with_held_out_floor", "with_model_covariances"]
 
 BOOTSTRAP_REPLICATES = 20
 """Replicate maps of a bootstrap."""
@@ -194,6 +196,17 @@ def with_covariances(result: Map, uncertainty, *, est: Any, mapped: np.ndarray, 
         cov = systematic_floor(cov, result.positions, result.anchor_ids)
     return dataclasses.replace(result, covariances=cov,
                                warnings=(*result.warnings, *notes))
+
+
+def with_model_covariances(result: Map, cov_mapped: np.ndarray, mapped: np.ndarray) -> Map:
+    """``result`` with the model's covariances ``cov_mapped`` (len(mapped), d, d) of its rows
+    ``mapped`` in the adjustment's frame (as :func:`mappers.viewpoints.adjustment_covariances`
+    gives them), carried to the map's frame as ``uncertainty="model"`` carries them."""
+    d = result.positions.shape[1]
+    cov = np.full((len(result.positions), d, d), np.nan)
+    cov[mapped] = cov_mapped
+    cov = transform_covariances(cov, np.asarray(result.affine)[:d])
+    return dataclasses.replace(result, covariances=_finish(result, cov))
 
 
 def with_held_out_check(result: Map, held_out: Callable[[int], tuple[np.ndarray, np.ndarray]],

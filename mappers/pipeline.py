@@ -25,6 +25,7 @@ from mappers.covariances import (
     with_covariances,
     with_held_out_check,
     with_held_out_floor,
+    with_model_covariances,
 )
 from mappers.defaults import choose_for_history
 from mappers.fitting import Map, check_inputs, fit_checked, fit_fused_method
@@ -100,8 +101,11 @@ def build_map(
             CAL-SMA's linearised block jackknife (complete visibility histories, dense CAL-SMA;
             a fraction of a map's time); ``"bootstrap"``: from replicate maps
             of a moving-block bootstrap over the steps (any method; about 20 maps' time);
-            True: ``"model"`` where the method has one, else ``"jackknife"`` where it applies,
-            else ``"bootstrap"``
+            True: ``"model"`` where the method has one, plus the systematic floor its anchors,
+            each released from the adjustment by one linearised step, estimate
+            (:func:`mappers.covariances.with_held_out_floor`; ~0 where the model describes the
+            readings, the size of a logged run's calibration errors where it does not), else
+            ``"jackknife"`` where it applies, else ``"bootstrap"``
             (:mod:`mappers.covariances`); ``"anchors"``: True's covariances checked by the
             anchors, each held out in turn, and scaled when they miss them
             (:mod:`mappers.core.held_out_anchors`; for a method with an adjustment each anchor
@@ -146,11 +150,7 @@ def _build_2d(histories, anchor_ids, anchor_positions, method, sensor, mask, tim
               random_state, uncertainty, params):
     """``build_map``'s 2-D map (with its covariances unless ``uncertainty`` is False), the fitted
     estimator and the rows it was fitted on: ``(Map, est, mapped)``."""
-    parts = getattr(histories, "parts", None)
-    if isinstance(parts, Mapping) and not isinstance(histories, Mapping):
-        # a fused History (lfmdr_gym): its single-sensor parts, each with its own mask
-        timeline = timeline if timeline is not None else getattr(histories, "timeline", None)
-        histories = dict(parts)
+    histories, timeline = _unpacked(histories, timeline)
     if isinstance(histories, Mapping):
         result, est, mapped = _build_fused_map(histories, anchor_ids, anchor_positions, method,
                                                sensor, mask, timeline, normalize, random_state,
@@ -165,6 +165,16 @@ def _build_2d(histories, anchor_ids, anchor_positions, method, sensor, mask, tim
     return result, est, mapped
 
 
+
+
+def _unpacked(histories, timeline):
+    """``(histories, timeline)``, a fused History (lfmdr_gym) as its single-sensor parts (a
+    mapping, each with its own mask) and its timeline unless one is given."""
+    parts = getattr(histories, "parts", None)
+    if isinstance(parts, Mapping) and not isinstance(histories, Mapping):
+        timeline = timeline if timeline is not None else getattr(histories, "timeline", None)
+        histories = dict(parts)
+    return histories, timeline
 
 
 def _fit_map(histories, anchor_ids, anchor_positions, method, sensor, mask, timeline, normalize,
@@ -344,11 +354,20 @@ def _held_out_checked(histories, anchor_ids, anchor_positions, method, floor=Fal
         release = None
         linear = spatial_held_out(est, pos) if isinstance(est, SpatialAdjustment) else None
     else:
+        # (True: the model's covariances and the held-out anchors from one linearisation)
         result, est, mapped = _build_2d(histories, anchor_ids, anchor_positions, method,
                                         kwargs["sensor"], kwargs["mask"], kwargs["timeline"],
-                                        kwargs["normalize"], kwargs["random_state"], True, params)
+                                        kwargs["normalize"], kwargs["random_state"],
+                                        not floor, params)
         release, linear = _releaser(result, est, mapped, histories, ids, pos,
-                                    {**kwargs, **params})
+                                    {**kwargs, **params}, floor)
+        if floor and linear is not None:
+            result = with_model_covariances(result, linear[2], mapped)
+        elif floor:  # (no adjustment, or an anchor it did not place)
+            hs, tl = _unpacked(histories, kwargs["timeline"])
+            result = _with_covariances(result, True, est, mapped, hs, anchor_ids,
+                                       anchor_positions, kwargs["sensor"], kwargs["mask"], tl,
+                                       kwargs["normalize"], kwargs["random_state"], params)
     if floor:
         if has_model_covariances(est):
             held = linear if linear is not None else (np.full_like(pos, np.nan),
@@ -385,12 +404,13 @@ def _held_out_checked(histories, anchor_ids, anchor_positions, method, floor=Fal
     return checked
 
 
-def _releaser(result, est, mapped, histories, ids, pos, kwargs):
+def _releaser(result, est, mapped, histories, ids, pos, kwargs, with_covariances=False):
     """``(release, linear)``: ``release(j)`` anchor ``j`` held out of ``est``'s adjustment, in
     the map's frame (:func:`mappers.viewpoints.marginals.released_anchor`), and ``linear`` every
     anchor held out of it linearised, ``(positions (A, 2), covariances (A, 2, 2))`` in the map's
     frame (:func:`mappers.viewpoints.held_out_anchors`); ``(None, None)`` when ``est`` has no
-    adjustment."""
+    adjustment. ``with_covariances``: ``linear`` has a third item, the model's covariances of
+    the ``mapped`` rows in the adjustment's frame, from the same linearisation."""
     if not has_model_covariances(est) or np.any(~np.isin(ids, mapped)):
         return None, None
     parts = getattr(histories, "parts", None)
@@ -414,5 +434,5 @@ def _releaser(result, est, mapped, histories, ids, pos, kwargs):
         p, c = released_anchor(est, rows(X), rows(M), local, pos, j, timeline)
         return np.r_[p, 1.0] @ T, T[:2].T @ c @ T[:2]
 
-    p, c = held_out_anchors(est, rows(X), rows(M), local, timeline)
-    return release, (p @ T[:2] + T[2], np.einsum("ji,ajk,kl->ail", T[:2], c, T[:2]))
+    p, c, *model = held_out_anchors(est, rows(X), rows(M), local, timeline, with_covariances)
+    return release, (p @ T[:2] + T[2], np.einsum("ji,ajk,kl->ail", T[:2], c, T[:2]), *model)
