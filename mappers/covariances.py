@@ -198,10 +198,15 @@ def with_covariances(result: Map, uncertainty, *, est: Any, mapped: np.ndarray, 
                                warnings=(*result.warnings, *notes))
 
 
-def with_model_covariances(result: Map, cov_mapped: np.ndarray, mapped: np.ndarray) -> Map:
+def with_model_covariances(result: Map, cov_mapped: np.ndarray,
+                           mapped: np.ndarray | None = None) -> Map:
     """``result`` with the model's covariances ``cov_mapped`` (len(mapped), d, d) of its rows
     ``mapped`` in the adjustment's frame (as :func:`mappers.viewpoints.adjustment_covariances`
-    gives them), carried to the map's frame as ``uncertainty="model"`` carries them."""
+    gives them), carried to the map's frame as ``uncertainty="model"`` carries them; ``mapped``
+    None: ``cov_mapped`` (M, d, d) is already in the map's frame (a 3-D map's,
+    :func:`mappers.spatial.marginals.spatial_covariances`)."""
+    if mapped is None:
+        return dataclasses.replace(result, covariances=_finish(result, cov_mapped))
     d = result.positions.shape[1]
     cov = np.full((len(result.positions), d, d), np.nan)
     cov[mapped] = cov_mapped

@@ -349,10 +349,14 @@ def _held_out_checked(histories, anchor_ids, anchor_positions, method, floor=Fal
         result, est, X3, mask3, sensor3 = fit_map_3d(histories, ids, pos, method,
                                                      sensor=kwargs["sensor"],
                                                      mask=kwargs["mask"], **params)
-        result = _with_covariances_3d(result, True, est, X3, mask3, sensor3, ids, pos,
-                                      kwargs["random_state"])
         release = None
-        linear = spatial_held_out(est, pos) if isinstance(est, SpatialAdjustment) else None
+        linear = (spatial_held_out(est, pos, floor) if isinstance(est, SpatialAdjustment)
+                  else None)
+        if floor and linear is not None:  # (the model and the held-out anchors at once)
+            result = with_model_covariances(result, linear[2])
+        else:
+            result = _with_covariances_3d(result, True, est, X3, mask3, sensor3, ids, pos,
+                                          kwargs["random_state"])
     else:
         # (True: the model's covariances and the held-out anchors from one linearisation)
         result, est, mapped = _build_2d(histories, anchor_ids, anchor_positions, method,

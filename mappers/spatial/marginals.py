@@ -32,6 +32,7 @@ from mappers.viewpoints import (
     DENSE_COUPLING_MAX_BYTES,
     model_covariances,
     released_steps,
+    restricted_parts,
     robust_weights,
     schur_information,
     step_blocks,
@@ -111,7 +112,7 @@ def spatial_covariances(est) -> np.ndarray:
     return cov
 
 
-def spatial_held_out(est, anchor_positions) -> tuple[np.ndarray, np.ndarray]:
+def spatial_held_out(est, anchor_positions, with_covariances: bool = False):
     """Each anchor of a fitted SPATIAL-BA held out, linearised: its position (A, 3) and
     covariance (A, 3, 3) in the output frame when it alone is released from the adjustment, by
     Gauss-Newton steps from the solution (:func:`mappers.viewpoints.released_steps`). Anchors
@@ -120,13 +121,16 @@ def spatial_held_out(est, anchor_positions) -> tuple[np.ndarray, np.ndarray]:
     again to the others (``anchor_positions`` (A, 3), what ``est`` was fitted with). The
     covariance is the model's with the other anchors fixed (as :func:`spatial_covariances`),
     carried by the similarity. NaN rows for an anchor its readings do not pin down (a
-    non-finite covariance)."""
-    parts, _, free, index = _parts(est, True)
+    non-finite covariance). ``with_covariances``: also the objects' covariances (M, 3, 3) of
+    :func:`spatial_covariances`, from the same linearisation (built once: ``uncertainty=True``
+    needs both)."""
+    parts, placed, free, index = _parts(est, True)
     ids = np.asarray(est.anchor_ids_, dtype=int)
     target = np.asarray(anchor_positions, dtype=float)
     soft = est.anchor_noise is not None
+    S = schur_information(*parts[:3])
     steps, covs = released_steps(parts, index[free], index[ids],
-                                 est.anchor_noise ** -2.0 if soft else None)
+                                 est.anchor_noise ** -2.0 if soft else None, S=S)
     covs = _to_output(est, covs)
     Rs, scale, shift = est.similarity_
     pos = np.full((len(ids), 3), np.nan)
@@ -138,4 +142,15 @@ def spatial_held_out(est, anchor_positions) -> tuple[np.ndarray, np.ndarray]:
         pos[j] = scale * moved[j] @ np.asarray(Rs).T + shift
     bad = ~np.all(np.isfinite(covs), axis=(1, 2)) | ~np.all(np.isfinite(pos), axis=1)
     pos[bad], covs[bad] = np.nan, np.nan
-    return pos, covs
+    if not with_covariances:
+        return pos, covs
+    rows = index[free]
+    cols = (rows[:, None] * 3 + np.arange(3)[None, :]).ravel()
+    U, _, Wf, _, _, sandwich, dof, n_rows, n_unknowns, _ = restricted_parts(parts, rows)
+    # (the free objects' reduced information is the block of the unknowns': the poses'
+    # elimination is linear in the objects' columns)
+    P = np.where(placed[:, None], est.adjusted_.points, np.nan)
+    model = _to_output(est, model_covariances(S[np.ix_(cols, cols)], U, Wf, sandwich, dof,
+                                              n_rows, n_unknowns, P, free))
+    model[~np.all(np.isfinite(est.embedding_), axis=1)] = np.nan
+    return pos, covs, model

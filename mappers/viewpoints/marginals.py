@@ -55,7 +55,8 @@ from mappers.viewpoints.range_bearing import RangeBearingAdjustment
 
 __all__ = [
     "adjustment_covariances", "block_gradients", "has_model_covariances", "held_out_anchors", "model_covariances",
-    "released_anchor", "released_steps", "sandwich_covariances", "schur_information",
+    "released_anchor", "released_steps", "restricted_parts", "sandwich_covariances",
+    "schur_information",
     "step_blocks",
 ]
 
@@ -367,7 +368,7 @@ def adjustment_covariances(est, X, mask, anchor_ids, timeline=None) -> np.ndarra
     return _bearing(adj, X, mask, anchor_ids, blocks)
 
 
-def _restricted(parts, rows: np.ndarray):
+def restricted_parts(parts, rows: np.ndarray):
     """``parts`` (a linearisation as :func:`_bearing_parts` gives it) with only the unknowns
     ``rows`` (increasing): the blocks and sandwich terms of the others dropped, each kept
     object renumbered -- the linearisation with the other objects held, as
@@ -416,6 +417,6 @@ def held_out_anchors(est, X, mask, anchor_ids, timeline=None, with_covariances: 
     cols = (rows[:, None] * parts[1].shape[1] + np.arange(parts[1].shape[1])[None, :]).ravel()
     # (the free objects' reduced information is the block of the unknowns': the poses'
     # elimination is linear in the objects' columns)
-    model = _covariances(_restricted(parts, rows), adj.embedding_, free, S[np.ix_(cols, cols)])
+    model = _covariances(restricted_parts(parts, rows), adj.embedding_, free, S[np.ix_(cols, cols)])
     return pos, covs, model
 
