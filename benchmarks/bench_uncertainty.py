@@ -30,7 +30,9 @@ true``) and :data:`mappers.covariances.BOOTSTRAP_INFLATION` (``--uncertainty boo
 chosen, on ``visibility-other-sim`` (seeds 13000-13014).
 
 ``mrclam``: every MRCLAM run under ``--data`` mapped from range and bearing fused (the logged-run
-default, ``LOC-SMA``), scored against motion capture. ``mrclam-inflated`` asks what a calibrated
+default, ``LOC-SMA``), scored against motion capture; ``mrclam-model`` and ``starloc-model``:
+with ``uncertainty="model"`` (the model alone, without the floor ``True`` estimates from the
+held-out anchors). ``mrclam-inflated`` asks what a calibrated
 inflation would give: for each run, the factor on the covariances that puts 95 % of the *other*
 runs' landmarks inside their regions (leave-one-run-out: the run's figure does not come from a
 factor chosen on it), applied to that run (not a default of the library: the figures say
@@ -43,11 +45,11 @@ ranges (SPATIAL-BA, :func:`lfmdr_gym.experiments.starloc.map_starloc`), its scor
 in 3-D (chi-squared(3)), with ``uncertainty=True`` and ``"anchors"``; ``--setups s1,s2`` maps
 the sequences of those setups instead of s3's. ``mrclam-floor`` and ``starloc-floor``: with
 ``uncertainty="floor"`` (the model plus the systematic floor,
-:func:`mappers.core.uncertainty.systematic_floor`). For ``mrclam`` and ``starloc`` the line
-``floor for 0.95`` gives the smallest share of the anchors' extent (:data:`FLOOR_GRID`) whose
-floor puts 95 % of the set's landmarks inside their regions: how
-:data:`mappers.core.uncertainty.SYSTEMATIC_FLOOR` was chosen (on ``starloc``, the s3
-sequences). ``--uncertainty anchors`` asks the simulated sets for ``"anchors"`` instead of
+:func:`mappers.core.uncertainty.systematic_floor`). For ``mrclam-model`` and
+``starloc-model`` the line ``floor for 0.95`` gives the smallest share of the anchors' extent
+(:data:`FLOOR_GRID`) whose floor on the model's covariances puts 95 % of the set's landmarks inside their regions: how
+:data:`mappers.core.uncertainty.SYSTEMATIC_FLOOR` was chosen (on the s3 sequences' model
+covariances). ``--uncertainty anchors`` asks the simulated sets for ``"anchors"`` instead of
 True.
 
 Per map: the share of non-anchor landmarks whose truth lies inside their 95 % region (squared
