@@ -191,6 +191,22 @@ def test_true_keeps_a_model_its_anchors_agree_with():
     assert not any("systematic floor" in w for w in m.warnings)
 
 
+def test_without_two_held_out_anchors_true_falls_back_to_the_fixed_floor():
+    from mappers.covariances import with_held_out_floor
+
+    P, X = _bearing(2)
+    model = _quiet(X, ANCHORS, P[ANCHORS], uncertainty="model")
+    floor = _quiet(X, ANCHORS, P[ANCHORS], uncertainty="floor")
+    a = len(ANCHORS)
+    one = np.full((a, 2), np.nan)
+    one[0] = P[ANCHORS[0]] + 0.5  # one anchor held out, far off: still too few to estimate
+    covs = np.full((a, 2, 2), np.nan)
+    covs[0] = 1e-4 * np.eye(2)
+    m = with_held_out_floor(model, one, covs, P[ANCHORS])
+    np.testing.assert_allclose(m.covariances, floor.covariances, rtol=1e-12, equal_nan=True)
+    assert "only 1 of" in m.warnings[-1] and "fixed systematic floor" in m.warnings[-1]
+
+
 def test_released_anchor_is_placed_by_the_readings_and_the_other_anchors():
     from mappers.core.uncertainty import mahalanobis_squared
     from mappers.viewpoints import BearingAdjustment, released_anchor
