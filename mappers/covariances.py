@@ -43,6 +43,7 @@ import numpy as np
 from mappers.calibrated import has_linear_jackknife, linear_jackknife_covariances
 from mappers.core.errors import MappingError
 from mappers.core.held_out_anchors import held_out_factor, held_out_floor
+from mappers.core.threads import thread_limit
 from mappers.core.uncertainty import (
     SYSTEMATIC_FLOOR,
     check_uncertainty,
@@ -60,7 +61,7 @@ from mappers.viewpoints import adjustment_covariances
 from mappers.viewpoints import has_model_covariances as _has_planar_model
 
 __all__ = ["BOOTSTRAP_INFLATION", "BOOTSTRAP_REPLICATES", "JACKKNIFE_INFLATION", "MIN_REPLICATES",
-           "has_model_covariances", "with_covariances", "with_held_out_check",
+           "SINGLE_THREAD_MAX_OBJECTS", "covariance_threads", "has_model_covariances", "with_covariances", "with_held_out_check",
            "with_held_out_floor", "with_model_covariances"]
 
 BOOTSTRAP_REPLICATES = 20
@@ -84,6 +85,20 @@ layouts of the second simulator (``--seed0 13100 --layouts 25``; docs/guide/unce
 
 MIN_REPLICATES = 10
 """An object placed in fewer replicates gets a NaN covariance (and a note)."""
+
+
+SINGLE_THREAD_MAX_OBJECTS = 500
+"""Up to this many objects the covariances are computed with one BLAS thread, as the maps are
+(:mod:`mappers.fitting`): their matrices are small, and more threads only spin on a shared
+machine's cores (on a 50-object bearing map of 1,000 steps they made the model's
+covariances cost about five times the CPU time)."""
+
+
+def covariance_threads(n_objects: int):
+    """The BLAS thread limit (:func:`mappers.core.threads.thread_limit`) the covariances of a
+    map of ``n_objects`` are computed under: one thread up to
+    :data:`SINGLE_THREAD_MAX_OBJECTS`, else the libraries decide."""
+    return thread_limit(1 if n_objects <= SINGLE_THREAD_MAX_OBJECTS else None)
 
 
 def has_model_covariances(est) -> bool:
@@ -171,6 +186,13 @@ def with_covariances(result: Map, uncertainty, *, est: Any, mapped: np.ndarray, 
     mode = check_uncertainty(uncertainty)
     if mode is False:
         return result
+    with covariance_threads(len(result.positions)):
+        return _with_covariances(result, mode, est, mapped, X, mask, n_steps, refit,
+                                 random_state, timeline)
+
+
+def _with_covariances(result, mode, est, mapped, X, mask, n_steps, refit, random_state,
+                      timeline) -> Map:
     jackknife = has_linear_jackknife(est) and mask is None and not isinstance(X, dict)
     if mode in (True, "anchors"):  # ("anchors": build_map scales these afterwards)
         mode = ("model" if has_model_covariances(est) else "jackknife" if jackknife

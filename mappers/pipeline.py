@@ -21,6 +21,7 @@ from mappers.core.fused_histories import check_fused
 from mappers.core.sensors import COLUMNS_PER_STEP, check_sensor_set
 from mappers.core.uncertainty import check_uncertainty
 from mappers.covariances import (
+    covariance_threads,
     has_model_covariances,
     with_covariances,
     with_held_out_check,
@@ -350,8 +351,9 @@ def _held_out_checked(histories, anchor_ids, anchor_positions, method, floor=Fal
                                                      sensor=kwargs["sensor"],
                                                      mask=kwargs["mask"], **params)
         release = None
-        linear = (spatial_held_out(est, pos, floor) if isinstance(est, SpatialAdjustment)
-                  else None)
+        with covariance_threads(len(result.positions)):
+            linear = (spatial_held_out(est, pos, floor) if isinstance(est, SpatialAdjustment)
+                      else None)
         if floor and linear is not None:  # (the model and the held-out anchors at once)
             result = with_model_covariances(result, linear[2])
         else:
@@ -363,8 +365,9 @@ def _held_out_checked(histories, anchor_ids, anchor_positions, method, floor=Fal
                                         kwargs["sensor"], kwargs["mask"], kwargs["timeline"],
                                         kwargs["normalize"], kwargs["random_state"],
                                         not floor, params)
-        release, linear = _releaser(result, est, mapped, histories, ids, pos,
-                                    {**kwargs, **params}, floor)
+        with covariance_threads(len(result.positions)):
+            release, linear = _releaser(result, est, mapped, histories, ids, pos,
+                                        {**kwargs, **params}, floor)
         if floor and linear is not None:
             result = with_model_covariances(result, linear[2], mapped)
         elif floor:  # (no adjustment, or an anchor it did not place)
