@@ -7,8 +7,10 @@ MPE against the tag survey (issue 34).
 
 Anchors: six surveyed tags seen in >= 3 image pairs (the lowest, then farthest-point order);
 scored: the other tags seen in >= 3 image pairs; ``mapped`` is the share of them placed (a tag
-left unmapped is missing from the MPE, and at least 90 % should be mapped). Also the baseline
-of every tag at the anchors' centroid. Sensors: ``range-bearing`` the stereo camera (left rays
+left unmapped is missing from the MPE, and at least 90 % should be mapped); ``mappable`` the
+share of them that a chain of sightings links to three anchors not on one line, the most any map
+can place (:mod:`mappers.spatial.anchored`). Also the baseline of every tag at the anchors'
+centroid. Sensors: ``range-bearing`` the stereo camera (left rays
 and stereo ranges, SPATIAL-BA), ``bearing`` the left camera's rays (SPATIAL-BA), ``visibility``
 the sightings (COVIS-3D); the parameters are :data:`lfmdr_gym.experiments.starloc.STARLOC_PARAMS`.
 Goals on setup s3: stereo <= 0.05 m, bearing <= 0.10 m, visibility <= 1.0 m. The data:
@@ -42,7 +44,7 @@ from lfmdr_gym.experiments.starloc import map_starloc  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = ROOT.parent / "shared" / "data" / "starloc"
 FIELDS = ["sequence", "setup", "sensor", "mapped_by", "mpe", "mapped", "n_scored", "centroid_mpe",
-          "cpu_s"]
+          "cpu_s", "mappable"]
 
 
 def centroid_mpe(seq: Path) -> float:
@@ -108,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     rows = []
     print(f"{'sequence':18s} {'sensor':14s} {'MPE [m]':>8s} {'mapped':>7s} {'scored':>6s} "
-          f"{'centroid':>8s} {'CPU [s]':>7s}")
+          f"{'centroid':>8s} {'CPU [s]':>7s} {'mappable':>8s}")
     for seq in folders:
         base = centroid_mpe(seq)
         for sensor in args.sensors.split(","):
@@ -120,14 +122,16 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{seq.name:18s} {sensor:14s} failed: {exc}", flush=True)
                 rows.append({"sequence": seq.name, "setup": seq.name.rsplit("_", 1)[-1],
                              "sensor": sensor, "mapped_by": "failed", "mpe": "nan", "mapped": "0",
-                             "n_scored": "", "centroid_mpe": f"{base:.4f}", "cpu_s": ""})
+                             "n_scored": "", "centroid_mpe": f"{base:.4f}", "cpu_s": "",
+                             "mappable": ""})
                 continue
             rows.append({"sequence": r.sequence, "setup": r.sequence.rsplit("_", 1)[-1],
                          "sensor": sensor, "mapped_by": r.method, "mpe": f"{r.mpe:.4f}",
                          "mapped": f"{r.mapped:.3f}", "n_scored": r.n_scored,
-                         "centroid_mpe": f"{base:.4f}", "cpu_s": f"{r.cpu_seconds:.2f}"})
+                         "centroid_mpe": f"{base:.4f}", "cpu_s": f"{r.cpu_seconds:.2f}",
+                         "mappable": f"{r.mappable:.4f}"})
             print(f"{r.sequence:18s} {sensor:14s} {r.mpe:8.3f} {r.mapped:7.0%} {r.n_scored:6d} "
-                  f"{base:8.3f} {r.cpu_seconds:7.2f}", flush=True)
+                  f"{base:8.3f} {r.cpu_seconds:7.2f} {r.mappable:8.0%}", flush=True)
     if args.out is not None:
         buf = io.StringIO()
         writer = csv.DictWriter(buf, fieldnames=FIELDS, lineterminator="\n")

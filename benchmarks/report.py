@@ -447,7 +447,8 @@ STARLOC_GOALS = {"range-bearing": 0.05, "bearing": 0.10, "visibility": 1.0}
 
 def starloc_section(root: Path) -> list[str]:
     """STAR-loc (issue 34): per sequence, the non-anchor MPE [m] and the share of tags mapped
-    for each sensor, and the tags-at-the-anchors'-centroid baseline."""
+    for each sensor, the share any map could place (``mappable``), and the
+    tags-at-the-anchors'-centroid baseline."""
     rows = read_rows(root, STARLOC)
     by_seq: dict[str, dict[str, dict[str, str]]] = {}
     for r in rows:
@@ -460,7 +461,11 @@ def starloc_section(root: Path) -> list[str]:
             return "failed"
         return f"{number(r['mpe']):.3f} ({number(r['mapped']):.0%})"
 
-    body = [[seq, *(cell(runs.get(sensor)) for sensor in STARLOC_SENSORS),
+    def ceiling(runs: dict[str, dict[str, str]]) -> str:
+        shares = [r["mappable"] for r in runs.values() if r.get("mappable")]
+        return f"{number(shares[0]):.0%}" if shares else "-"
+
+    body = [[seq, *(cell(runs.get(sensor)) for sensor in STARLOC_SENSORS), ceiling(runs),
              f"{number(next(iter(runs.values()))['centroid_mpe']):.2f}"]
             for seq, runs in sorted(by_seq.items(), key=lambda kv: (kv[0].rsplit("_", 1)[-1],
                                                                      kv[0]))]
@@ -473,11 +478,14 @@ def starloc_section(root: Path) -> list[str]:
         "mapped; six anchors (the lowest tag seen in >= 3 image pairs, then farthest-point "
         "order), scored over the other tags seen in >= 3 image pairs. range-bearing and "
         "bearing: SPATIAL-BA; visibility: COVIS-3D. Goals on setup s3: "
-        f"{goals}. Setups s1 and s2 have a worse calibration (the data's README).",
+        f"{goals}. Setups s1 and s2 have a worse calibration (the data's README). "
+        "mappable: the share of the scored tags that a chain of sightings links to three "
+        "anchors not on one line, the most a map from the sightings' geometry can place "
+        "(`mappers.spatial.anchored`; COVIS-3D places the others by co-observation alone).",
         "",
         *command(STARLOC),
         "",
-        *table(["sequence", *STARLOC_SENSORS, "centroid"], body),
+        *table(["sequence", *STARLOC_SENSORS, "mappable", "centroid"], body),
         "",
     ]
 

@@ -17,6 +17,7 @@ import numpy as np
 from lfmdr_gym.datasets.starloc import read_starloc, scored_tags, starloc_anchors, starloc_survey
 from lfmdr_gym.histories.ray_table import ray_histories
 from mappers import build_map
+from mappers.spatial.anchored import anchored_objects
 
 __all__ = ["STARLOC_DISPARITY_OFFSET", "STARLOC_PARAMS", "StarlocResult", "map_starloc"]
 
@@ -54,8 +55,10 @@ sequence."""
 class StarlocResult:
     """One sequence mapped: its name, the sensor, the method, the mean position error [m] of the
     scored tags that were mapped, the share of scored tags mapped, how many were scored, the
-    anchors, the CPU seconds, the map's positions by tag id, and (``uncertainty=``) each
-    placed tag's (3, 3) covariance by tag id (zero for the anchors)."""
+    anchors, the CPU seconds, the map's positions by tag id, (``uncertainty=``) each
+    placed tag's (3, 3) covariance by tag id (zero for the anchors), and ``mappable``: the share
+    of the scored tags that a chain of sightings links to three anchors not on one line, the
+    most any map of the sequence can place (:mod:`mappers.spatial.anchored`)."""
 
     sequence: str
     sensor: str
@@ -67,6 +70,7 @@ class StarlocResult:
     cpu_seconds: float
     positions: dict[int, tuple[float, float, float]]
     covariances: dict[int, np.ndarray] | None = None
+    mappable: float = float("nan")
 
 
 def map_starloc(seq_dir: str | Path, sensor: str = "range-bearing",
@@ -97,6 +101,7 @@ def map_starloc(seq_dir: str | Path, sensor: str = "range-bearing",
     m = build_map(histories, anchor_rows, anchor_xyz, uncertainty=uncertainty,
                   **(STARLOC_PARAMS[sensor] if params is None else params))
     cpu = time.process_time() - start
+    fixable = anchored_objects(h.visibility, np.array(anchor_rows), anchor_xyz)
     placed = [t for t in scored if np.all(np.isfinite(m.positions[row[t]]))]
     err = [np.linalg.norm(m.positions[row[t]] - xyz.loc[t].to_numpy(dtype=float)) for t in placed]
     return StarlocResult(seq.name, sensor, m.method, float(np.mean(err)) if err else np.nan,
@@ -106,4 +111,5 @@ def map_starloc(seq_dir: str | Path, sensor: str = "range-bearing",
                           for t in h.ids if np.all(np.isfinite(m.positions[row[int(t)]]))},
                          None if m.covariances is None else
                          {int(t): m.covariances[row[int(t)]] for t in h.ids
-                          if np.all(np.isfinite(m.positions[row[int(t)]]))})
+                          if np.all(np.isfinite(m.positions[row[int(t)]]))},
+                         float(np.mean([fixable[row[t]] for t in scored])) if scored else np.nan)

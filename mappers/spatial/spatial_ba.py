@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
-from scipy.sparse import issparse
+from scipy.sparse import coo_matrix, issparse
 from sklearn.base import BaseEstimator
 
 from mappers.core.align_3d import check_anchors_3d, umeyama
@@ -22,6 +22,7 @@ from mappers.core.embedding_transformer import EmbeddingTransformer
 from mappers.core.threads import thread_limit
 from mappers.core.validation import check_views
 from mappers.spatial.adjustment import adjust_viewpoints
+from mappers.spatial.anchored import anchored_objects
 from mappers.spatial.covisibility_3d import CoVisibility3D
 from mappers.spatial.global_start import register_global
 from mappers.spatial.incremental import register_incremental
@@ -87,7 +88,9 @@ class SpatialAdjustment(EmbeddingTransformer, BaseEstimator):
     :class:`~mappers.spatial.adjustment.AdjustmentResult` before the similarity onto the
     anchors), ``anchor_ids_`` and ``similarity_`` (rotation, scale, translation taking
     ``adjusted_`` to the output; the identity without ``anchor_noise``): what the model
-    covariances need (:mod:`mappers.spatial.marginals`).
+    covariances need (:mod:`mappers.spatial.marginals`); ``unanchored_`` the ids of the objects
+    no chain of sightings links to three anchors not on one line, which no map can place from
+    its sightings (:mod:`mappers.spatial.anchored`; always unmapped), and ``notes_`` saying so.
     """
 
     def __init__(self, *, bearing_noise: float = float(np.deg2rad(1.0)), range_noise: float = 0.02,
@@ -130,6 +133,12 @@ class SpatialAdjustment(EmbeddingTransformer, BaseEstimator):
         if anchor_ids is None or anchor_positions is None:
             raise ValueError("SPATIAL-BA needs anchors: anchor_ids and anchor_positions (A, 3)")
         ids, pos = check_anchors_3d(anchor_ids, anchor_positions, obs.n_objects)
+        seen = coo_matrix((np.ones(obs.obj.size), (obs.obj, obs.step)),
+                          shape=(obs.n_objects, obs.n_steps))
+        self.unanchored_ = np.flatnonzero(~anchored_objects(seen, ids, pos))
+        self.notes_ = (f"objects {self.unanchored_.tolist()} share no chain of sightings with "
+                       "three anchors not on one line: their sightings fix no place for them",) \
+            if self.unanchored_.size else ()
         if self.start not in ("anchors", "global", "incremental"):
             raise ValueError(f"start must be 'anchors', 'global' or 'incremental', got "
                              f"{self.start!r}")
@@ -174,6 +183,7 @@ class SpatialAdjustment(EmbeddingTransformer, BaseEstimator):
         self.inconsistent_ = _inconsistent(obs, res, self.max_ray_error, ids)
         points = res.points.copy()
         points[self.inconsistent_] = np.nan
+        points[self.unanchored_] = np.nan  # any place there would be a guess
         self.embedding_ = points
         self.rotations_, self.positions_ = res.rotations, res.positions
         self.range_scale_, self.n_iter_ = res.range_scale, res.n_iter
