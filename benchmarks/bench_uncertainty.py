@@ -242,15 +242,15 @@ def starloc_rows(data: Path, name: str, setups=("s3",)) -> list[dict]:
         cov = np.array([r.covariances[t] for t in tags])
         truth = xyz.loc[tags].to_numpy(dtype=float)
         n, inside, radius, mpe = score(pos, cov, truth, np.arange(len(tags)))
-        extent = np.array([r.positions[a] for a in r.anchors])
+        # the anchors' known positions (an anchor SPATIAL-BA did not place has none in the map)
+        extent = xyz.loc[list(r.anchors)].to_numpy(dtype=float)
         rows.append({"_q": mahalanobis_squared(truth - pos, cov), "_e": truth - pos, "_c": cov,
                      "_ext": float(np.max(np.linalg.norm(extent[:, None] - extent[None],
                                                          axis=2))), "set": name,
                      "layout": seq.name, "method": r.method, "n_scored": n, "inside": inside,
                      "rms_radius": radius, "mpe": mpe, "cpu_map": cpu0, "cpu_uncertainty": cpu1,
                      "wall_map": wall0, "wall_uncertainty": wall1,
-                     **informative(pos, cov, truth, np.arange(len(tags)),
-                                   [r.positions[a] for a in r.anchors])})
+                     **informative(pos, cov, truth, np.arange(len(tags)), extent)})
     return rows
 
 
