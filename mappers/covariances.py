@@ -285,15 +285,17 @@ def with_held_out_floor(result: Map, held_positions, held_covariances,
     adjustment: about nothing added where the anchors land inside their regions (a history the
     model describes), the systematic error's size where they do not (a logged run). With fewer
     than two anchors that can be held out (an anchor seen along one ray, a sparse run) the floor
-    is ``"floor"``'s fixed share of the anchors' extent
+    is ``"floor"``'s fixed share of the extent of the anchors' known positions
     (:data:`mappers.core.uncertainty.SYSTEMATIC_FLOOR`,
     :func:`mappers.core.uncertainty.systematic_floor`). A note in ``Map.warnings`` says which."""
     target = np.asarray(anchor_positions, dtype=float)
     errors = np.asarray(held_positions, dtype=float) - target
     covs = np.asarray(held_covariances, dtype=float)
     ok = np.all(np.isfinite(errors), axis=1) & np.all(np.isfinite(covs), axis=(1, 2))
-    if ok.sum() < 2:
-        cov = systematic_floor(result.covariances, result.positions, result.anchor_ids)
+    if ok.sum() < 2:  # (the extent from the anchors' known positions: some may be unplaced)
+        known = np.array(result.positions, dtype=float)
+        known[list(result.anchor_ids)] = target
+        cov = systematic_floor(result.covariances, known, result.anchor_ids)
         note = (f"uncertainty: only {int(ok.sum())} of {len(target)} anchors could be held out: "
                 f"the covariances get the fixed systematic floor ({SYSTEMATIC_FLOOR:g} of the "
                 "anchors' extent per axis)")
