@@ -30,7 +30,9 @@ true``) and :data:`mappers.covariances.BOOTSTRAP_INFLATION` (``--uncertainty boo
 chosen, on ``visibility-other-sim`` (seeds 13000-13014).
 
 ``mrclam``: every MRCLAM run under ``--data`` mapped from range and bearing fused (the logged-run
-default, ``LOC-SMA``), scored against motion capture. ``mrclam-inflated`` asks what a calibrated
+default, ``LOC-SMA``), scored against motion capture; ``mrclam-model`` and ``starloc-model``:
+with ``uncertainty="model"`` (the model alone, without the floor ``True`` estimates from the
+held-out anchors). ``mrclam-inflated`` asks what a calibrated
 inflation would give: for each run, the factor on the covariances that puts 95 % of the *other*
 runs' landmarks inside their regions (leave-one-run-out: the run's figure does not come from a
 factor chosen on it), applied to that run (not a default of the library: the figures say
@@ -43,11 +45,11 @@ ranges (SPATIAL-BA, :func:`lfmdr_gym.experiments.starloc.map_starloc`), its scor
 in 3-D (chi-squared(3)), with ``uncertainty=True`` and ``"anchors"``; ``--setups s1,s2`` maps
 the sequences of those setups instead of s3's. ``mrclam-floor`` and ``starloc-floor``: with
 ``uncertainty="floor"`` (the model plus the systematic floor,
-:func:`mappers.core.uncertainty.systematic_floor`). For ``mrclam`` and ``starloc`` the line
-``floor for 0.95`` gives the smallest share of the anchors' extent (:data:`FLOOR_GRID`) whose
-floor puts 95 % of the set's landmarks inside their regions: how
-:data:`mappers.core.uncertainty.SYSTEMATIC_FLOOR` was chosen (on ``starloc``, the s3
-sequences). ``--uncertainty anchors`` asks the simulated sets for ``"anchors"`` instead of
+:func:`mappers.core.uncertainty.systematic_floor`). For ``mrclam-model`` and
+``starloc-model`` the line ``floor for 0.95`` gives the smallest share of the anchors' extent
+(:data:`FLOOR_GRID`) whose floor on the model's covariances puts 95 % of the set's landmarks inside their regions: how
+:data:`mappers.core.uncertainty.SYSTEMATIC_FLOOR` was chosen (on the s3 sequences' model
+covariances). ``--uncertainty anchors`` asks the simulated sets for ``"anchors"`` instead of
 True.
 
 Per map: the share of non-anchor landmarks whose truth lies inside their 95 % region (squared
@@ -88,16 +90,18 @@ from mappers import build_map, covariances
 from mappers.core.uncertainty import chi2_quantile, mahalanobis_squared, rms_radius
 
 SETS = ("visibility", "bearing", "range-bearing", "bearing-view90", "visibility-other-sim",
-        "mrclam", "mrclam-anchors", "mrclam-floor", "starloc", "starloc-anchors", "starloc-floor")
-REAL = {"mrclam", "mrclam-anchors", "mrclam-floor", "starloc", "starloc-anchors", "starloc-floor"}
+        "mrclam", "mrclam-model", "mrclam-anchors", "mrclam-floor", "starloc", "starloc-model",
+        "starloc-anchors", "starloc-floor")
+REAL = {"mrclam", "mrclam-model", "mrclam-anchors", "mrclam-floor", "starloc", "starloc-model",
+        "starloc-anchors", "starloc-floor"}
 FLOOR_GRID = np.round(np.arange(0.0005, 0.0201, 0.0005), 4)
 """The shares of the anchors' extent ``floor for 0.95`` is sought among (module docstring)."""
 
 
 def real_mode(name: str) -> bool | str:
-    """The ``uncertainty`` a real set asks for: its name's suffix ("-anchors", "-floor"), else
-    True."""
-    return name.rsplit("-", 1)[1] if name.endswith(("-anchors", "-floor")) else True
+    """The ``uncertainty`` a real set asks for: its name's suffix ("-model", "-anchors",
+    "-floor"), else True."""
+    return name.rsplit("-", 1)[1] if name.endswith(("-model", "-anchors", "-floor")) else True
 
 
 def floor_for(rows: list[dict], level: float = 0.95) -> float:
@@ -238,15 +242,15 @@ def starloc_rows(data: Path, name: str, setups=("s3",)) -> list[dict]:
         cov = np.array([r.covariances[t] for t in tags])
         truth = xyz.loc[tags].to_numpy(dtype=float)
         n, inside, radius, mpe = score(pos, cov, truth, np.arange(len(tags)))
-        extent = np.array([r.positions[a] for a in r.anchors])
+        # the anchors' known positions (an anchor SPATIAL-BA did not place has none in the map)
+        extent = xyz.loc[list(r.anchors)].to_numpy(dtype=float)
         rows.append({"_q": mahalanobis_squared(truth - pos, cov), "_e": truth - pos, "_c": cov,
                      "_ext": float(np.max(np.linalg.norm(extent[:, None] - extent[None],
                                                          axis=2))), "set": name,
                      "layout": seq.name, "method": r.method, "n_scored": n, "inside": inside,
                      "rms_radius": radius, "mpe": mpe, "cpu_map": cpu0, "cpu_uncertainty": cpu1,
                      "wall_map": wall0, "wall_uncertainty": wall1,
-                     **informative(pos, cov, truth, np.arange(len(tags)),
-                                   [r.positions[a] for a in r.anchors])})
+                     **informative(pos, cov, truth, np.arange(len(tags)), extent)})
     return rows
 
 
@@ -277,7 +281,7 @@ def mrclam_rows(data: Path, name: str = "mrclam") -> list[dict]:
         ok = objects[np.all(np.isfinite(r.positions[objects]), axis=1)]
         q_runs[run_dir.name] = mahalanobis_squared(r.truth[ok] - r.positions[ok],
                                                    r.covariances[ok])
-    for row in list(rows) if mode is True else []:  # leave-one-run-out (module docstring)
+    for row in list(rows) if mode == "model" else []:  # leave-one-run-out (module docstring)
         others = np.concatenate([q for name, q in q_runs.items() if name != row["layout"]])
         if not others.size:
             continue
@@ -318,7 +322,8 @@ def main(argv=None) -> int:
     ap.add_argument("--setups", default="s3",
                     help="the STAR-loc setups the starloc sets map (comma-separated: s1,s2,s3)")
     ap.add_argument("--csv", type=Path, default=None)
-    ap.add_argument("--uncertainty", choices=("true", "anchors", "jackknife", "bootstrap"),
+    ap.add_argument("--uncertainty", choices=("true", "model", "anchors", "jackknife",
+                                              "bootstrap"),
                     default="true",
                     help="the simulated sets' mode: True, 'anchors' (held-out anchors' check), "
                          "or 'jackknife' / 'bootstrap' (visibility: the linearised jackknife, the "
@@ -360,7 +365,7 @@ def main(argv=None) -> int:
         q = np.concatenate([r["_q"] for r in rows if r["set"] == name])
         d = 3 if name.startswith("starloc") else 2
         print(f"{name}: inflation for 0.95 = {np.nanquantile(q, 0.95) / chi2_quantile(d):.3f}")
-        if name in ("mrclam", "starloc"):
+        if name in ("mrclam-model", "starloc-model"):
             print(f"{name}: floor for 0.95 = "
                   f"{floor_for([r for r in rows if r['set'] == name]):.4f} of the anchors' extent")
     return 0

@@ -21,7 +21,9 @@ Two sources, chosen by ``uncertainty``:
   by :data:`BOOTSTRAP_INFLATION` for the method's bias, which resampling cannot see.
 
 ``True`` is ``"model"`` where there is one, else ``"jackknife"`` where it applies, else
-``"bootstrap"``. The covariances are in the
+``"bootstrap"``; ``build_map`` then adds to the model's the systematic floor the map's anchors,
+each released from the adjustment in turn, estimate (:func:`with_held_out_floor`, issue 35: the
+model alone cannot see a logged run's calibration errors). The covariances are in the
 map's frame (a method's embedding carried by the anchor fit's linear part), zero for the anchors
 (taken as exact: they fix the frame), NaN for unmapped objects. A bootstrap costs about
 ``BOOTSTRAP_REPLICATES`` maps; the model and the jackknife a small fraction of one
@@ -40,8 +42,10 @@ import numpy as np
 
 from mappers.calibrated import has_linear_jackknife, linear_jackknife_covariances
 from mappers.core.errors import MappingError
-from mappers.core.held_out_anchors import held_out_factor
+from mappers.core.held_out_anchors import held_out_factor, held_out_floor
+from mappers.core.threads import thread_limit
 from mappers.core.uncertainty import (
+    SYSTEMATIC_FLOOR,
     check_uncertainty,
     mahalanobis_squared,
     moving_blocks,
@@ -57,7 +61,8 @@ from mappers.viewpoints import adjustment_covariances
 from mappers.viewpoints import has_model_covariances as _has_planar_model
 
 __all__ = ["BOOTSTRAP_INFLATION", "BOOTSTRAP_REPLICATES", "JACKKNIFE_INFLATION", "MIN_REPLICATES",
-           "has_model_covariances", "with_covariances", "with_held_out_check"]
+           "SINGLE_THREAD_MAX_OBJECTS", "covariance_threads", "has_model_covariances", "with_covariances", "with_held_out_check",
+           "with_held_out_floor", "with_model_covariances"]
 
 BOOTSTRAP_REPLICATES = 20
 """Replicate maps of a bootstrap."""
@@ -80,6 +85,20 @@ layouts of the second simulator (``--seed0 13100 --layouts 25``; docs/guide/unce
 
 MIN_REPLICATES = 10
 """An object placed in fewer replicates gets a NaN covariance (and a note)."""
+
+
+SINGLE_THREAD_MAX_OBJECTS = 500
+"""Up to this many objects the covariances are computed with one BLAS thread, as the maps are
+(:mod:`mappers.fitting`): their matrices are small, and more threads only spin on a shared
+machine's cores (on a 50-object bearing map of 1,000 steps they made the model's
+covariances cost about five times the CPU time)."""
+
+
+def covariance_threads(n_objects: int):
+    """The BLAS thread limit (:func:`mappers.core.threads.thread_limit`) the covariances of a
+    map of ``n_objects`` are computed under: one thread up to
+    :data:`SINGLE_THREAD_MAX_OBJECTS`, else the libraries decide."""
+    return thread_limit(1 if n_objects <= SINGLE_THREAD_MAX_OBJECTS else None)
 
 
 def has_model_covariances(est) -> bool:
@@ -167,6 +186,13 @@ def with_covariances(result: Map, uncertainty, *, est: Any, mapped: np.ndarray, 
     mode = check_uncertainty(uncertainty)
     if mode is False:
         return result
+    with covariance_threads(len(result.positions)):
+        return _with_covariances(result, mode, est, mapped, X, mask, n_steps, refit,
+                                 random_state, timeline)
+
+
+def _with_covariances(result, mode, est, mapped, X, mask, n_steps, refit, random_state,
+                      timeline) -> Map:
     jackknife = has_linear_jackknife(est) and mask is None and not isinstance(X, dict)
     if mode in (True, "anchors"):  # ("anchors": build_map scales these afterwards)
         mode = ("model" if has_model_covariances(est) else "jackknife" if jackknife
@@ -192,6 +218,22 @@ def with_covariances(result: Map, uncertainty, *, est: Any, mapped: np.ndarray, 
         cov = systematic_floor(cov, result.positions, result.anchor_ids)
     return dataclasses.replace(result, covariances=cov,
                                warnings=(*result.warnings, *notes))
+
+
+def with_model_covariances(result: Map, cov_mapped: np.ndarray,
+                           mapped: np.ndarray | None = None) -> Map:
+    """``result`` with the model's covariances ``cov_mapped`` (len(mapped), d, d) of its rows
+    ``mapped`` in the adjustment's frame (as :func:`mappers.viewpoints.adjustment_covariances`
+    gives them), carried to the map's frame as ``uncertainty="model"`` carries them; ``mapped``
+    None: ``cov_mapped`` (M, d, d) is already in the map's frame (a 3-D map's,
+    :func:`mappers.spatial.marginals.spatial_covariances`)."""
+    if mapped is None:
+        return dataclasses.replace(result, covariances=_finish(result, cov_mapped))
+    d = result.positions.shape[1]
+    cov = np.full((len(result.positions), d, d), np.nan)
+    cov[mapped] = cov_mapped
+    cov = transform_covariances(cov, np.asarray(result.affine)[:d])
+    return dataclasses.replace(result, covariances=_finish(result, cov))
 
 
 def with_held_out_check(result: Map, held_out: Callable[[int], tuple[np.ndarray, np.ndarray]],
@@ -231,3 +273,40 @@ def with_held_out_check(result: Map, held_out: Callable[[int], tuple[np.ndarray,
             + ("the covariances pass the test (kept)" if factor == 1.0 else
                f"the covariances are multiplied by {factor:.3g}"))
     return dataclasses.replace(result, covariances=cov, warnings=(*result.warnings, note))
+
+
+def with_held_out_floor(result: Map, held_positions, held_covariances,
+                        anchor_positions) -> Map:
+    """``result`` (a map with the model's covariances) with the isotropic floor its held-out
+    anchors estimate added to the covariance of every non-anchor object
+    (:func:`mappers.core.held_out_anchors.held_out_floor`): ``held_positions`` (A, d) and
+    ``held_covariances`` (A, d, d) are each anchor's position and covariance in the map without
+    it, ``anchor_positions`` (A, d) where it is. What ``uncertainty=True`` gives a method with an
+    adjustment: about nothing added where the anchors land inside their regions (a history the
+    model describes), the systematic error's size where they do not (a logged run). With fewer
+    than two anchors that can be held out (an anchor seen along one ray, a sparse run) the floor
+    is ``"floor"``'s fixed share of the extent of the anchors' known positions
+    (:data:`mappers.core.uncertainty.SYSTEMATIC_FLOOR`,
+    :func:`mappers.core.uncertainty.systematic_floor`). A note in ``Map.warnings`` says which."""
+    target = np.asarray(anchor_positions, dtype=float)
+    errors = np.asarray(held_positions, dtype=float) - target
+    covs = np.asarray(held_covariances, dtype=float)
+    ok = np.all(np.isfinite(errors), axis=1) & np.all(np.isfinite(covs), axis=(1, 2))
+    if ok.sum() < 2:  # (the extent from the anchors' known positions: some may be unplaced)
+        known = np.array(result.positions, dtype=float)
+        known[list(result.anchor_ids)] = target
+        cov = systematic_floor(result.covariances, known, result.anchor_ids)
+        note = (f"uncertainty: only {int(ok.sum())} of {len(target)} anchors could be held out: "
+                f"the covariances get the fixed systematic floor ({SYSTEMATIC_FLOOR:g} of the "
+                "anchors' extent per axis)")
+    else:
+        variance, used = held_out_floor(errors, covs)
+        cov = np.array(result.covariances, dtype=float)
+        rows = np.all(np.isfinite(cov), axis=(1, 2))
+        rows[list(result.anchor_ids)] = False
+        cov[rows] += variance * np.eye(cov.shape[-1])
+        note = (f"uncertainty: {used} held-out anchors miss their regions: a systematic floor "
+                f"of {math.sqrt(variance):.3g} per axis is added to the model's covariances"
+                if variance > 0 else None)
+    notes = (note,) if note else ()
+    return dataclasses.replace(result, covariances=cov, warnings=(*result.warnings, *notes))

@@ -20,7 +20,14 @@ from mappers.core.errors import MappingError
 from mappers.core.fused_histories import check_fused
 from mappers.core.sensors import COLUMNS_PER_STEP, check_sensor_set
 from mappers.core.uncertainty import check_uncertainty
-from mappers.covariances import has_model_covariances, with_covariances, with_held_out_check
+from mappers.covariances import (
+    covariance_threads,
+    has_model_covariances,
+    with_covariances,
+    with_held_out_check,
+    with_held_out_floor,
+    with_model_covariances,
+)
 from mappers.defaults import choose_for_history
 from mappers.fitting import Map, check_inputs, fit_checked, fit_fused_method
 from mappers.spatial.marginals import spatial_held_out
@@ -95,8 +102,11 @@ def build_map(
             CAL-SMA's linearised block jackknife (complete visibility histories, dense CAL-SMA;
             a fraction of a map's time); ``"bootstrap"``: from replicate maps
             of a moving-block bootstrap over the steps (any method; about 20 maps' time);
-            True: ``"model"`` where the method has one, else ``"jackknife"`` where it applies,
-            else ``"bootstrap"``
+            True: ``"model"`` where the method has one, plus the systematic floor its anchors,
+            each released from the adjustment by one linearised step, estimate
+            (:func:`mappers.covariances.with_held_out_floor`; ~0 where the model describes the
+            readings, the size of a logged run's calibration errors where it does not), else
+            ``"jackknife"`` where it applies, else ``"bootstrap"``
             (:mod:`mappers.covariances`); ``"anchors"``: True's covariances checked by the
             anchors, each held out in turn, and scaled when they miss them
             (:mod:`mappers.core.held_out_anchors`; for a method with an adjustment each anchor
@@ -115,10 +125,11 @@ def build_map(
         ValueError: bad input, naming the problem. MappingError (a ValueError) when the method
         itself fails (e.g. Hessian LLE's eigenproblem), naming the method and the cause.
     """
-    if check_uncertainty(uncertainty) == "anchors":
+    if check_uncertainty(uncertainty) in ("anchors", True):
         return _held_out_checked(histories, anchor_ids, anchor_positions, method, sensor=sensor,
                                  mask=mask, timeline=timeline, normalize=normalize,
-                                 random_state=random_state, **params)
+                                 random_state=random_state,
+                                 floor=check_uncertainty(uncertainty) is True, **params)
     if anchor_dimension(anchor_positions) == 3:
         uncertainty = check_uncertainty(uncertainty)
         result, est, X3, mask3, sensor3 = fit_map_3d(histories, anchor_ids, anchor_positions,
@@ -140,11 +151,7 @@ def _build_2d(histories, anchor_ids, anchor_positions, method, sensor, mask, tim
               random_state, uncertainty, params):
     """``build_map``'s 2-D map (with its covariances unless ``uncertainty`` is False), the fitted
     estimator and the rows it was fitted on: ``(Map, est, mapped)``."""
-    parts = getattr(histories, "parts", None)
-    if isinstance(parts, Mapping) and not isinstance(histories, Mapping):
-        # a fused History (lfmdr_gym): its single-sensor parts, each with its own mask
-        timeline = timeline if timeline is not None else getattr(histories, "timeline", None)
-        histories = dict(parts)
+    histories, timeline = _unpacked(histories, timeline)
     if isinstance(histories, Mapping):
         result, est, mapped = _build_fused_map(histories, anchor_ids, anchor_positions, method,
                                                sensor, mask, timeline, normalize, random_state,
@@ -159,6 +166,16 @@ def _build_2d(histories, anchor_ids, anchor_positions, method, sensor, mask, tim
     return result, est, mapped
 
 
+
+
+def _unpacked(histories, timeline):
+    """``(histories, timeline)``, a fused History (lfmdr_gym) as its single-sensor parts (a
+    mapping, each with its own mask) and its timeline unless one is given."""
+    parts = getattr(histories, "parts", None)
+    if isinstance(parts, Mapping) and not isinstance(histories, Mapping):
+        timeline = timeline if timeline is not None else getattr(histories, "timeline", None)
+        histories = dict(parts)
+    return histories, timeline
 
 
 def _fit_map(histories, anchor_ids, anchor_positions, method, sensor, mask, timeline, normalize,
@@ -312,13 +329,19 @@ def _with_covariances_3d(result, uncertainty, est, X, mask, sensor, anchor_ids, 
                             random_state=random_state)
 
 
-def _held_out_checked(histories, anchor_ids, anchor_positions, method, **kwargs) -> Map:
+def _held_out_checked(histories, anchor_ids, anchor_positions, method, floor=False,
+                      **kwargs) -> Map:
     """``build_map(..., uncertainty="anchors")``: the map with its own covariances (``True``),
     scaled by its held-out anchors (:func:`mappers.covariances.with_held_out_check`): each
     anchor in turn mapped by the same method from the other anchors; where that map cannot place
     it (a sparse logged run) and the method ends with a planar adjustment, the adjustment alone
     is fitted again from the full map with that anchor free
-    (:func:`mappers.viewpoints.marginals.released_anchor`)."""
+    (:func:`mappers.viewpoints.marginals.released_anchor`).
+
+    ``floor`` (``uncertainty=True``): for a method with an adjustment, the model's covariances
+    plus the floor its anchors, released from the adjustment by one linearised step, estimate
+    (:func:`mappers.covariances.with_held_out_floor`); any other method's own covariances as
+    they are (no map again)."""
     ids = np.asarray(anchor_ids, dtype=int)
     pos = np.asarray(anchor_positions, dtype=float)
     params = {k: kwargs.pop(k) for k in list(kwargs)
@@ -327,26 +350,51 @@ def _held_out_checked(histories, anchor_ids, anchor_positions, method, **kwargs)
         result, est, X3, mask3, sensor3 = fit_map_3d(histories, ids, pos, method,
                                                      sensor=kwargs["sensor"],
                                                      mask=kwargs["mask"], **params)
-        result = _with_covariances_3d(result, True, est, X3, mask3, sensor3, ids, pos,
-                                      kwargs["random_state"])
         release = None
-        linear = spatial_held_out(est, pos) if isinstance(est, SpatialAdjustment) else None
+        with covariance_threads(len(result.positions)):
+            linear = (spatial_held_out(est, pos, floor) if isinstance(est, SpatialAdjustment)
+                      else None)
+        if floor and linear is not None:  # (the model and the held-out anchors at once)
+            result = with_model_covariances(result, linear[2])
+        else:
+            result = _with_covariances_3d(result, True, est, X3, mask3, sensor3, ids, pos,
+                                          kwargs["random_state"])
     else:
+        # (True: the model's covariances and the held-out anchors from one linearisation)
         result, est, mapped = _build_2d(histories, anchor_ids, anchor_positions, method,
                                         kwargs["sensor"], kwargs["mask"], kwargs["timeline"],
-                                        kwargs["normalize"], kwargs["random_state"], True, params)
-        release, linear = _releaser(result, est, mapped, histories, ids, pos,
-                                    {**kwargs, **params})
+                                        kwargs["normalize"], kwargs["random_state"],
+                                        not floor, params)
+        with covariance_threads(len(result.positions)):
+            release, linear = _releaser(result, est, mapped, histories, ids, pos,
+                                        {**kwargs, **params}, floor)
+        if floor and linear is not None:
+            result = with_model_covariances(result, linear[2], mapped)
+        elif floor:  # (no adjustment, or an anchor it did not place)
+            hs, tl = _unpacked(histories, kwargs["timeline"])
+            result = _with_covariances(result, True, est, mapped, hs, anchor_ids,
+                                       anchor_positions, kwargs["sensor"], kwargs["mask"], tl,
+                                       kwargs["normalize"], kwargs["random_state"], params)
+    if floor:
+        if has_model_covariances(est):
+            held = linear if linear is not None else (np.full_like(pos, np.nan),
+                                                      np.full((*pos.shape, pos.shape[1]), np.nan))
+            result = with_held_out_floor(result, held[0], held[1], pos)
+        for note in result.warnings:
+            warnings.warn(note, MapWarning, stacklevel=3)
+        return result
     for note in result.warnings:
         warnings.warn(note, MapWarning, stacklevel=3)
     kwargs = {**kwargs, **params}
+
+    own = "model" if has_model_covariances(est) else True  # (True would add its floor)
 
     def held_out(j):
         if linear is not None:  # the method's adjustment, linearised: no map again
             return linear[0][j], linear[1][j]
         keep = np.arange(len(ids)) != j
         try:
-            m = build_map(histories, ids[keep], pos[keep], method, uncertainty=True, **kwargs)
+            m = build_map(histories, ids[keep], pos[keep], method, uncertainty=own, **kwargs)
             p, c = m.positions[ids[j]], m.covariances[ids[j]]
             if np.all(np.isfinite(p)) and np.all(np.isfinite(c)):
                 return p, c
@@ -363,12 +411,13 @@ def _held_out_checked(histories, anchor_ids, anchor_positions, method, **kwargs)
     return checked
 
 
-def _releaser(result, est, mapped, histories, ids, pos, kwargs):
+def _releaser(result, est, mapped, histories, ids, pos, kwargs, with_covariances=False):
     """``(release, linear)``: ``release(j)`` anchor ``j`` held out of ``est``'s adjustment, in
     the map's frame (:func:`mappers.viewpoints.marginals.released_anchor`), and ``linear`` every
     anchor held out of it linearised, ``(positions (A, 2), covariances (A, 2, 2))`` in the map's
     frame (:func:`mappers.viewpoints.held_out_anchors`); ``(None, None)`` when ``est`` has no
-    adjustment."""
+    adjustment. ``with_covariances``: ``linear`` has a third item, the model's covariances of
+    the ``mapped`` rows in the adjustment's frame, from the same linearisation."""
     if not has_model_covariances(est) or np.any(~np.isin(ids, mapped)):
         return None, None
     parts = getattr(histories, "parts", None)
@@ -392,5 +441,5 @@ def _releaser(result, est, mapped, histories, ids, pos, kwargs):
         p, c = released_anchor(est, rows(X), rows(M), local, pos, j, timeline)
         return np.r_[p, 1.0] @ T, T[:2].T @ c @ T[:2]
 
-    p, c = held_out_anchors(est, rows(X), rows(M), local, timeline)
-    return release, (p @ T[:2] + T[2], np.einsum("ji,ajk,kl->ail", T[:2], c, T[:2]))
+    p, c, *model = held_out_anchors(est, rows(X), rows(M), local, timeline, with_covariances)
+    return release, (p @ T[:2] + T[2], np.einsum("ji,ajk,kl->ail", T[:2], c, T[:2]), *model)

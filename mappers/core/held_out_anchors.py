@@ -26,16 +26,22 @@ so the scores' mean is taken and its spread accounted for by the F law.
 
 When the test passes, the factor is 1: the model is kept as it is (a simulated history whose
 noise the model describes keeps its calibration).
+
+:func:`held_out_floor` reads the same held-out anchors another way, the one ``uncertainty=True``
+uses for a method with an adjustment: the anchors' errors beyond their covariances as an
+*additive*, isotropic variance ``σ²`` (a systematic error the same size wherever a landmark is,
+however many readings it has), not a factor on the model (which leaves the landmarks with many
+readings, whose model ellipses are small, as overconfident as before).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
+from scipy import optimize, stats
 
-from mappers.core.uncertainty import chi2_quantile
+from mappers.core.uncertainty import chi2_quantile, mahalanobis_squared
 
-__all__ = ["held_out_factor"]
+__all__ = ["held_out_factor", "held_out_floor"]
 
 
 def held_out_factor(q: np.ndarray, d: int, level: float = 0.95) -> tuple[float, float]:
@@ -56,3 +62,47 @@ def held_out_factor(q: np.ndarray, d: int, level: float = 0.95) -> tuple[float, 
     if total <= stats.chi2.ppf(level, a * d):
         return 1.0, k
     return k * d * float(stats.f.ppf(level, d, a * d)) / chi2_quantile(d, level), k
+
+
+def held_out_floor(errors: np.ndarray, covariances: np.ndarray,
+                   level: float = 0.95) -> tuple[float, int]:
+    """``(variance, A)``: the isotropic variance per axis to add to every non-anchor object's
+    covariance, estimated from held-out anchors' errors ``errors`` (A, d) (mapped position minus
+    known position) under their covariances ``covariances`` (A, d, d) in the maps without them;
+    ``A`` the anchors used (rows with a finite error and covariance).
+
+    ``σ²`` solves ``Σ_j e_jᵀ (C_j + σ² I)⁻¹ e_j = A d`` (0 when the anchors' squared Mahalanobis
+    distances already sum to at most ``A d``): the moment estimate of an additive variance
+    component (Koch, *Parameter Estimation and Hypothesis Testing in Linear Models*, 2nd ed.,
+    1999, §3.6; the "additive" systematic part of an error budget), its left side falling in
+    ``σ²``, so the root is unique. It is widened for the few anchors it comes from by
+    ``d F_level(d, A d) / χ²_level(d)`` (1.49 for four anchors in 2-D, 1.21 for six in 3-D): a new
+    object's error over ``σ̂`` follows ``d F(d, A d)`` where the floor dominates (as
+    :func:`held_out_factor`'s widening). No constant is tuned. ValueError with fewer than two
+    usable anchors or ``level`` outside (0, 1). The root is found by ``scipy.optimize.brentq``
+    on a bracket doubled from the anchors' mean squared error per axis."""
+    if not 0 < level < 1:
+        raise ValueError(f"level must be in (0, 1), got {level}")
+    e = np.asarray(errors, dtype=float)
+    c = np.asarray(covariances, dtype=float)
+    if e.ndim != 2 or c.shape != (*e.shape, e.shape[1]):
+        raise ValueError(f"errors (A, d) and covariances (A, d, d) expected, got {e.shape} "
+                         f"and {c.shape}")
+    ok = np.all(np.isfinite(e), axis=1) & np.all(np.isfinite(c), axis=(1, 2))
+    e, c = e[ok], c[ok]
+    a, d = e.shape
+    if a < 2:
+        raise ValueError(f"a floor from held-out anchors needs at least two of them with a "
+                         f"finite error and covariance, got {a}")
+    eye = np.eye(d)
+
+    def excess(s2: float) -> float:
+        return float(np.sum(mahalanobis_squared(e, c + s2 * eye))) - a * d
+
+    if excess(0.0) <= 0:
+        return 0.0, a
+    hi = max(float(np.sum(e * e)) / (a * d), np.finfo(float).tiny)
+    while excess(hi) > 0:  # (sum_j |e_j|^2 / hi <= A d once hi >= mean |e|^2 / d: a few steps)
+        hi *= 2.0
+    s2 = optimize.brentq(excess, 0.0, hi, xtol=1e-300, rtol=1e-12)
+    return s2 * d * float(stats.f.ppf(level, d, a * d)) / chi2_quantile(d, level), a

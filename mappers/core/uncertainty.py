@@ -40,8 +40,10 @@ __all__ = [
 ]
 
 UNCERTAINTY_MODES = (False, True, "model", "jackknife", "bootstrap", "anchors", "floor")
-"""The values ``build_map(uncertainty=...)`` takes: none, the method's own (``True``), from the
-normal equations (``"model"``), from CAL-SMA's linearised block jackknife (``"jackknife"``,
+"""The values ``build_map(uncertainty=...)`` takes: none, the method's own (``True``: for a
+method with a bundle adjustment, the normal equations' plus the systematic floor its held-out
+anchors estimate, :func:`mappers.core.held_out_anchors.held_out_floor`), from the
+normal equations alone (``"model"``), from CAL-SMA's linearised block jackknife (``"jackknife"``,
 :mod:`mappers.calibrated.cal_sma_uncertainty`), from a bootstrap over steps (``"bootstrap"``),
 the method's own checked and scaled by the held-out anchors (``"anchors"``,
 :mod:`mappers.core.held_out_anchors`), the normal equations' with a floor for a logged sensor's
@@ -55,7 +57,9 @@ in steps of 0.0005, that put 95 % of their 181 scored tags inside their 95 % reg
 the maps of SPATIAL-BA's later ``gain_tol`` stop) and
 confirmed on bodies of data not used to choose it: MRCLAM's four runs (range and bearing,
 LOC-SMA: 0.932 inside, sharpness 1.95) and STAR-loc's s1 and s2 sequences (other calibrations:
-0.863, 0.93) — ``benchmarks/bench_uncertainty.py``, docs/guide/uncertainty.md."""
+0.863, 0.93) — ``benchmarks/bench_uncertainty.py``, docs/guide/uncertainty.md. It is also
+``uncertainty=True``'s floor for a map whose anchors cannot be held out
+(:func:`mappers.covariances.with_held_out_floor`)."""
 
 
 def check_uncertainty(value) -> bool | str:

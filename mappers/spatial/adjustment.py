@@ -35,7 +35,7 @@ from mappers.viewpoints import (
     use_sparse_coupling,
 )
 
-__all__ = ["DAMPING", "AdjustmentResult", "adjust_viewpoints"]
+__all__ = ["DAMPING", "AdjustmentResult", "Problem", "adjust_viewpoints", "normal_blocks"]
 
 DAMPING = Damping(up=10.0, down=10.0, floor=1e-9, tries=None, ceiling=1e8, accept_equal=False)
 """The 6-DoF adjustment's Levenberg-Marquardt damping rule (:class:`mappers.viewpoints.Damping`):
@@ -69,7 +69,7 @@ def _tangent_bases(u: np.ndarray) -> np.ndarray:
     return np.stack([b1, np.cross(u, b1)], axis=2)
 
 
-class _Problem:
+class Problem:
     """The sightings of the registered steps, with their noise, in the form the solver needs."""
 
     def __init__(self, obs: RayObservations, keep: np.ndarray, bearing_noise: float,
@@ -182,7 +182,7 @@ def _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, lo
     # by step (ray_observations gives them so): the compiled step takes each step's sightings
     # as one run
     keep = keep[np.argsort(obs.step[keep], kind="stable")]
-    prob = _Problem(obs, keep, bearing_noise, range_noise, range_growth)
+    prob = Problem(obs, keep, bearing_noise, range_noise, range_growth)
     fixed = np.asarray(fixed, dtype=bool)
     free = placed & (~fixed if anchor_noise is None else np.ones(len(P), dtype=bool))
     free_index = np.full(len(P), -1)
@@ -211,8 +211,8 @@ def _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, lo
         w = robust_weights(np.linalg.norm(e, axis=1), loss_scale, loss)
         if sparse:
             Jc, Jp = prob.jacobians(R, v, nv, vh)
-            step_blocks = _normal_blocks(prob, e, w, Jc, Jp, t_rows, free_index, steps.size,
-                                         int(free.sum()), True)
+            step_blocks = normal_blocks(prob, e, w, Jc, Jp, t_rows, free_index, steps.size,
+                                        int(free.sum()), True)
         else:
             step_blocks = _compiled_blocks(prob, res, w, R, t_rows, free_index, indptr,
                                            steps.size, int(free.sum()))
@@ -239,7 +239,7 @@ def _adjust(obs, P0, R0, C0, fixed, bearing_noise, range_noise, range_growth, lo
     return AdjustmentResult(P, R, C, cost, it)
 
 
-def _normal_blocks(prob, e, w, Jc, Jp, t, free_index, n_steps, n_free, sparse=False):
+def normal_blocks(prob, e, w, Jc, Jp, t, free_index, n_steps, n_free, sparse=False):
     """The Gauss-Newton normal blocks of the poses and the free points, as
     :func:`mappers.viewpoints.schur_step` takes them (``sparse``: the coupling as a
     :class:`mappers.viewpoints.Coupling`)."""
@@ -270,7 +270,7 @@ class _SightingCoupling(NamedTuple):
 
 
 def _compiled_blocks(prob, res, w, R, t, free_index, indptr, n_steps, n_free):
-    """:func:`_normal_blocks` by one compiled loop over the sightings
+    """:func:`normal_blocks` by one compiled loop over the sightings
     (:func:`mappers.spatial.adjustment_kernels.normal_equations`; equal to rounding), the
     coupling per sighting (:class:`_SightingCoupling`) for :func:`_compiled_step`."""
     e, v, nv, vh = res

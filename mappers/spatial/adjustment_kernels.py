@@ -43,8 +43,8 @@ def add_normal_block(J, e, k, wk, g, U, row):  # pragma: no cover - compiled
 def _normal_equations(R, step, t, f, v, nv, vh, e, w, B, has_r, sr, sb,
                       U, g, V, h, W):  # pragma: no cover - compiled
     """The Gauss-Newton blocks of the weighted residuals ``w * |e|^2 / 2``, as
-    :func:`mappers.spatial.adjustment._normal_blocks` sums them from
-    :meth:`mappers.spatial.adjustment._Problem.jacobians`: for each sighting k (its step
+    :func:`mappers.spatial.adjustment.normal_blocks` sums them from
+    :meth:`mappers.spatial.adjustment.Problem.jacobians`: for each sighting k (its step
     ``step[k]`` with rotation ``R[step[k]]``, that step's row ``t[k]`` of the poses, its object's
     row ``f[k]`` of the free objects or -1; offset ``v`` in the sensor's frame, its length ``nv``
     and direction ``vh``; residual ``e`` (3,); tangent basis ``B`` (3, 2); range noise ``sr`` and

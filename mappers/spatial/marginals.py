@@ -4,7 +4,7 @@ eliminated: the 3-D form of :mod:`mappers.viewpoints.marginals`.
 At the adjustment's solution (before the similarity onto the anchors, when ``anchor_noise`` is
 set) the Gauss-Newton normal blocks of the steps' poses (6 x 6: rotation vector and position)
 and of the free objects (3 x 3) are built once more, undamped, with the robust loss's weights
-at the final residuals (:func:`mappers.spatial.adjustment._normal_blocks`, the adjustment's own).
+at the final residuals (:func:`mappers.spatial.adjustment.normal_blocks`, the adjustment's own).
 The poses are eliminated by the Schur complement
 (:func:`mappers.viewpoints.marginals.schur_information`) and the (3, 3) diagonal blocks of the
 inverse, times the robustly weighted residuals' variance ``sum(w |e|²) / (K - p)`` (K residual
@@ -27,11 +27,12 @@ from __future__ import annotations
 import numpy as np
 
 from mappers.core.align_3d import umeyama
-from mappers.spatial.adjustment import _normal_blocks, _Problem
+from mappers.spatial.adjustment import Problem, normal_blocks
 from mappers.viewpoints import (
     DENSE_COUPLING_MAX_BYTES,
     model_covariances,
     released_steps,
+    restricted_parts,
     robust_weights,
     schur_information,
     step_blocks,
@@ -53,7 +54,7 @@ def _parts(est, unknown_anchors: bool):
     placed = np.all(np.isfinite(P), axis=1)
     posed = np.all(np.isfinite(C), axis=1)
     keep = placed[obs.obj] & posed[obs.step]
-    prob = _Problem(obs, keep, est.bearing_noise, est.range_noise, est.range_growth)
+    prob = Problem(obs, keep, est.bearing_noise, est.range_noise, est.range_growth)
     free = placed.copy()
     free[np.asarray(ids, dtype=int)] = False
     unknown = placed if unknown_anchors else free
@@ -75,7 +76,7 @@ def _parts(est, unknown_anchors: bool):
             f"{8 * 18 * steps.size * n_unknown / 2**30:.2f} GiB for N = {steps.size} steps "
             f"and F = {n_unknown} free objects (above its dense_coupling_bytes, "
             f"{limit:.3g}); use fewer steps")
-    U, V, Wf, g, h = _normal_blocks(prob, e, w, Jc, Jp, t, index, steps.size, n_unknown)
+    U, V, Wf, g, h = normal_blocks(prob, e, w, Jc, Jp, t, index, steps.size, n_unknown)
     we = w[:, None] * e
     g_pose = np.einsum("kri,kr->ki", Jc, we)
     g_obj = np.einsum("kri,kr->ki", Jp, we)
@@ -111,7 +112,7 @@ def spatial_covariances(est) -> np.ndarray:
     return cov
 
 
-def spatial_held_out(est, anchor_positions) -> tuple[np.ndarray, np.ndarray]:
+def spatial_held_out(est, anchor_positions, with_covariances: bool = False):
     """Each anchor of a fitted SPATIAL-BA held out, linearised: its position (A, 3) and
     covariance (A, 3, 3) in the output frame when it alone is released from the adjustment, by
     Gauss-Newton steps from the solution (:func:`mappers.viewpoints.released_steps`). Anchors
@@ -120,13 +121,16 @@ def spatial_held_out(est, anchor_positions) -> tuple[np.ndarray, np.ndarray]:
     again to the others (``anchor_positions`` (A, 3), what ``est`` was fitted with). The
     covariance is the model's with the other anchors fixed (as :func:`spatial_covariances`),
     carried by the similarity. NaN rows for an anchor its readings do not pin down (a
-    non-finite covariance)."""
-    parts, _, free, index = _parts(est, True)
+    non-finite covariance). ``with_covariances``: also the objects' covariances (M, 3, 3) of
+    :func:`spatial_covariances`, from the same linearisation (built once: ``uncertainty=True``
+    needs both)."""
+    parts, placed, free, index = _parts(est, True)
     ids = np.asarray(est.anchor_ids_, dtype=int)
     target = np.asarray(anchor_positions, dtype=float)
     soft = est.anchor_noise is not None
+    S = schur_information(*parts[:3])
     steps, covs = released_steps(parts, index[free], index[ids],
-                                 est.anchor_noise ** -2.0 if soft else None)
+                                 est.anchor_noise ** -2.0 if soft else None, S=S)
     covs = _to_output(est, covs)
     Rs, scale, shift = est.similarity_
     pos = np.full((len(ids), 3), np.nan)
@@ -138,4 +142,15 @@ def spatial_held_out(est, anchor_positions) -> tuple[np.ndarray, np.ndarray]:
         pos[j] = scale * moved[j] @ np.asarray(Rs).T + shift
     bad = ~np.all(np.isfinite(covs), axis=(1, 2)) | ~np.all(np.isfinite(pos), axis=1)
     pos[bad], covs[bad] = np.nan, np.nan
-    return pos, covs
+    if not with_covariances:
+        return pos, covs
+    rows = index[free]
+    cols = (rows[:, None] * 3 + np.arange(3)[None, :]).ravel()
+    U, _, Wf, _, _, sandwich, dof, n_rows, n_unknowns, _ = restricted_parts(parts, rows)
+    # (the free objects' reduced information is the block of the unknowns': the poses'
+    # elimination is linear in the objects' columns)
+    P = np.where(placed[:, None], est.adjusted_.points, np.nan)
+    model = _to_output(est, model_covariances(S[np.ix_(cols, cols)], U, Wf, sandwich, dof,
+                                              n_rows, n_unknowns, P, free))
+    model[~np.all(np.isfinite(est.embedding_), axis=1)] = np.nan
+    return pos, covs, model

@@ -13,6 +13,7 @@ from mappers.viewpoints.marginals import (
     model_covariances,
     released_anchor,
     released_steps,
+    restricted_parts,
     schur_information,
     step_blocks,
 )
@@ -41,7 +42,8 @@ __all__ = [
     "BearingAdjustment", "BearingAdjustmentWarning",
     *engine.__all__,
     "adjustment_covariances", "has_model_covariances", "held_out_anchors", "model_covariances",
-    "released_anchor", "released_steps", "schur_information", "step_blocks",
+    "released_anchor", "released_steps", "restricted_parts", "schur_information",
+    "step_blocks",
     "RangeBearingAdjustment",
     "anchored_start", "fit_start", "free_objects", "keep_if_better",
     "MAX_FOV_DEG", "MAX_FREE_OBJECTS", "VIEWPOINT_SEARCH_CONSTRAINTS", "ConeProblem",

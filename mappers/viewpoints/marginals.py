@@ -55,7 +55,8 @@ from mappers.viewpoints.range_bearing import RangeBearingAdjustment
 
 __all__ = [
     "adjustment_covariances", "block_gradients", "has_model_covariances", "held_out_anchors", "model_covariances",
-    "released_anchor", "released_steps", "sandwich_covariances", "schur_information",
+    "released_anchor", "released_steps", "restricted_parts", "sandwich_covariances",
+    "schur_information",
     "step_blocks",
 ]
 
@@ -221,13 +222,15 @@ def _range_bearing_parts(est: RangeBearingAdjustment, X, masks, anchor_ids, bloc
             3 * int(used.sum()) + 2 * int(free.sum()), index)
 
 
-def _covariances(parts, P, free) -> np.ndarray:
+def _covariances(parts, P, free, S=None) -> np.ndarray:
+    """:func:`model_covariances` of a linearisation ``parts``; ``S`` its reduced information
+    when already at hand (:func:`schur_information` of its blocks)."""
     U, V, Wf, _, _, sandwich, dof, n_rows, n_unknowns, _ = parts
-    return model_covariances(schur_information(U, V, Wf), U, Wf, sandwich, dof, n_rows,
-                             n_unknowns, P, free)
+    S = schur_information(U, V, Wf) if S is None else S
+    return model_covariances(S, U, Wf, sandwich, dof, n_rows, n_unknowns, P, free)
 
 
-def released_steps(parts, free_rows, held_rows, prior: float | None = None
+def released_steps(parts, free_rows, held_rows, prior: float | None = None, S=None
                    ) -> tuple[np.ndarray, np.ndarray]:
     """For each of ``held_rows`` (rows of the unknowns of ``parts``, a linearisation as
     :func:`_bearing_parts` gives it, whose objects the adjustment held): the undamped
@@ -245,14 +248,15 @@ def released_steps(parts, free_rows, held_rows, prior: float | None = None
     it by, through the rest of the adjustment: the linearised leave-one-out prediction of a
     held object (the outlier test of a constraint, Baarda 1968; Koch, *Parameter Estimation
     and Hypothesis Testing in Linear Models*, 1999, §4.4), at the cost of a small solve instead
-    of an adjustment again."""
+    of an adjustment again. ``S``: the unknowns' reduced information
+    (:func:`schur_information` of ``parts``' blocks) when already at hand."""
     U, V, Wf, g, h, (t, f_all, gp, go, blocks), dof, n_rows, n_unknowns, _ = parts
     d = V.shape[1]
     free_rows = np.asarray(free_rows, dtype=int)
     held_rows = np.asarray(held_rows, dtype=int)
     # the poses eliminated once for all unknowns: a subset's reduced information and gradient
     # are the rows (and columns) of these
-    S = schur_information(U, V, Wf)
+    S = schur_information(U, V, Wf) if S is None else S
     Ui = np.linalg.inv(U + 1e-12 * np.eye(U.shape[1]))
     z = h.reshape(-1) - Wf.reshape(-1, S.shape[0]).T @ np.einsum("nij,nj->ni", Ui, g).ravel()
     Z = block_gradients(U, Wf, t, f_all, gp, go, blocks, S.shape[0])
@@ -364,12 +368,30 @@ def adjustment_covariances(est, X, mask, anchor_ids, timeline=None) -> np.ndarra
     return _bearing(adj, X, mask, anchor_ids, blocks)
 
 
-def held_out_anchors(est, X, mask, anchor_ids, timeline=None) -> tuple[np.ndarray, np.ndarray]:
+def restricted_parts(parts, rows: np.ndarray):
+    """``parts`` (a linearisation as :func:`_bearing_parts` gives it) with only the unknowns
+    ``rows`` (increasing): the blocks and sandwich terms of the others dropped, each kept
+    object renumbered -- the linearisation with the other objects held, as
+    :func:`_bearing_parts` of those unknowns alone builds it (each kept object's blocks are sums
+    over its own readings, and the poses' over all readings, in both)."""
+    U, V, Wf, g, h, (t, f, gp, go, blocks), dof, n_rows, n_unknowns, index = parts
+    d = V.shape[1]
+    remap = np.full(len(V), -1)
+    remap[rows] = np.arange(len(rows))
+    cols = (np.asarray(rows)[:, None] * d + np.arange(d)[None, :]).ravel()
+    renumber = lambda a: np.where(a >= 0, remap[np.maximum(a, 0)], -1)  # noqa: E731
+    return (U, V[rows], Wf[:, :, cols], g, h[rows], (t, renumber(f), gp, go, blocks), dof,
+            n_rows, n_unknowns, renumber(index))
+
+
+def held_out_anchors(est, X, mask, anchor_ids, timeline=None, with_covariances: bool = False):
     """Each anchor of the fitted adjustment in ``est`` held out, linearised: its position
     (A, 2) and covariance (A, 2, 2) in the adjustment's frame when it alone is released and the
     other anchors held (:func:`released_steps`; one step from the solution, no adjustment
     again). Arguments as for :func:`adjustment_covariances`. An anchor its readings do not pin
-    down (a non-finite covariance) gets NaN rows."""
+    down (a non-finite covariance) gets NaN rows. ``with_covariances``: also the objects'
+    covariances (M, 2, 2) of :func:`adjustment_covariances`, from the same linearisation (built
+    once: ``uncertainty=True`` needs both)."""
     adj = _adjustment(est)
     if adj is None:
         raise ValueError(f"{type(est).__name__} holds no bundle adjustment")
@@ -384,9 +406,17 @@ def held_out_anchors(est, X, mask, anchor_ids, timeline=None) -> tuple[np.ndarra
     P, _, _, _, placed, free, _ = _frame(adj, ids)
     parts = make(adj, X, mask, ids, blocks, placed)
     index = parts[-1]
-    steps, covs = released_steps(parts, index[free], index[ids])
+    S = schur_information(*parts[:3])
+    steps, covs = released_steps(parts, index[free], index[ids], S=S)
     pos = np.asarray(adj.embedding_, dtype=float)[ids] + np.diagonal(steps).T
     bad = ~np.all(np.isfinite(covs), axis=(1, 2)) | ~np.all(np.isfinite(pos), axis=1)
     pos[bad], covs[bad] = np.nan, np.nan
-    return pos, covs
+    if not with_covariances:
+        return pos, covs
+    rows = index[free]
+    cols = (rows[:, None] * parts[1].shape[1] + np.arange(parts[1].shape[1])[None, :]).ravel()
+    # (the free objects' reduced information is the block of the unknowns': the poses'
+    # elimination is linear in the objects' columns)
+    model = _covariances(restricted_parts(parts, rows), adj.embedding_, free, S[np.ix_(cols, cols)])
+    return pos, covs, model
 

@@ -157,6 +157,56 @@ def test_held_out_anchors_widen_covariances_that_miss_a_systematic_error():
         model.positions, model.covariances, P, others)
 
 
+def test_true_adds_the_floor_its_held_out_anchors_estimate():
+    # Issue 35: the systematic offset above, which the model's ellipses miss, is what the
+    # anchors released from the adjustment see; True adds it as one isotropic floor
+    P, poses = layout(16, 3), walk(150, seed=3)
+    offset = np.random.default_rng(3).normal(0.0, 0.04, P.shape)
+    _, b, _ = sensed(P + offset, poses)
+    b = b + np.random.default_rng(4).normal(0.0, np.radians(0.5), b.shape)
+    X = np.stack([np.cos(b), np.sin(b)], -1).reshape(len(P), -1)
+    model = _quiet(X, ANCHORS, P[ANCHORS], uncertainty="model")
+    m = _quiet(X, ANCHORS, P[ANCHORS], uncertainty=True)
+    np.testing.assert_array_equal(m.positions, model.positions)
+    np.testing.assert_array_equal(m.covariances[ANCHORS], 0.0)
+    assert any("systematic floor" in w for w in m.warnings)
+    others = np.setdiff1d(np.arange(len(P)), [*ANCHORS, *model.unmapped])
+    added = m.covariances[others] - model.covariances[others]
+    floor = added[0, 0, 0]
+    np.testing.assert_allclose(added, np.broadcast_to(floor * np.eye(2), added.shape),
+                               rtol=1e-9, atol=1e-12 * floor)
+    assert 0.01 < np.sqrt(floor) < 0.2  # the offsets' size (4 cm per axis), not the noise's
+    assert coverage(m.positions, m.covariances, P, others) >= 0.8 > coverage(
+        model.positions, model.covariances, P, others)
+
+
+def test_true_keeps_a_model_its_anchors_agree_with():
+    # simulated bearings with the noise the model assumes: the anchors fall inside their
+    # regions, so True adds no floor (seed chosen so; the floor is then exactly 0)
+    P, X = _bearing(2)
+    model = _quiet(X, ANCHORS, P[ANCHORS], uncertainty="model")
+    m = _quiet(X, ANCHORS, P[ANCHORS], uncertainty=True)
+    # (from one linearisation with the anchors' columns: equal to rounding)
+    np.testing.assert_allclose(m.covariances, model.covariances, rtol=1e-9, atol=1e-18)
+    assert not any("systematic floor" in w for w in m.warnings)
+
+
+def test_without_two_held_out_anchors_true_falls_back_to_the_fixed_floor():
+    from mappers.covariances import with_held_out_floor
+
+    P, X = _bearing(2)
+    model = _quiet(X, ANCHORS, P[ANCHORS], uncertainty="model")
+    floor = _quiet(X, ANCHORS, P[ANCHORS], uncertainty="floor")
+    a = len(ANCHORS)
+    one = np.full((a, 2), np.nan)
+    one[0] = P[ANCHORS[0]] + 0.5  # one anchor held out, far off: still too few to estimate
+    covs = np.full((a, 2, 2), np.nan)
+    covs[0] = 1e-4 * np.eye(2)
+    m = with_held_out_floor(model, one, covs, P[ANCHORS])
+    np.testing.assert_allclose(m.covariances, floor.covariances, rtol=1e-12, equal_nan=True)
+    assert "only 1 of" in m.warnings[-1] and "fixed systematic floor" in m.warnings[-1]
+
+
 def test_released_anchor_is_placed_by_the_readings_and_the_other_anchors():
     from mappers.core.uncertainty import mahalanobis_squared
     from mappers.viewpoints import BearingAdjustment, released_anchor

@@ -1,5 +1,5 @@
 """The compiled 6-DoF normal equations and Schur step (mappers/spatial/adjustment_kernels.py)
-give the numpy expressions' numbers to rounding: the blocks of ``_normal_blocks`` and the step
+give the numpy expressions' numbers to rounding: the blocks of ``normal_blocks`` and the step
 of the dense ``schur_step``, with and without ranges, with fixed and free objects."""
 
 import numpy as np
@@ -7,11 +7,11 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from mappers.spatial.adjustment import (
+    Problem,
     _compiled_blocks,
     _compiled_step,
-    _normal_blocks,
-    _Problem,
     adjust_viewpoints,
+    normal_blocks,
 )
 from mappers.spatial.rays import RayObservations
 from mappers.viewpoints import robust_weights, schur_step
@@ -38,7 +38,7 @@ def _problem(seed=0, m=25, n=80, per=9, ranged=0.6):
 def test_the_compiled_blocks_and_step_are_the_dense_ones(ranged):
     obs, P, R, C = _problem(ranged=ranged)
     keep = np.arange(len(obs.step))
-    prob = _Problem(obs, keep, np.deg2rad(1.0), 0.02, 0.01)
+    prob = Problem(obs, keep, np.deg2rad(1.0), 0.02, 0.01)
     res = prob.residuals(P, R, C)
     e = res[0]
     w = robust_weights(np.linalg.norm(e, axis=1), 3.0, "cauchy")
@@ -49,7 +49,7 @@ def test_the_compiled_blocks_and_step_are_the_dense_ones(ranged):
     indptr = np.zeros(obs.n_steps + 1, dtype=np.int64)
     np.cumsum(np.bincount(obs.step, minlength=obs.n_steps), out=indptr[1:])
     Jc, Jp = prob.jacobians(R, *res[1:])
-    want = _normal_blocks(prob, e, w, Jc, Jp, obs.step, free_index, obs.n_steps, n_free)
+    want = normal_blocks(prob, e, w, Jc, Jp, obs.step, free_index, obs.n_steps, n_free)
     got = _compiled_blocks(prob, res, w, R, obs.step, free_index, indptr, obs.n_steps, n_free)
     for name, a, b in zip("UVWgh", got, want, strict=True):
         if name == "W":  # per sighting against the dense (N, 6, 3F) array
