@@ -61,8 +61,9 @@ from mappers.viewpoints import adjustment_covariances
 from mappers.viewpoints import has_model_covariances as _has_planar_model
 
 __all__ = ["BOOTSTRAP_INFLATION", "BOOTSTRAP_REPLICATES", "JACKKNIFE_INFLATION", "MIN_REPLICATES",
-           "SINGLE_THREAD_MAX_OBJECTS", "covariance_threads", "has_model_covariances", "with_covariances", "with_held_out_check",
-           "with_held_out_floor", "with_model_covariances"]
+           "SINGLE_THREAD_MAX_OBJECTS", "covariance_threads", "has_model_covariances",
+           "with_covariances", "with_held_out_check", "with_held_out_floor",
+           "with_model_covariances"]
 
 BOOTSTRAP_REPLICATES = 20
 """Replicate maps of a bootstrap."""
