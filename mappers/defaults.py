@@ -15,6 +15,11 @@ fused history's sensors) and whether the history is masked, and says
   ``lfmdr mrclam``), where a landmark is in view in a few percent of the steps and the sensor's
   model is not known (None: ``method``), chosen leave-one-run-out on the logs
   (``benchmarks/bench_mrclam.py``);
+- ``sightings``: the default for a masked history that is a log of sightings
+  (:func:`is_sightings_log`: the mask says what was seen, not what was in view) whose steps are
+  ordered like a walk's (:func:`mappers.core.flicker.persistence` at least
+  :data:`mappers.core.flicker.MIN_PERSISTENCE`), in place of ``method`` when that is
+  ``VIEW-BA`` (None: ``localisation_free``, as for such a log of unordered viewpoints);
 - ``spatial``: the default when the anchors are 3-D, (A, 3) positions (a label of
   :data:`mappers.spatial.METHODS_3D`; None: no 3-D path for such histories): ``COVIS-3D`` for
   sightings, ``SPATIAL-BA`` for 3-D rays with or without ranges, ``RANGE-3D`` for ranges alone
@@ -73,6 +78,8 @@ class Choice:
     logged: str | None = None
     logged_params: Mapping[str, Any] = field(default_factory=dict)
     spatial: str | None = None
+    sightings: str | None = None
+    sightings_params: Mapping[str, Any] = field(default_factory=dict)
 
 
 _RB = frozenset({"range", "bearing"})
@@ -82,6 +89,15 @@ _LARGE_BEARING_BA: Mapping[str, Any] = MappingProxyType(
     {"start": "COVIS-SPARSE", "start_params": MappingProxyType({"n_rounds": 5}),
      "schur_solver": "cg", "schur_rtol": 1e-3, "gain_tol": 1e-2, "max_rounds": 6})
 _COVIS_3D, _SPATIAL_BA, _RANGE_3D = "COVIS-3D", "SPATIAL-BA", "RANGE-3D"
+# A walk-ordered log of sightings: COVIS-ENSEMBLE over windows of 1-6 steps, the members' maps
+# combined by each object's geometric median (one failed member cannot move it). Chosen on the
+# simulators' tuning layouts (the project's world and the second simulator, seeds 100-111) and
+# confirmed on their fresh layouts and on MRCLAM, which had no say. Where its members scatter by
+# more than 0.15 of the anchors' spread (short logs: too few co-observations) the map is
+# DROPOUT-BLEND's: chosen on the tests' synthetic walks (tests/synthetic_walk.py), never fires
+# on the simulators' logs or MRCLAM (docs/dead-ends.md, "Defaults that carry").
+_SIGHTINGS: Mapping[str, Any] = MappingProxyType(
+    {"windows": (1, 2, 3, 4, 6), "min_co": (3, 5), "combine": "median", "max_spread": 0.15})
 
 DEFAULTS: Mapping[tuple[str | frozenset[str], bool], Choice] = MappingProxyType({
     ("visibility", False): Choice("CAL-SMA", "CAL-SMA", large="CAL-SMA", large_params=_SPARSE,
@@ -94,7 +110,8 @@ DEFAULTS: Mapping[tuple[str | frozenset[str], bool], Choice] = MappingProxyType(
     # what was seen is mapped, for bearing too: no bearing-only statistic measured better on
     # them (docs/bearing-on-real-data.md).
     ("visibility", True): Choice("VIEW-BA", "DROPOUT-BLEND", large="DROPOUT-BLEND",
-                                 logged="COVIS-ENSEMBLE", spatial=_COVIS_3D),
+                                 logged="COVIS-ENSEMBLE", spatial=_COVIS_3D,
+                                 sightings="COVIS-ENSEMBLE", sightings_params=_SIGHTINGS),
     # Above the size threshold masked bearing is BEARING-BA started from COVIS-SPARSE (five
     # calibration rounds instead of ten: the adjustment refines its map to the same error), its
     # joint step on the sparse Schur engine (conjugate gradients to a relative residual of
@@ -170,6 +187,12 @@ def is_sightings_log(X, mask) -> bool:
     return bool(observed.any() and np.all(np.asarray(X)[observed] > 0.5))
 
 
+def _seen(X, mask) -> np.ndarray:
+    """(M, N) dense 0/1: the sightings of a log of sightings (every observed entry is one)."""
+    return (sp.csr_array(mask, dtype=bool).toarray() if sp.issparse(mask)
+            else np.asarray(mask, dtype=bool)).astype(float)
+
+
 def choose_for_history(X, mask, sensor: str, timeline=None,
                        notes: list[str] | None = None) -> tuple[str, dict[str, Any]] | None:
     """:func:`choose_method` for a single sensor's histories as ``build_map`` checked them
@@ -179,16 +202,21 @@ def choose_for_history(X, mask, sensor: str, timeline=None,
     that flickers like a sensor with dropouts, :func:`mappers.core.flicker.flicker_rate` above
     :data:`FLICKER_THRESHOLD`), a note says so. Perfect histories never flicker so much: their
     rate is a few percent. A masked visibility history that is a log of sightings
-    (:func:`is_sightings_log`) gets the localisation-free map instead of ``VIEW-BA``, with a
-    note."""
+    (:func:`is_sightings_log`) gets the row's ``sightings`` default instead of ``VIEW-BA`` when
+    its steps are ordered like a walk's, else the localisation-free map, with a note."""
     n = X.shape[0]
     plain = choose_method(sensor, masked=mask is not None, n_objects=n)
     if plain is not None and plain[0] == "VIEW-BA" and is_sightings_log(X, mask):
-        label, params = localisation_free(sensor, masked=True)
+        row = _row(sensor, True)
+        walk = row.sightings is not None and persistence(_seen(X, mask), timeline) >= MIN_PERSISTENCE
+        label, params = ((row.sightings, dict(row.sightings_params)) if walk
+                         else localisation_free(sensor, masked=True))
         if notes is not None:
+            order = ("its steps are ordered like a walk's" if walk
+                     else "its steps are not ordered like a walk's")
             notes.append(f"every observed entry of the masked visibility history is a sighting: a "
                          f"log of what was seen, not of what was in view, so the mask is not a "
-                         f"view cone and it is mapped with {label!r}, not 'VIEW-BA'")
+                         f"view cone and it is mapped with {label!r}, not 'VIEW-BA' ({order})")
         return label, params
     if (mask is not None or sp.issparse(X) or n > SCALABLE_ABOVE_OBJECTS
             or choose_method(sensor, dropouts=True, n_objects=n) == plain):

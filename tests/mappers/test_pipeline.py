@@ -264,7 +264,7 @@ def test_partial_mask_goes_to_a_method_for_masked_histories():
 def test_masked_default_per_sensor_and_a_method_registered_by_a_user_works_with_masks():
     H, P, a = world()
     mask = H > 0
-    # a mask that says only what was seen is a log of sightings (DROPOUT-BLEND,
+    # a mask that says only what was seen is a log of sightings (its own default,
     # tests/mappers/test_sightings_log.py); one with objects in view but not seen is a view's
     mask[:, ::7] = True
     m = build_map(H, a, P[a], mask=mask)

@@ -408,7 +408,7 @@ def test_covis_ensemble_is_the_visibility_default_and_checks_its_arguments(tmp_p
     ens = map_mrclam_run(run, "bearing", robots=(1, 2, 3), plot=False, **small)
     assert ens.method == "COVIS-ENSEMBLE"
     assert ens.params == {"bin_widths": [1.0, 2.0], "min_co": [3], "member": "covis-power",
-                          "power": 0.5}
+                          "power": 0.5, "combine": "mean", "max_spread": None}
     # each member alone: the ensemble of one bin width (covis-power at that width)
     singles = [map_mrclam_run(run, "bearing", robots=(1, 2, 3), method="COVIS-ENSEMBLE",
                               bin_widths=(w,), min_co=3) for w in (1.0, 2.0)]
