@@ -124,13 +124,28 @@ def view_part(runs: int, passes: int | None = None, simulators=tuple(SIMULATORS)
                   f"{np.median(cpu[kind]):.2f} s] {verdict}")
 
 
-def mrclam_part(data: Path) -> None:
+def write_mrclam_tables(runs, tmp: Path) -> dict[str, tuple[Path, Path, Path]]:
+    """Each MRCLAM run converted as ``lfmdr convert mrclam`` converts it: its observation
+    table, anchors and truth written as CSV under ``tmp``, by run name."""
     from lfmdr_gym.datasets.mrclam import read_run
     from lfmdr_gym.datasets.mrclam_table import (
         mrclam_anchors,
         mrclam_landmarks,
         mrclam_observations,
     )
+
+    tables = {}
+    for run in runs:
+        r, stem = read_run(run), tmp / run.name
+        tables[run.name] = (stem.with_suffix(".csv"), Path(f"{stem}-anchors.csv"),
+                            Path(f"{stem}-truth.csv"))
+        mrclam_observations(r).to_csv(tables[run.name][0], index=False)
+        mrclam_anchors(r).to_csv(tables[run.name][1], index=False)
+        mrclam_landmarks(r).to_csv(tables[run.name][2], index=False)
+    return tables
+
+
+def mrclam_part(data: Path) -> None:
     from lfmdr_gym.experiments.map_log import map_observation_log
     from lfmdr_gym.experiments.mrclam import map_mrclam_run
 
@@ -140,14 +155,7 @@ def mrclam_part(data: Path) -> None:
     print("\n## MRCLAM with no setting given: non-anchor MPE [m] per run")
     with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        tables = {}
-        for run in runs:
-            r, stem = read_run(run), Path(tmp) / run.name
-            tables[run.name] = (stem.with_suffix(".csv"), Path(f"{stem}-anchors.csv"),
-                                Path(f"{stem}-truth.csv"))
-            mrclam_observations(r).to_csv(tables[run.name][0], index=False)
-            mrclam_anchors(r).to_csv(tables[run.name][1], index=False)
-            mrclam_landmarks(r).to_csv(tables[run.name][2], index=False)
+        tables = write_mrclam_tables(runs, Path(tmp))
         for sensor, goal in MRCLAM_GOALS.items():
             cols: dict[str, list[float]] = {"lfmdr mrclam": [], "lfmdr map": []}
             used: dict[str, set[str]] = {k: set() for k in cols}

@@ -35,7 +35,7 @@ from threadpoolctl import threadpool_limits
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_defaults_carry import _other, _world  # noqa: E402
+from bench_defaults_carry import _other, _world, write_mrclam_tables  # noqa: E402
 
 import mappers  # noqa: E402
 
@@ -52,12 +52,6 @@ def _sim_cases(make, seeds):
 def _mrclam_cases(data: Path):
     import tempfile
 
-    from lfmdr_gym.datasets.mrclam import read_run
-    from lfmdr_gym.datasets.mrclam_table import (
-        mrclam_anchors,
-        mrclam_landmarks,
-        mrclam_observations,
-    )
     from lfmdr_gym.histories.observation_table import read_landmarks, read_observations
     from lfmdr_gym.histories.observations import observations_to_history
 
@@ -65,17 +59,13 @@ def _mrclam_cases(data: Path):
     if not runs:
         raise SystemExit(f"no MRCLAM_Dataset* directories under {data}")
     with tempfile.TemporaryDirectory() as tmp:
-        for run in runs:
-            r, stem = read_run(run), Path(tmp) / run.name
-            mrclam_observations(r).to_csv(f"{stem}.csv", index=False)
-            mrclam_anchors(r).to_csv(f"{stem}-anchors.csv", index=False)
-            mrclam_landmarks(r).to_csv(f"{stem}-truth.csv", index=False)
+        for name, (log, anchors, truth) in write_mrclam_tables(runs, Path(tmp)).items():
             h = observations_to_history(
-                read_observations(f"{stem}.csv"), read_landmarks(f"{stem}-anchors.csv", what="anchors"),
-                truth=read_landmarks(f"{stem}-truth.csv", what="truth"), sensor="visibility")
+                read_observations(log), read_landmarks(anchors, what="anchors"),
+                truth=read_landmarks(truth, what="truth"), sensor="visibility")
             dense = [m.toarray() if hasattr(m, "toarray") else np.asarray(m) for m in (h.matrix, h.mask)]
             # the truth is for the score only: the map sees the history and the anchors
-            yield (run.name, dense[0].astype(float), dense[1].astype(bool), np.asarray(h.anchor_ids),
+            yield (name, dense[0].astype(float), dense[1].astype(bool), np.asarray(h.anchor_ids),
                    np.asarray(h.anchor_positions), np.asarray(h.object_positions), h.timeline)
 
 

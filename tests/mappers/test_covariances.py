@@ -135,15 +135,21 @@ def test_bootstrap_of_a_visibility_map():
     assert 0.2 < radius / error < 5.0
 
 
-def test_held_out_anchors_widen_covariances_that_miss_a_systematic_error():
-    # every object is sensed where it is not: a fixed offset of 4 cm each (a landmark's marker
-    # off its surveyed centre), which the readings' residuals cannot see: the model's ellipses
-    # miss it, the held-out anchors see it and widen them
+def _offset_bearings():
+    """A layout of 16 objects and its bearing history (0.5 degrees of noise) sensed where the
+    objects are not: a fixed offset of 4 cm each, which the readings' residuals cannot see."""
     P, poses = layout(16, 3), walk(150, seed=3)
     offset = np.random.default_rng(3).normal(0.0, 0.04, P.shape)
     _, b, _ = sensed(P + offset, poses)
     b = b + np.random.default_rng(4).normal(0.0, np.radians(0.5), b.shape)
-    X = np.stack([np.cos(b), np.sin(b)], -1).reshape(len(P), -1)
+    return P, np.stack([np.cos(b), np.sin(b)], -1).reshape(len(P), -1)
+
+
+def test_held_out_anchors_widen_covariances_that_miss_a_systematic_error():
+    # every object is sensed where it is not: a fixed offset of 4 cm each (a landmark's marker
+    # off its surveyed centre), which the readings' residuals cannot see: the model's ellipses
+    # miss it, the held-out anchors see it and widen them
+    P, X = _offset_bearings()
     model = _quiet(X, ANCHORS, P[ANCHORS], uncertainty="model")
     checked = _quiet(X, ANCHORS, P[ANCHORS], uncertainty="anchors")
     np.testing.assert_array_equal(checked.positions, model.positions)
@@ -160,11 +166,7 @@ def test_held_out_anchors_widen_covariances_that_miss_a_systematic_error():
 def test_true_adds_the_floor_its_held_out_anchors_estimate():
     # Issue 35: the systematic offset above, which the model's ellipses miss, is what the
     # anchors released from the adjustment see; True adds it as one isotropic floor
-    P, poses = layout(16, 3), walk(150, seed=3)
-    offset = np.random.default_rng(3).normal(0.0, 0.04, P.shape)
-    _, b, _ = sensed(P + offset, poses)
-    b = b + np.random.default_rng(4).normal(0.0, np.radians(0.5), b.shape)
-    X = np.stack([np.cos(b), np.sin(b)], -1).reshape(len(P), -1)
+    P, X = _offset_bearings()
     model = _quiet(X, ANCHORS, P[ANCHORS], uncertainty="model")
     m = _quiet(X, ANCHORS, P[ANCHORS], uncertainty=True)
     np.testing.assert_array_equal(m.positions, model.positions)
