@@ -38,7 +38,12 @@ from mappers.core.estimator_params import store_params
 from mappers.core.sensors import check_timeline, step_observations
 from mappers.core.validation import check_history
 from mappers.masked.dropout_blend import DropoutBlend
-from mappers.masked.pair_maps import MaskedMap, MaskedMapWarning, masked_embedding
+from mappers.masked.pair_maps import (
+    MaskedMap,
+    MaskedMapWarning,
+    UnanchoredGraphError,
+    masked_embedding,
+)
 
 __all__ = ["COMBINE", "CovisEnsemble", "ensemble_embedding", "geometric_median", "member_spread",
            "window_steps"]
@@ -158,8 +163,8 @@ def ensemble_embedding(
                 members.append(masked_embedding(X, mask, sensor, method, anchor_ids=anchor_ids,
                                                 anchor_positions=anchor_positions,
                                                 max_iter=max_iter, **ps))
-            except ValueError as exc:  # the member can place nothing in the anchors' frame
-                if combine == "mean" or "falls apart" not in str(exc):
+            except UnanchoredGraphError as exc:  # it can place nothing in the anchors' frame
+                if combine == "mean":
                     raise
                 failed.append(f"history {k} with {dict(ps)}: {exc}")
     if not members:

@@ -97,7 +97,8 @@ from mappers.smacof import (
     weighted_smacof,
 )
 
-__all__ = ["MASKED_METHODS", "MaskedMap", "MaskedMapWarning", "MaskedMapper", "masked_embedding"]
+__all__ = ["MASKED_METHODS", "MaskedMap", "MaskedMapWarning", "MaskedMapper", "UnanchoredGraphError",
+           "masked_embedding"]
 
 _COVIS = ("covis-nonmetric", "covis-power", "covis-angle")
 _PATTERN_ONLY = ("covis-nonmetric", "covis-power")
@@ -215,6 +216,11 @@ def _initial(delta: np.ndarray, weights: np.ndarray, anchor_ids, anchor_position
     return Y
 
 
+class UnanchoredGraphError(ValueError):
+    """The graph of usable pairs falls apart and no group holds 2 or more anchors: nothing can
+    be placed in the anchors' frame."""
+
+
 def _drop_loose_groups(pairs, comps, keep, anchor_ids, anchor_positions, msgs):
     """Leave out the groups of usable pairs held by fewer than 2 anchors (their scale and
     rotation in the anchors' frame are not measured; non-metric stress and lower bounds would
@@ -222,7 +228,7 @@ def _drop_loose_groups(pairs, comps, keep, anchor_ids, anchor_positions, msgs):
     sub_anchor = np.searchsorted(keep, anchor_ids)
     loose = [c for c in comps if np.isin(c, sub_anchor).sum() < 2]
     if len(loose) == len(comps):
-        raise ValueError(
+        raise UnanchoredGraphError(
             "the graph of usable pairs falls apart and no group holds 2 or more anchors "
             f"(groups {[[int(keep[i]) for i in c] for c in comps]}, anchors "
             f"{anchor_ids.tolist()}): nothing can be placed in the anchors' frame"

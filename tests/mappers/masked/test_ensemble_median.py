@@ -13,6 +13,7 @@ import pytest
 from mappers import build_map, mean_position_error
 from mappers.defaults import choose_for_history
 from mappers.masked.ensemble import CovisEnsemble, ensemble_embedding, geometric_median
+from mappers.masked.pair_maps import UnanchoredGraphError
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from synthetic_walk import ANCHORS, history, layout, walk  # noqa: E402
@@ -80,6 +81,26 @@ def test_median_ensemble_agrees_with_the_mean_when_no_member_fails_and_refuses_b
     with pytest.raises(ValueError, match="combine"):
         CovisEnsemble(combine="mode").fit(X, mask=seen, sensor="visibility", anchor_ids=ANCHORS,
                                           anchor_positions=P[ANCHORS])
+
+
+def test_a_member_that_places_nothing_is_left_out_of_the_median_and_named():
+    P, X, seen = _sightings()
+    # a second log in which every step sees one object alone: no pair is ever seen together,
+    # so its member's pair graph falls apart with no group held by 2 anchors
+    lone = np.zeros_like(seen)
+    lone[np.arange(seen.shape[1]) % len(P), np.arange(seen.shape[1])] = True
+    hists = [(X * seen, seen), (lone.astype(float), lone)]
+    kw = dict(anchor_ids=ANCHORS, anchor_positions=P[ANCHORS], param_sets=[{"min_co": 3}])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        alone = ensemble_embedding(hists[:1], "visibility", "covis-nonmetric", **kw)
+        med = ensemble_embedding(hists, "visibility", "covis-nonmetric", combine="median", **kw)
+        with pytest.raises(UnanchoredGraphError, match="falls apart"):
+            ensemble_embedding(hists, "visibility", "covis-nonmetric", **kw)  # the mean
+        with pytest.raises(ValueError, match="no member of the ensemble could be mapped"):
+            ensemble_embedding(hists[1:], "visibility", "covis-nonmetric", combine="median", **kw)
+    np.testing.assert_allclose(med.positions, alone.positions, atol=1e-8)
+    assert any("1 of 2 members placed nothing" in w for w in med.warnings)
 
 
 def test_a_walk_ordered_log_of_sightings_gets_the_median_ensemble_with_a_note():
