@@ -7,15 +7,10 @@ import warnings
 import numpy as np
 import pytest
 from paths import SHARED_DATA
+from starloc_scoring import inside, scored_errors, sharpness
 
-from lfmdr_gym.datasets.starloc import read_starloc, scored_tags, starloc_survey
 from lfmdr_gym.experiments.starloc import map_starloc
-from mappers.core.uncertainty import (
-    SYSTEMATIC_FLOOR,
-    chi2_quantile,
-    mahalanobis_squared,
-    rms_radius,
-)
+from mappers.core.uncertainty import SYSTEMATIC_FLOOR
 
 SEQ = SHARED_DATA / "starloc" / "data" / "zigzag_s2"
 
@@ -25,18 +20,10 @@ def test_the_floor_covers_a_sequence_it_was_not_chosen_on():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         r = map_starloc(SEQ, uncertainty="floor")
-    survey = starloc_survey(SEQ)
-    xyz = survey.set_index("landmark")[["x", "y", "z"]]
-    tags = [t for t in scored_tags(read_starloc(SEQ, "range-bearing"), survey, r.anchors)
-            if t in r.positions]
+    tags, err, cov = scored_errors(SEQ, r)
     assert len(tags) >= 30
-    err = xyz.loc[tags].to_numpy(dtype=float) - np.array([r.positions[t] for t in tags])
-    cov = np.array([r.covariances[t] for t in tags])
     a = np.array([r.positions[t] for t in r.anchors])
     extent = np.max(np.linalg.norm(a[:, None] - a[None], axis=2))
     model = cov - (SYSTEMATIC_FLOOR * extent) ** 2 * np.eye(3)
-    inside = np.mean(mahalanobis_squared(err, cov) <= chi2_quantile(3))
-    inside_model = np.mean(mahalanobis_squared(err, model) <= chi2_quantile(3))
-    sharpness = np.mean(rms_radius(cov)) / np.mean(np.linalg.norm(err, axis=1))
-    assert inside_model < 0.5 and inside >= 0.8  # (38 of 40 when measured)
-    assert sharpness <= 3.0
+    assert inside(err, model) < 0.5 and inside(err, cov) >= 0.8  # (38 of 40 when measured)
+    assert sharpness(err, cov) <= 3.0
