@@ -16,7 +16,12 @@ from mappers.masked.coobservation import (
 from mappers.masked.covis_auto import CovisAuto, CovisCalibrated, co_observation_coefficient
 from mappers.masked.covis_sparse import SparseCovis, sparse_co_observation
 from mappers.masked.dropout_blend import WALK_PERSISTENCE, DropoutBlend, smooth_steps
-from mappers.masked.ensemble import CovisEnsemble, ensemble_embedding, window_steps
+from mappers.masked.ensemble import (
+    CovisEnsemble,
+    ensemble_embedding,
+    geometric_median,
+    window_steps,
+)
 from mappers.masked.pair_maps import (
     MASKED_METHODS,
     MaskedMap,
@@ -32,6 +37,6 @@ __all__ = [
     "CovisAuto", "CovisCalibrated", "co_observation_coefficient",
     "SparseCovis", "sparse_co_observation",
     "WALK_PERSISTENCE", "DropoutBlend", "smooth_steps",
-    "CovisEnsemble", "ensemble_embedding", "window_steps",
+    "CovisEnsemble", "ensemble_embedding", "geometric_median", "window_steps",
     "MASKED_METHODS", "MaskedMap", "MaskedMapper", "MaskedMapWarning", "masked_embedding",
 ]

@@ -4,7 +4,8 @@ Rays (and ranges) -> SPATIAL-BA, the 6-DoF viewpoint bundle adjustment started f
 registered to one another by their common objects; sightings -> COVIS-3D, co-observation
 embedded in three dimensions, or FRUSTUM-BA, the frustum adjustment of a planar robot's
 calibrated camera (FRUSTUM-BA-WALK: with the walk prior on the viewpoints of an ordered
-walk); ranges alone -> RANGE-3D, the range-only adjustment of the objects and the
+walk), or COVIS-3D-MEDIAN, the median of three co-observation embeddings of ordered steps;
+ranges alone -> RANGE-3D, the range-only adjustment of the objects and the
 viewpoints' positions. No odometry, no motion model.
 """
 
@@ -23,6 +24,7 @@ from mappers.spatial.registration import (
     register_rays,
     triangulate,
 )
+from mappers.spatial.sightings_median_3d import SightingsMedian3D
 from mappers.spatial.spatial_ba import SpatialAdjustment
 
 __all__ = [
@@ -30,5 +32,5 @@ __all__ = [
     "METHODS_3D", "anchor_dimension", "build_map_3d", "Range3D",
     "RAY_COLUMNS", "RayObservations", "ray_observations",
     "orthogonal_iteration", "register_points", "register_rays", "triangulate",
-    "SpatialAdjustment",
+    "SightingsMedian3D", "SpatialAdjustment",
 ]

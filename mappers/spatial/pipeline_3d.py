@@ -22,19 +22,23 @@ from mappers.spatial.frustum import FrustumAdjustment
 from mappers.spatial.frustum_walk import FrustumWalkAdjustment
 from mappers.spatial.range_3d import Range3D
 from mappers.spatial.rays import RAY_COLUMNS
+from mappers.spatial.sightings_median_3d import SightingsMedian3D
 from mappers.spatial.spatial_ba import SpatialAdjustment
 
 __all__ = ["METHODS_3D", "anchor_dimension", "build_map_3d", "default_for_histories_3d",
            "default_method_3d", "fit_map_3d", "step_columns_3d"]
 
 METHODS_3D = {"SPATIAL-BA": SpatialAdjustment, "COVIS-3D": CoVisibility3D, "RANGE-3D": Range3D,
-              "FRUSTUM-BA": FrustumAdjustment, "FRUSTUM-BA-WALK": FrustumWalkAdjustment}
+              "FRUSTUM-BA": FrustumAdjustment, "FRUSTUM-BA-WALK": FrustumWalkAdjustment,
+              "COVIS-3D-MEDIAN": SightingsMedian3D}
 """The 3-D methods by label: rays (and ranges) -> SPATIAL-BA, sightings -> COVIS-3D (or
 FRUSTUM-BA given a planar robot's camera calibration, ``method="FRUSTUM-BA"``, or FRUSTUM-BA-WALK,
-the same with the walk prior on the ordered steps' viewpoints), ranges alone -> RANGE-3D."""
+the same with the walk prior on the ordered steps' viewpoints, or COVIS-3D-MEDIAN, the median of
+three co-observation embeddings of ordered steps), ranges alone -> RANGE-3D."""
 
 SENSORS_3D = {"SPATIAL-BA": ("bearing", "range-bearing"), "COVIS-3D": ("visibility",),
               "FRUSTUM-BA": ("visibility",), "FRUSTUM-BA-WALK": ("visibility",),
+              "COVIS-3D-MEDIAN": ("visibility",),
               "RANGE-3D": ("range",)}
 """The histories each 3-D method maps (``"range-bearing"``: fused rays and ranges)."""
 
@@ -95,7 +99,7 @@ def build_map_3d(histories, anchor_ids, anchor_positions, method: str | None = N
     """The 3-D map of the objects (see the module's docstring): a :class:`mappers.Map` whose
     ``positions`` and ``embedding`` are (M, 3), NaN rows for the objects listed in
     ``unmapped``. ``method``: ``"SPATIAL-BA"``, ``"COVIS-3D"``, ``"FRUSTUM-BA"``,
-    ``"FRUSTUM-BA-WALK"`` or ``"RANGE-3D"`` (None: by the sensor);
+    ``"FRUSTUM-BA-WALK"``, ``"COVIS-3D-MEDIAN"`` or ``"RANGE-3D"`` (None: by the sensor);
     ``params`` go to the method."""
     return fit_map_3d(histories, anchor_ids, anchor_positions, method, sensor=sensor, mask=mask,
                       **params)[0]

@@ -38,8 +38,7 @@ from sklearn.base import BaseEstimator
 from mappers.core.align_3d import check_anchors_3d
 from mappers.core.embedding_transformer import EmbeddingTransformer
 from mappers.core.validation import check_views
-from mappers.masked import covisibility_dissimilarity
-from mappers.masked.ensemble import geometric_median
+from mappers.masked import covisibility_dissimilarity, geometric_median
 from mappers.smacof import weighted_smacof
 from mappers.spatial.covisibility_3d import anchor_mean_start, anchor_scale
 
@@ -53,7 +52,9 @@ pair with a target near 0 does not take all the weight."""
 
 def window_sightings(seen: np.ndarray, window: int) -> np.ndarray:
     """(M, N - window + 1) bool: object i seen in any of the steps ``j .. j + window - 1``
-    (column j) of the ordered sightings ``seen`` (M, N); ``window`` 1 gives ``seen`` back."""
+    (column j) of the ordered sightings ``seen`` (M, N); ``window`` 1 gives ``seen`` back.
+    Sliding windows, one per step: :func:`mappers.masked.window_steps` tiles the steps into
+    disjoint windows instead, so two sightings a step apart across a tile's edge never meet."""
     seen = np.asarray(seen, dtype=bool)
     if window < 1:
         raise ValueError(f"window must be >= 1 step, got {window}")
