@@ -4,6 +4,7 @@ MPE against the tag survey (issue 34).
     python benchmarks/bench_starloc.py [--data DIR] [--sensors range-bearing,bearing,visibility]
         [--out docs/results/starloc/starloc.csv]
         [--figure docs/guide/starloc_3d.png --figure-sequence loop-2d_s3]
+        [--visibility-method COVIS-3D-MEDIAN [--visibility-params '{"window": 10}']]
 
 Anchors: six surveyed tags seen in >= 3 image pairs (the lowest, then farthest-point order);
 scored: the other tags seen in >= 3 image pairs; ``mapped`` is the share of them placed (a tag
@@ -13,6 +14,8 @@ can place (:mod:`mappers.spatial.anchored`). Also the baseline of every tag at t
 centroid. Sensors: ``range-bearing`` the stereo camera (left rays
 and stereo ranges, SPATIAL-BA), ``bearing`` the left camera's rays (SPATIAL-BA), ``visibility``
 the sightings (COVIS-3D); the parameters are :data:`lfmdr_gym.experiments.starloc.STARLOC_PARAMS`.
+``--visibility-method`` maps the sightings with another 3-D method instead (e.g. the opt-in
+``COVIS-3D-MEDIAN``, or ``FRUSTUM-BA-WALK`` given its camera as ``--visibility-params`` JSON).
 Goals on setup s3: stereo <= 0.05 m, bearing <= 0.10 m, visibility <= 1.0 m. The data:
 ``<repo>/../shared/data/starloc`` (its README; never copied into the repository).
 """
@@ -22,6 +25,7 @@ from __future__ import annotations
 import argparse
 import csv
 import io
+import json
 import sys
 import warnings
 from pathlib import Path
@@ -97,7 +101,17 @@ def main(argv: list[str] | None = None) -> int:
                         help="draw three orthographic views of one sequence's stereo map here")
     parser.add_argument("--figure-sequence", default="loop-2d_s3")
     parser.add_argument("--no-table", action="store_true", help="only draw the figure")
+    parser.add_argument("--visibility-method", default=None,
+                        help="map the sightings with this 3-D method (default: the default)")
+    parser.add_argument("--visibility-params", type=json.loads, default={},
+                        help="JSON object of that method's parameters")
     args = parser.parse_args(argv)
+    if args.visibility_params and args.visibility_method is None:
+        parser.error("--visibility-params needs --visibility-method")
+    if not isinstance(args.visibility_params, dict):
+        parser.error("--visibility-params must be a JSON object")
+    params = {"visibility": {"method": args.visibility_method, **args.visibility_params}} \
+        if args.visibility_method is not None else {}
     if args.figure is not None:
         draw_views(args.data / "data" / args.figure_sequence, args.figure)
         print(f"wrote {args.figure}")
@@ -117,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")  # the map's notes: unmapped tags counted
-                    r = map_starloc(seq, sensor)
+                    r = map_starloc(seq, sensor, params.get(sensor))
             except ValueError as exc:  # a sequence too short to map: a row that says so
                 print(f"{seq.name:18s} {sensor:14s} failed: {exc}", flush=True)
                 rows.append({"sequence": seq.name, "setup": seq.name.rsplit("_", 1)[-1],
