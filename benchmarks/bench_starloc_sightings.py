@@ -11,14 +11,16 @@ never placed left out):
   survey for their targets (a diagnosis, never a method): the true distances of the pairs seen
   together only (``true-co``); the best monotone function, fitted on the truth, of the ``-log``
   Ochiai coefficient of those pairs (``iso-och``) and of the second-order dissimilarity of every
-  pair (``iso-2nd``, :func:`mappers.spatial.sightings_median_3d.second_order_embedding`'s);
-* the maps from the sightings: COVIS-3D, the three members of COVIS-3D-MEDIAN (harmonic,
-  second-order over windows of 10 image pairs, geodesic) and their median.
+  pair (``iso-2nd``, :func:`mappers.spatial.sightings_median_3d.second_order_dissimilarity`);
+* the maps from the sightings: COVIS-3D, the four members of COVIS-3D-MEDIAN (second-order over
+  windows of 10 and 20 image pairs, geodesic, frame gap) and their median.
 
-``--subsets``: the geometric median of every subset of one to five of seven maps (COVIS-3D, the
-harmonic map, the second-order map over windows of 3, 10 and 20, the geodesic map, and a map of
-the log frame gaps between two tags' sightings), ranked on eight_s3, grid_s3 and loop-2d-fast_s3
-and shown on the other s3 sequences and on s1/s2 (the choice of COVIS-3D-MEDIAN's members).
+``--subsets``: the geometric median of every subset of one to five of seven maps (COVIS-3D, a
+harmonic map, the second-order map over windows of 3, 10 and 20, the geodesic map, the frame-gap
+map), ranked on eight_s3, grid_s3 and loop-2d-fast_s3 (tune) and shown on the other s3
+sequences and on s1/s2 (how COVIS-3D-MEDIAN's members were chosen). The harmonic map: each tag
+at the Ochiai-weighted mean of those seen with it, anchors held (one linear system; Zhu,
+Ghahramani & Lafferty, ICML 2003).
 The survey is read for the anchors, the scores and the oracles; never a pose column.
 """
 
@@ -31,6 +33,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from scipy.sparse.csgraph import connected_components
 from scipy.stats import spearmanr
 from sklearn.isotonic import IsotonicRegression
 
@@ -39,12 +42,15 @@ from lfmdr_gym.histories.ray_table import ray_histories
 from mappers.masked import covisibility_dissimilarity, geometric_median
 from mappers.smacof import weighted_smacof
 from mappers.spatial import CoVisibility3D, SightingsMedian3D
-from mappers.spatial.covisibility_3d import anchor_mean_start, anchor_scale
+from mappers.spatial.covisibility_3d import anchor_mean_start
 from mappers.spatial.sightings_median_3d import (
     MIN_TARGET,
+    second_order_dissimilarity,
     second_order_embedding,
-    window_sightings,
 )
+
+MEMBERS = ("second-10", "second-20", "geodesic", "frame-gap")
+"""COVIS-3D-MEDIAN's ``members_`` in their order (its default windows 10 and 20)."""
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = ROOT.parent / "shared" / "data" / "starloc"
@@ -90,15 +96,6 @@ def oracle_map(d: dict, targets: np.ndarray, weights: np.ndarray) -> np.ndarray:
     return out
 
 
-def second_order(seen: np.ndarray, window: int) -> np.ndarray:
-    """The second-order dissimilarity of :func:`second_order_embedding` (its formula)."""
-    delta, counts = covisibility_dissimilarity(window_sightings(seen, window))
-    och = np.exp(-delta) * (counts > 0)
-    np.fill_diagonal(och, 1.0)
-    rows = och / np.linalg.norm(och, axis=1, keepdims=True)
-    return np.clip(1.0 - rows @ rows.T, 0.0, None)
-
-
 def diagnosis(d: dict) -> dict:
     """The distances of the pairs seen together and the three oracles' errors."""
     seen, X = d["seen"], d["xyz"]
@@ -110,7 +107,7 @@ def diagnosis(d: dict) -> dict:
     iso = IsotonicRegression().fit(delta[iu][co], truth[iu][co])
     T_och = np.zeros_like(truth)
     T_och[counts > 0] = iso.predict(delta[counts > 0])
-    F = second_order(seen, 10)
+    F = second_order_dissimilarity(seen, 10)[0]
     iso2 = IsotonicRegression().fit(F[iu], truth[iu])
     T_2nd = np.zeros_like(truth)
     T_2nd[iu] = iso2.predict(F[iu])
@@ -123,26 +120,23 @@ def diagnosis(d: dict) -> dict:
             "iso-2nd": mpe(d, oracle_map(d, T_2nd, 1.0 / np.maximum(T_2nd, MIN_TARGET) ** 2))}
 
 
-def frame_gap_map(d: dict) -> np.ndarray:
-    """Targets: the mean log(1 + frame gap) from each sighting of one tag to the nearest of the
-    other's (the smaller of the two directions), scaled on the anchors; Sammon weights."""
-    seen = d["seen"]
-    delta, counts = covisibility_dissimilarity(seen)
+def harmonic_map(d: dict) -> np.ndarray:
+    """The harmonic map (see the module's docstring) of the tags linked to an anchor by pairs
+    seen together; NaN for the others."""
+    delta, counts = covisibility_dissimilarity(d["seen"])
     np.fill_diagonal(counts, 0)
-    sub = np.flatnonzero(counts.sum(axis=1) > 0)
-    loc = np.searchsorted(sub, d["ar"])
-    cols = [np.flatnonzero(seen[i]) for i in sub]
-    G = np.array([[np.mean(np.log1p(np.min(np.abs(a[:, None] - b[None]), axis=1))) for b in cols]
-                  for a in cols])
-    G = np.minimum(G, G.T)
-    np.fill_diagonal(G, 0.0)
-    T = anchor_scale(G, loc, d["apos"]) * G
-    W = 1.0 / np.maximum(T, MIN_TARGET) ** 2
-    np.fill_diagonal(W, 0.0)
-    och = np.where(counts > 0, np.exp(-delta), 0.0)[np.ix_(sub, sub)]
-    Y, _, _ = weighted_smacof(T, W, anchor_mean_start(och, loc, d["apos"]), fixed=loc,
-                              fixed_positions=d["apos"], max_iter=300)
-    out = np.full((len(seen), 3), np.nan)
+    S = np.where(counts > 0, np.exp(-delta), 0.0)
+    _, label = connected_components(counts > 0, directed=False)
+    keep = np.isin(label, label[d["ar"]]) & (counts.sum(axis=1) > 0)
+    sub = np.flatnonzero(keep)
+    loc = np.searchsorted(sub, d["ar"][keep[d["ar"]]])
+    S = S[np.ix_(sub, sub)]
+    L = np.diag(S.sum(axis=1)) - S
+    free = np.setdiff1d(np.arange(len(sub)), loc)
+    Y = np.empty((len(sub), 3))
+    Y[loc] = d["apos"][keep[d["ar"]]]
+    Y[free] = np.linalg.solve(L[np.ix_(free, free)], -L[np.ix_(free, loc)] @ Y[loc])
+    out = np.full((len(d["seen"]), 3), np.nan)
     out[sub] = Y
     return out
 
@@ -151,15 +145,14 @@ def candidate_maps(d: dict) -> dict[str, np.ndarray]:
     """The seven maps the subsets are drawn from (see the module's docstring)."""
     seen, ar, apos = d["seen"], d["ar"], d["apos"]
     est = SightingsMedian3D().fit(seen.astype(float), anchor_ids=ar, anchor_positions=apos)
-    maps = {"covis-3d": CoVisibility3D().fit_transform(seen.astype(float), anchor_ids=ar,
-                                                       anchor_positions=apos),
-            "harmonic": est.members_[0], "second-10": est.members_[1],
-            "geodesic": est.members_[2], "frame-gap": frame_gap_map(d)}
-    for w in (3, 20):
-        sub = np.flatnonzero(np.isfinite(est.members_[1][:, 0]))
-        out = np.full((len(seen), 3), np.nan)
-        out[sub] = second_order_embedding(seen[sub], np.searchsorted(sub, ar), apos, w, 300)
-        maps[f"second-{w}"] = out
+    maps = dict(zip(MEMBERS, est.members_, strict=True))
+    maps["covis-3d"] = CoVisibility3D().fit_transform(seen.astype(float), anchor_ids=ar,
+                                                      anchor_positions=apos)
+    maps["harmonic"] = harmonic_map(d)
+    sub = np.flatnonzero(np.isfinite(est.members_[0][:, 0]))
+    maps["second-3"] = np.full((len(seen), 3), np.nan)
+    maps["second-3"][sub] = second_order_embedding(seen[sub], np.searchsorted(sub, ar), apos, 3,
+                                                   300)
     return maps
 
 
@@ -176,11 +169,13 @@ def median_of(maps: list[np.ndarray]) -> np.ndarray:
 
 
 def subsets(data: dict[str, dict]) -> None:
-    """Rank every subset of one to five maps by its mean error on :data:`TUNE`."""
+    """Rank every subset of one to five maps by its mean error on :data:`TUNE` (sequences with
+    fewer than two scored tags left out: loop-2d-fast_s2 has one, and COVIS-3D cannot map it)."""
+    data = {name: d for name, d in data.items() if len(d["sr"]) > 1}
     maps = {name: candidate_maps(d) for name, d in data.items()}
     names = list(next(iter(maps.values())))
     s3 = [s for s in data if s.endswith("_s3")]
-    rest = [s for s in data if not s.endswith("_s3") and len(data[s]["sr"]) > 1]
+    rest = [s for s in data if not s.endswith("_s3")]
     rows = []
     for r in range(1, 6):
         for combo in itertools.combinations(names, r):
@@ -189,8 +184,8 @@ def subsets(data: dict[str, dict]) -> None:
                          np.mean([e[s] for s in s3 if s not in TUNE]),
                          np.mean([e[s] for s in rest]) if rest else np.nan, combo))
     rows.sort(key=lambda r: r[0])
-    print(f"\n{len(rows)} subsets ranked on {', '.join(TUNE)}; the other s3 sequences; s1/s2 "
-          "(sequences with more than one scored tag)")
+    print(f"\n{len(rows)} subsets ranked on {', '.join(TUNE)} (tune), the other s3 sequences "
+          "(confirm), s1/s2")
     base = next(r for r in rows if r[3] == ("covis-3d",))
     for r in [*rows[:8], base]:
         print(f"  tune {r[0]:.3f}  confirm {r[1]:.3f}  s1/s2 {r[2]:.3f}  {' + '.join(r[3])}")
@@ -210,8 +205,8 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     setups = set(args.setups.split(","))
     print(f"{'sequence':16s} {'co-seen median/p90/max [m]':>26s} {'rho':>5s} {'true-co':>7s} "
-          f"{'iso-och':>7s} {'iso-2nd':>7s} | {'COVIS-3D':>8s} {'harmon.':>7s} {'2nd-10':>7s} "
-          f"{'geodes.':>7s} {'MEDIAN':>7s}")
+          f"{'iso-och':>7s} {'iso-2nd':>7s} | {'COVIS-3D':>8s} {'2nd-10':>7s} {'2nd-20':>7s} "
+          f"{'geodes.':>7s} {'gap':>7s} {'MEDIAN':>7s}")
     data = {}
     for seq in folders:
         d = load(seq)
@@ -227,11 +222,10 @@ def main(argv: list[str] | None = None) -> int:
                                           anchor_positions=d["apos"])
             covis = CoVisibility3D().fit_transform(d["seen"].astype(float), anchor_ids=d["ar"],
                                                    anchor_positions=d["apos"])
-        members = [mpe(d, m) for m in est.members_]
+        members = " ".join(f"{mpe(d, m):7.2f}" for m in est.members_)
         print(f"{seq.name:16s} {g['co_median']:10.2f} {g['co_p90']:6.2f} {g['co_max']:6.2f}    "
               f"{g['spearman']:5.2f} {g['true-co']:7.2f} {g['iso-och']:7.2f} {g['iso-2nd']:7.2f} | "
-              f"{mpe(d, covis):8.2f} {members[0]:7.2f} {members[1]:7.2f} {members[2]:7.2f} "
-              f"{mpe(d, est.embedding_):7.2f}", flush=True)
+              f"{mpe(d, covis):8.2f} {members} {mpe(d, est.embedding_):7.2f}", flush=True)
     if args.subsets:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

@@ -1,31 +1,35 @@
-"""COVIS-3D-MEDIAN: a 3-D map from sightings alone, the geometric median of three embeddings.
+"""COVIS-3D-MEDIAN: a 3-D map from ordered sightings alone, the geometric median of four maps.
 
-Each of three maps of the same co-observation is biased its own way, so each object is put at the
-geometric median of its three positions (as ``COVIS-ENSEMBLE(combine="median")`` does in 2-D,
-:func:`mappers.masked.ensemble.geometric_median`). All three hold the anchors at their positions:
+Each of four maps of the same sightings is biased its own way, so each object is put at the
+geometric median of its positions in them (as ``COVIS-ENSEMBLE(combine="median")`` does in 2-D,
+:func:`mappers.masked.geometric_median`). Each map is a weighted SMACOF (de Leeuw 1977) with the
+anchors held at their positions (Borg & Groenen, *Modern Multidimensional Scaling*, 2005,
+sec. 8.4), of targets that are a dissimilarity times one scale fitted on the anchors' pairs
+(:func:`mappers.spatial.covisibility_3d.anchor_scale`), started as COVIS-3D is:
 
-1. **harmonic**: each object at the mean of the objects seen with it, weighted by their Ochiai
-   co-observation coefficient; with the anchors held this is one linear system, the harmonic
-   function of the co-observation graph (Zhu, Ghahramani & Lafferty, "Semi-supervised learning
-   using Gaussian fields and harmonic functions", ICML 2003). It cannot leave the anchors' hull.
-2. **second order over windows**: the sightings merged over ``window`` consecutive steps (an
-   object seen in any of them; a hand-held camera's consecutive frames overlap), then the cosine
-   dissimilarity of two objects' rows of Ochiai coefficients (objects seen with the same others
-   are near one another, even if never seen together: it gives every pair a target). Targets:
-   that dissimilarity times one scale fitted on the anchors' pairs; weights ``1 / max(target,
-   MIN_TARGET)**2`` (near pairs count most, as in Sammon's mapping); weighted SMACOF (de Leeuw
-   1977) with the anchors held (Borg & Groenen 2005, sec. 8.4).
+1. and 2. **second order over windows** of 10 and of 20 steps: the sightings merged over sliding
+   windows of consecutive steps (an object seen in any of them; a hand-held camera's
+   consecutive frames overlap), then the cosine dissimilarity of two objects' rows of Ochiai
+   coefficients (objects seen with the same others are near one another, even when never seen
+   together: every pair gets a target). Weights ``1 / max(target, MIN_TARGET)**2`` (near pairs
+   count most, as in Sammon's mapping).
 3. **geodesic**: shortest paths on the graph of the pairs seen together, an edge's length the
-   square root of its ``-log`` Ochiai coefficient (a landmark Isomap, Tenenbaum, de Silva &
-   Langford, Science 2000), times one scale fitted on the anchors' pairs; weights the square
-   root of the steps that saw both for pairs seen together, the least of those for the others;
-   weighted SMACOF with the anchors held.
+   square root of its ``-log`` Ochiai coefficient (a landmark Isomap: Tenenbaum, de Silva &
+   Langford, Science 290, 2000). Weights: the square root of the steps that saw both for pairs
+   seen together, the least of those for the others.
+4. **frame gap**: from each sighting of one object, the number of steps to the nearest sighting
+   of the other; the mean of ``log(1 + gap)`` over the first object's sightings, the smaller of
+   the two directions (objects seen soon after one another are near). Sammon weights as 1.
 
-The steps must be in the order they were taken (the windows merge neighbouring columns).
+The steps must be in the order they were taken (windows and gaps read neighbouring columns).
+The four were chosen among 119 medians of one to five of seven maps (with COVIS-3D, a harmonic
+map and windows of 3) on three STAR-loc sequences (``python
+benchmarks/bench_starloc_sightings.py --subsets``).
 
-Measured on STAR-loc (``python benchmarks/bench_starloc.py --visibility-method
-COVIS-3D-MEDIAN``; docs/dead-ends.md): 1.7-2.2 m on setup s3 against COVIS-3D's 2.2-2.9 m,
-not under the 1.0 m goal, and worse than COVIS-3D on 5 of 13 sequences; so it is opt-in
+Measured on STAR-loc (``python benchmarks/bench_starloc.py --sensors visibility
+--visibility-method COVIS-3D-MEDIAN``; docs/dead-ends.md): 1.7-2.1 m on setup s3 against
+COVIS-3D's 2.2-2.9 m, better on each s3 sequence but not under the 1.0 m goal, worse than
+COVIS-3D on 4 of the 7 setup s1/s2 sequences and on ``LFMDR-Camera3D-v0``; so it is opt-in
 (``method="COVIS-3D-MEDIAN"``), not the default.
 """
 
@@ -42,12 +46,12 @@ from mappers.masked import covisibility_dissimilarity, geometric_median
 from mappers.smacof import weighted_smacof
 from mappers.spatial.covisibility_3d import anchor_mean_start, anchor_scale
 
-__all__ = ["SightingsMedian3D", "geodesic_embedding", "harmonic_embedding",
-           "second_order_embedding", "window_sightings"]
+__all__ = ["SightingsMedian3D", "frame_gap_embedding", "frame_gaps", "geodesic_embedding",
+           "second_order_dissimilarity", "second_order_embedding", "window_sightings"]
 
 MIN_TARGET = 0.3
-"""Metres: the second-order member's weights are ``1 / max(target, MIN_TARGET)**2``, so that a
-pair with a target near 0 does not take all the weight."""
+"""Metres: the Sammon weights are ``1 / max(target, MIN_TARGET)**2``, so that a pair with a
+target near 0 does not take all the weight."""
 
 
 def window_sightings(seen: np.ndarray, window: int) -> np.ndarray:
@@ -65,34 +69,24 @@ def window_sightings(seen: np.ndarray, window: int) -> np.ndarray:
     return (csum[:, j + window] - csum[:, j]) > 0
 
 
-def harmonic_embedding(similarity: np.ndarray, ids: np.ndarray, pos: np.ndarray) -> np.ndarray:
-    """(M, d): the anchors ``ids`` at ``pos`` (A, d), every other object at the
-    ``similarity``-weighted (M, M, symmetric, >= 0) mean of the others: the harmonic solution
-    ``L_ff X_f = -L_fa pos`` of the graph Laplacian. Every object must be linked to an anchor
-    by a chain of positive similarities (ValueError otherwise: the system is singular)."""
-    S = np.asarray(similarity, dtype=float).copy()
-    np.fill_diagonal(S, 0.0)
-    L = np.diag(S.sum(axis=1)) - S
-    free = np.setdiff1d(np.arange(S.shape[0]), ids)
-    out = np.empty((S.shape[0], pos.shape[1]))
-    out[ids] = pos
-    try:
-        out[free] = np.linalg.solve(L[np.ix_(free, free)], -L[np.ix_(free, ids)] @ pos)
-    except np.linalg.LinAlgError as exc:
-        raise ValueError("some objects are not linked to an anchor by sightings: no harmonic "
-                         "map") from exc
-    return out
-
-
-def second_order_embedding(seen: np.ndarray, ids: np.ndarray, pos: np.ndarray, window: int,
-                           max_iter: int) -> np.ndarray:
-    """(M, 3): member 2 of the module's docstring on the ordered sightings ``seen`` (M, N)."""
+def second_order_dissimilarity(seen: np.ndarray, window: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(D, och)``: the second-order dissimilarity (M, M) of the ordered sightings ``seen``
+    (M, N) merged over sliding windows of ``window`` steps — one minus the cosine of two objects'
+    rows of Ochiai coefficients — and those coefficients (1 on the diagonal)."""
     delta, counts = covisibility_dissimilarity(window_sightings(seen, window))
     och = np.exp(-delta) * (counts > 0)
     np.fill_diagonal(och, 1.0)
     rows = och / np.linalg.norm(och, axis=1, keepdims=True)
     D = np.clip(1.0 - rows @ rows.T, 0.0, None)
     np.fill_diagonal(D, 0.0)
+    return D, och
+
+
+def second_order_embedding(seen: np.ndarray, ids: np.ndarray, pos: np.ndarray, window: int,
+                           max_iter: int) -> np.ndarray:
+    """(M, 3): a second-order member of the module's docstring on the ordered sightings
+    ``seen`` (M, N)."""
+    D, och = second_order_dissimilarity(seen, window)
     T = anchor_scale(D, ids, pos) * D
     W = 1.0 / np.maximum(T, MIN_TARGET) ** 2
     np.fill_diagonal(W, 0.0)
@@ -121,6 +115,37 @@ def geodesic_embedding(delta: np.ndarray, counts: np.ndarray, ids: np.ndarray, p
     return Y
 
 
+def frame_gaps(seen: np.ndarray) -> np.ndarray:
+    """(M, M): for objects i, j of the ordered sightings ``seen`` (M, N; each object seen at
+    least once), the mean over the steps that saw i of ``log(1 + steps to the nearest step that
+    saw j)``, then the smaller of (i, j) and (j, i); 0 on the diagonal."""
+    seen = np.asarray(seen, dtype=bool)
+    if not seen.any(axis=1).all():
+        raise ValueError("frame_gaps needs every object seen at least once")
+    n = seen.shape[1]
+    steps = np.arange(n, dtype=float)
+    # the step of the last sighting at or before each step, and of the next at or after it
+    before = np.maximum.accumulate(np.where(seen, steps, -np.inf), axis=1)
+    after = np.minimum.accumulate(np.where(seen, steps, np.inf)[:, ::-1], axis=1)[:, ::-1]
+    gap = np.minimum(steps - before, after - steps)  # (M, N): steps to j's nearest sighting
+    G = (seen @ np.log1p(gap).T) / seen.sum(axis=1, keepdims=True)
+    G = np.minimum(G, G.T)
+    np.fill_diagonal(G, 0.0)
+    return G
+
+
+def frame_gap_embedding(seen: np.ndarray, start: np.ndarray, ids: np.ndarray, pos: np.ndarray,
+                        max_iter: int) -> np.ndarray:
+    """(M, 3): member 4 of the module's docstring on the ordered sightings ``seen`` (M, N),
+    from ``start`` (M, 3)."""
+    G = frame_gaps(seen)
+    T = anchor_scale(G, ids, pos) * G
+    W = 1.0 / np.maximum(T, MIN_TARGET) ** 2
+    np.fill_diagonal(W, 0.0)
+    Y, _, _ = weighted_smacof(T, W, start, fixed=ids, fixed_positions=pos, max_iter=max_iter)
+    return Y
+
+
 def _linked_to_anchors(counts: np.ndarray, ids: np.ndarray) -> np.ndarray:
     """(M,) bool: the objects that a chain of pairs with positive ``counts`` (M, M) links to one
     of the anchors ``ids`` (an anchor counts when it is seen with another object)."""
@@ -133,18 +158,21 @@ def _linked_to_anchors(counts: np.ndarray, ids: np.ndarray) -> np.ndarray:
 
 class SightingsMedian3D(EmbeddingTransformer, BaseEstimator):
     """Ordered visibility histories (M, N) of 0/1 -> (M, 3) world positions, the geometric
-    median of three anchored embeddings (see the module's docstring).
+    median of four anchored embeddings (see the module's docstring).
 
     Args:
-        window: steps merged by the second-order member (10: chosen on STAR-loc's eight_s3,
-            grid_s3 and loop-2d-fast_s3 among 1, 3, 10 and 20).
+        windows: the steps merged by each second-order member (10 and 20: see the module's
+            docstring; a window longer than the history is cut to its length).
         max_iter: SMACOF updates at most, per member.
 
-    Objects never seen with another, or not linked to the anchors by sightings, are NaN.
+    ``members_`` (K, M, 3) holds the members' maps in the order second-order (one per window),
+    geodesic, frame gap. Objects that no chain of sightings within the shortest window links to
+    an anchor are NaN; the geodesic member places only those linked by pairs seen in one step
+    (and none when fewer than two anchors are), the others take the median of the rest.
     """
 
-    def __init__(self, *, window: int = 10, max_iter: int = 300):
-        self.window = window
+    def __init__(self, *, windows: tuple[int, ...] = (10, 20), max_iter: int = 300):
+        self.windows = windows
         self.max_iter = max_iter
 
     def fit(self, X, y=None, *, anchor_ids=None, anchor_positions=None, mask=None):
@@ -155,32 +183,35 @@ class SightingsMedian3D(EmbeddingTransformer, BaseEstimator):
                              "(A, 3)")
         if not np.all((X == 0) | (X == 1) | (mask is not None and ~np.asarray(mask, bool))):
             raise ValueError("COVIS-3D-MEDIAN maps visibility histories: an (M, N) array of 0/1")
+        windows = [int(w) for w in np.atleast_1d(self.windows)]
+        if not windows or min(windows) < 1:
+            raise ValueError(f"windows must be one or more step counts >= 1, got {self.windows!r}")
         seen = X > 0 if mask is None else (X > 0) & np.asarray(mask, dtype=bool)
         ids, pos = check_anchors_3d(anchor_ids, anchor_positions, X.shape[0], fit="affine")
-        window = min(self.window, seen.shape[1])
+        windows = [min(w, seen.shape[1]) for w in windows]
         delta, counts = covisibility_dissimilarity(seen)
         near = _linked_to_anchors(counts, ids)  # by pairs seen in one step
-        wide = _linked_to_anchors(covisibility_dissimilarity(window_sightings(seen, window))[1],
-                                  ids)  # by pairs seen within a window of steps
+        wide = _linked_to_anchors(  # by pairs seen within the shortest window of steps
+            covisibility_dissimilarity(window_sightings(seen, min(windows)))[1], ids)
         if not wide[ids].all():
             raise ValueError(f"anchors {ids[~wide[ids]].tolist()} were never seen with another "
                              "object: COVIS-3D-MEDIAN cannot place them")
-        members = np.full((3, X.shape[0], 3), np.nan)
-        if np.count_nonzero(near[ids]) >= 2:  # the anchors linked this way give the scale
-            sub = np.flatnonzero(near)
-            local = np.searchsorted(sub, ids[near[ids]])
-            d_sub, c_sub = delta[np.ix_(sub, sub)], counts[np.ix_(sub, sub)]
-            members[0, sub] = harmonic_embedding(np.where(c_sub > 0, np.exp(-d_sub), 0.0),
-                                                 local, pos[near[ids]])
-            members[2, sub] = geodesic_embedding(d_sub, c_sub, local, pos[near[ids]],
-                                                 self.max_iter)
+        members = np.full((len(windows) + 2, X.shape[0], 3), np.nan)
         sub = np.flatnonzero(wide)
-        members[1, sub] = second_order_embedding(seen[sub], np.searchsorted(sub, ids), pos,
-                                                 window, self.max_iter)
+        local = np.searchsorted(sub, ids)
+        for k, w in enumerate(windows):
+            members[k, sub] = second_order_embedding(seen[sub], local, pos, w, self.max_iter)
+        if np.count_nonzero(near[ids]) >= 2:  # the anchors linked this way give the scale
+            near_sub = np.flatnonzero(near)
+            members[-2, near_sub] = geodesic_embedding(
+                delta[np.ix_(near_sub, near_sub)], counts[np.ix_(near_sub, near_sub)],
+                np.searchsorted(near_sub, ids[near[ids]]), pos[near[ids]], self.max_iter)
+        och = np.where(counts > 0, np.exp(-delta), 0.0)[np.ix_(sub, sub)]
+        members[-1, sub] = frame_gap_embedding(seen[sub], anchor_mean_start(och, local, pos),
+                                               local, pos, self.max_iter)
         out = np.full((X.shape[0], 3), np.nan)
         placed = np.isfinite(members[:, :, 0])
-        # each object at the median of the members that placed it (all three, or the
-        # second-order member alone where only windows of steps link it to the anchors)
+        # each object at the median of the members that placed it
         for which in np.unique(placed[:, wide], axis=1).T:
             rows = np.flatnonzero(wide & np.all(placed == which[:, None], axis=0))
             out[rows] = geometric_median(members[which][:, rows])
