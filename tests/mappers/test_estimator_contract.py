@@ -34,6 +34,7 @@ from mappers.spatial import (
     FrustumAdjustment,
     FrustumWalkAdjustment,
     Range3D,
+    SightingsMedian3D,
     SpatialAdjustment,
 )
 from mappers.viewpoints import (
@@ -70,6 +71,7 @@ ESTIMATORS = [
     VisibilityBearingSMACOF(),
     SpatialAdjustment(),
     CoVisibility3D(),
+    SightingsMedian3D(),
     Range3D(),
     FrustumAdjustment(),
     FrustumWalkAdjustment(),
@@ -117,6 +119,8 @@ _CANNOT_FIT = {
                        "the checks give neither",
     CoVisibility3D: "maps visibility (0/1) histories with 3-D anchors (four not on one plane); "
                     "the checks give real-valued data and no anchors",
+    SightingsMedian3D: "maps ordered visibility (0/1) histories with 3-D anchors (four not on one "
+                       "plane); the checks give real-valued data and no anchors",
     Range3D: "maps range histories with 3-D anchors (four not on one plane); the checks give no "
              "anchors",
     FrustumAdjustment: "maps visibility (0/1) histories with 3-D anchors and the camera's "
