@@ -118,12 +118,11 @@ def complete_free_directions(S: np.ndarray, D: np.ndarray) -> np.ndarray:
     adjustment's and whose free ones ``D`` gives, the others' error carried into them. Its
     inverse keeps ``S``'s pseudo-inverse on the objects without a free component; the free
     directions ``D`` does not fix stay free (a null space of the result)."""
-    S = 0.5 * (S + S.T)
     if not S.shape[0] or not np.any(D):
         return S
     # (an eigen-decomposition, not a Cholesky factorisation's failure: a free direction's
     # eigenvalue is rounding noise, ~1e-16 of the largest, and may come out positive)
-    ev, vec = np.linalg.eigh(S)
+    ev, vec = np.linalg.eigh(0.5 * (S + S.T))
     tol = NULL_TOL * max(float(ev[-1]), 1e-300)
     null = ev <= tol
     if not null.any():
