@@ -20,6 +20,12 @@ is what places the map on them, and ``build_map`` takes the anchors' positions a
 covariances are then carried to the output frame by the similarity ``s R`` (``s² R C Rᵀ``).
 Objects the adjustment placed but :class:`~mappers.spatial.spatial_ba.SpatialAdjustment` left
 out as inconsistent get NaN, like its positions.
+
+*Free directions*: an object the posed steps fix only up to a turn (seen by one posed step with
+two other objects) is placed along that turn by the start's pose-free distances; the directions
+the objects' reduced information leaves free get the information of the distances of the steps
+the adjustment left out with two objects, the others keep the adjustment's
+(:mod:`mappers.spatial.pair_distances`).
 """
 
 from __future__ import annotations
