@@ -61,7 +61,7 @@ simulated, >= 0.80 real), sharpness = mean RMS radius / mean error (goal <= 3; a
 Gaussian gives about 1.95), and the ratio of the median CPU times with and without uncertainty
 (goal <= 1.5). ``wide`` counts the landmarks whose 95 % region is wider than the anchors'
 extent (its RMS radius above the largest distance between two anchors: "anywhere on the map",
-e.g. a STAR-loc tag its readings fix only up to a turn), and ``sharp. rest`` is the sharpness of the
+e.g. a landmark no reading fixes in some direction), and ``sharp. rest`` is the sharpness of the
 others (CSV: ``n_wide``, ``rms_radius_informative``, ``mpe_informative``): one such region
 can make the mean RMS radius, and so the sharpness, meaningless.
 """

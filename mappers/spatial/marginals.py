@@ -20,6 +20,12 @@ is what places the map on them, and ``build_map`` takes the anchors' positions a
 covariances are then carried to the output frame by the similarity ``s R`` (``s² R C Rᵀ``).
 Objects the adjustment placed but :class:`~mappers.spatial.spatial_ba.SpatialAdjustment` left
 out as inconsistent get NaN, like its positions.
+
+*Free directions*: an object the posed steps fix only up to a turn (seen by one posed step with
+two other objects) is placed along that turn by the start's pose-free distances; the directions
+the objects' reduced information leaves free get the information of the distances of the steps
+the adjustment left out with two objects, the others keep the adjustment's
+(:mod:`mappers.spatial.pair_distances`).
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ import numpy as np
 
 from mappers.core.align_3d import umeyama
 from mappers.spatial.adjustment import Problem, normal_blocks
+from mappers.spatial.pair_distances import complete_free_directions, pair_distance_information
 from mappers.viewpoints import (
     DENSE_COUPLING_MAX_BYTES,
     model_covariances,
@@ -88,6 +95,21 @@ def _parts(est, unknown_anchors: bool):
     return parts, placed, free, index
 
 
+def _completed(est, S: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """The free objects' reduced information ``S`` with the directions the adjustment leaves
+    free given the information of the image pairs it left out
+    (:func:`mappers.spatial.pair_distances.complete_free_directions`; ``S`` as it is when it
+    has none)."""
+    res = est.adjusted_
+    index = np.full(len(free), -1)
+    index[free] = np.arange(free.sum())
+    D = pair_distance_information(
+        est.observations_, res.points, np.all(np.isfinite(res.positions), axis=1), index,
+        int(free.sum()), bearing_noise=est.bearing_noise, range_noise=est.range_noise,
+        range_growth=est.range_growth, loss=est.loss, loss_scale=est.loss_scale)
+    return complete_free_directions(S, D)
+
+
 def _to_output(est, cov: np.ndarray) -> np.ndarray:
     """Covariances (M, 3, 3) of the adjusted map carried by its similarity onto the anchors."""
     Rs, scale, _ = est.similarity_
@@ -106,8 +128,9 @@ def spatial_covariances(est) -> np.ndarray:
     parts, placed, free, _ = _parts(est, False)
     U, V, Wf, _, _, sandwich, dof, n_rows, n_unknowns, _ = parts
     P = np.where(placed[:, None], est.adjusted_.points, np.nan)
-    cov = _to_output(est, model_covariances(schur_information(U, V, Wf), U, Wf, sandwich, dof,
-                                            n_rows, n_unknowns, P, free))
+    S = _completed(est, schur_information(U, V, Wf), free)
+    cov = _to_output(est, model_covariances(S, U, Wf, sandwich, dof, n_rows, n_unknowns, P,
+                                            free))
     cov[~np.all(np.isfinite(est.embedding_), axis=1)] = np.nan
     return cov
 
@@ -150,7 +173,7 @@ def spatial_held_out(est, anchor_positions, with_covariances: bool = False):
     # (the free objects' reduced information is the block of the unknowns': the poses'
     # elimination is linear in the objects' columns)
     P = np.where(placed[:, None], est.adjusted_.points, np.nan)
-    model = _to_output(est, model_covariances(S[np.ix_(cols, cols)], U, Wf, sandwich, dof,
-                                              n_rows, n_unknowns, P, free))
+    model = _to_output(est, model_covariances(_completed(est, S[np.ix_(cols, cols)], free), U,
+                                              Wf, sandwich, dof, n_rows, n_unknowns, P, free))
     model[~np.all(np.isfinite(est.embedding_), axis=1)] = np.nan
     return pos, covs, model

@@ -49,9 +49,11 @@ def _orthogonal_iterations(p, V, indptr, F, R, iters, tol):  # pragma: no cover 
             for k in range(lo, hi):
                 x += p[k, i]
             mp[i] = x / n
-        Rc[:] = R[s]
+        for i in range(3):
+            for j in range(3):
+                Rc[i, j] = R[s, i, j]
         for _ in range(iters):
-            acc[:] = 0.0
+            acc[0] = acc[1] = acc[2] = 0.0
             for k in range(lo, hi):  # sum of V_k R p_k - R p_k
                 for i in range(3):
                     pc[i] = Rc[i, 0] * p[k, 0] + Rc[i, 1] * p[k, 1] + Rc[i, 2] * p[k, 2]
@@ -59,7 +61,7 @@ def _orthogonal_iterations(p, V, indptr, F, R, iters, tol):  # pragma: no cover 
                     acc[i] += V[k, i, 0] * pc[0] + V[k, i, 1] * pc[1] + V[k, i, 2] * pc[2] - pc[i]
             for i in range(3):
                 t[i] = (F[s, i, 0] * acc[0] + F[s, i, 1] * acc[1] + F[s, i, 2] * acc[2]) / n
-            mq[:] = 0.0
+            mq[0] = mq[1] = mq[2] = 0.0
             for k in range(lo, hi):  # q_k = V_k (R p_k + t)
                 for i in range(3):
                     pc[i] = Rc[i, 0] * p[k, 0] + Rc[i, 1] * p[k, 1] + Rc[i, 2] * p[k, 2] + t[i]
@@ -69,7 +71,9 @@ def _orthogonal_iterations(p, V, indptr, F, R, iters, tol):  # pragma: no cover 
                     mq[i] += x
             for i in range(3):
                 mq[i] /= n
-            H[:] = 0.0
+            for i in range(3):
+                for j in range(3):
+                    H[i, j] = 0.0
             for k in range(lo, hi):
                 for i in range(3):
                     for j in range(3):
@@ -87,7 +91,11 @@ def _orthogonal_iterations(p, V, indptr, F, R, iters, tol):  # pragma: no cover 
                     x = U[i, 0] * Vt[0, j] + U[i, 1] * Vt[1, j] + d * U[i, 2] * Vt[2, j]
                     moved = max(moved, abs(x - Rc[i, j]))
                     new[i, j] = x
-            Rc[:] = new
+            for i in range(3):
+                for j in range(3):
+                    Rc[i, j] = new[i, j]
             if moved < tol:
                 break
-        R[s] = Rc
+        for i in range(3):
+            for j in range(3):
+                R[s, i, j] = Rc[i, j]

@@ -93,7 +93,10 @@ def _schur_diagonal(Ui, blocks, step, free, Vd, out):  # pragma: no cover - comp
     """The preconditioner's blocks: ``out[j] = Vd[j] - sum over the blocks k of object j of
     W_k^T Ui_t W_k`` (F, d, d), overwritten."""
     p, d = blocks.shape[1], blocks.shape[2]
-    out[:] = Vd
+    for j in range(out.shape[0]):
+        for r in range(d):
+            for c in range(d):
+                out[j, r, c] = Vd[j, r, c]
     for k in range(blocks.shape[0]):
         t, j = step[k], free[k]
         for r in range(d):
@@ -107,29 +110,32 @@ def _schur_diagonal(Ui, blocks, step, free, Vd, out):  # pragma: no cover - comp
                 out[j, r, c] -= s
 
 
-def block_products(blocks, into, by, x, out):  # pragma: no cover - compiled
-    """``out[into[k]] += blocks[k] @ x[by[k]]`` for each block k (``blocks`` (K, p, d), ``x``
-    (., d), ``out`` (., p)): the one loop of :func:`couple` and, on the transposed blocks, of
-    :func:`couple_transpose`."""
-    p, d = blocks.shape[1], blocks.shape[2]
+def block_products(blocks, into, by, x, out, transposed):  # pragma: no cover - compiled
+    """``out[into[k]] += B_k @ x[by[k]]`` for each block k, ``B_k`` = ``blocks[k]`` (p, d) or,
+    ``transposed``, its transpose (``x`` (., d) or (., p), ``out`` (., p) or (., d)): the one
+    loop of :func:`couple` and :func:`couple_transpose`. The transpose is read in place:
+    numba's ``ndarray.transpose`` compiles its argument checks' messages, seconds on first use."""
+    rows, cols = blocks.shape[1], blocks.shape[2]
+    if transposed:
+        rows, cols = cols, rows
     for k in range(blocks.shape[0]):
         i, j = into[k], by[k]
-        for a in range(p):
+        for a in range(rows):
             s = 0.0
-            for c in range(d):
-                s += blocks[k, a, c] * x[j, c]
+            for c in range(cols):
+                s += (blocks[k, c, a] if transposed else blocks[k, a, c]) * x[j, c]
             out[i, a] += s
 
 
 def _couple(blocks, step, free, x, out):  # pragma: no cover - compiled
     """``out += W x``: each step's (p,) sum of its blocks times their objects' ``x`` (F, d)."""
-    block_products(blocks, step, free, x, out)
+    block_products(blocks, step, free, x, out, False)
 
 
 def _couple_transpose(blocks, step, free, v, out):  # pragma: no cover - compiled
     """``out += W^T v``: each object's (d,) sum of its blocks' transposes times their steps'
     ``v`` (N, p)."""
-    block_products(blocks.transpose((0, 2, 1)), free, step, v, out)
+    block_products(blocks, free, step, v, out, True)
 
 
 def _bearing_blocks(d, res, w, t, f, U, g, V, h, blocks, bstep, bfree):  # pragma: no cover

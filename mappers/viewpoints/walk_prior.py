@@ -180,7 +180,9 @@ def _forward_backward(E, top, init, cells, nx, ny, k, kd2, starts, cutoff,
     for q in range(g):
         src[cx[q], cy[q]] = 1.0
     norm = np.empty(g)
-    _gather(dst, _conv(src, tmp, tmp_t, dst, (0, nx - 1, 0, ny - 1), k, k, nx, ny), cx, cy, norm)
+    # the whole grid's box, typed as _scatter's (a literal 0 would compile _conv once more)
+    whole = (nx - nx, nx - 1, ny - ny, ny - 1)
+    _gather(dst, _conv(src, tmp, tmp_t, dst, whole, k, k, nx, ny), cx, cy, norm)
     _unscatter(src, cx, cy)
     for q in range(g):
         norm[q] = 1.0 / max(norm[q], 1e-300)
