@@ -26,11 +26,10 @@ The four were chosen among 119 medians of one to five of seven maps (with COVIS-
 map and windows of 3) on three STAR-loc sequences (``python
 benchmarks/bench_starloc_sightings.py --subsets``).
 
-Measured on STAR-loc (``python benchmarks/bench_starloc.py --sensors visibility
---visibility-method COVIS-3D-MEDIAN``; docs/dead-ends.md): 1.7-2.1 m on setup s3 against
-COVIS-3D's 2.2-2.9 m, better on each s3 sequence but not under the 1.0 m goal, worse than
-COVIS-3D on 4 of the 7 setup s1/s2 sequences and on ``LFMDR-Camera3D-v0``; so it is opt-in
-(``method="COVIS-3D-MEDIAN"``), not the default.
+Better than COVIS-3D on STAR-loc's setup s3, not on every other sequence nor in
+``LFMDR-Camera3D-v0`` (figures: the 3-D guide and docs/dead-ends.md, ``python
+benchmarks/bench_starloc.py --sensors visibility --visibility-method COVIS-3D-MEDIAN``), so it
+is opt-in (``method="COVIS-3D-MEDIAN"``), not the default.
 """
 
 from __future__ import annotations
