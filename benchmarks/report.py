@@ -441,6 +441,10 @@ def uncertainty_section(root: Path) -> list[str]:
 STARLOC = Source("docs/results/starloc/starloc.csv",
                   "python benchmarks/bench_starloc.py --out docs/results/starloc/starloc.csv "
                   "--figure docs/guide/starloc_3d.png")
+STARLOC_MEDIAN = Source("docs/results/starloc/starloc_visibility_median.csv",
+                        "python benchmarks/bench_starloc.py --sensors visibility "
+                        "--visibility-method COVIS-3D-MEDIAN "
+                        "--out docs/results/starloc/starloc_visibility_median.csv")
 STARLOC_SENSORS = ("range-bearing", "bearing", "visibility")
 STARLOC_GOALS = {"range-bearing": 0.05, "bearing": 0.10, "visibility": 1.0}
 
@@ -453,6 +457,7 @@ def starloc_section(root: Path) -> list[str]:
     by_seq: dict[str, dict[str, dict[str, str]]] = {}
     for r in rows:
         by_seq.setdefault(r["sequence"], {})[r["sensor"]] = r
+    median = {r["sequence"]: r for r in read_rows(root, STARLOC_MEDIAN)}
 
     def cell(r: dict[str, str] | None) -> str:
         if r is None:
@@ -465,7 +470,8 @@ def starloc_section(root: Path) -> list[str]:
         shares = [r["mappable"] for r in runs.values() if r.get("mappable")]
         return f"{number(shares[0]):.0%}" if shares else "-"
 
-    body = [[seq, *(cell(runs.get(sensor)) for sensor in STARLOC_SENSORS), ceiling(runs),
+    body = [[seq, *(cell(runs.get(sensor)) for sensor in STARLOC_SENSORS),
+             cell(median.get(seq)), ceiling(runs),
              f"{number(next(iter(runs.values()))['centroid_mpe']):.2f}"]
             for seq, runs in sorted(by_seq.items(), key=lambda kv: (kv[0].rsplit("_", 1)[-1],
                                                                      kv[0]))]
@@ -481,11 +487,15 @@ def starloc_section(root: Path) -> list[str]:
         f"{goals}. Setups s1 and s2 have a worse calibration (the data's README). "
         "mappable: the share of the scored tags that a chain of sightings links to three "
         "anchors not on one line, the most a map from the sightings' geometry can place "
-        "(`mappers.spatial.anchored`; COVIS-3D places the others by co-observation alone).",
+        "(`mappers.spatial.anchored`; COVIS-3D places the others by co-observation alone). "
+        "COVIS-3D-MEDIAN: the sightings mapped by the opt-in median of four co-observation "
+        "maps (`mappers.spatial.SightingsMedian3D`).",
         "",
         *command(STARLOC),
+        *command(STARLOC_MEDIAN),
         "",
-        *table(["sequence", *STARLOC_SENSORS, "mappable", "centroid"], body),
+        *table(["sequence", *STARLOC_SENSORS, "visibility, COVIS-3D-MEDIAN", "mappable",
+                "centroid"], body),
         "",
     ]
 
