@@ -37,7 +37,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 
 from mappers.core.align import check_anchors
 from mappers.core.estimator_params import store_params
-from mappers.core.iteration_params import ITERATION_CONSTRAINTS
+from mappers.core.iteration_params import ITERATION_CONSTRAINTS, ROUND_CONSTRAINTS
 from mappers.core.validation import check_fused_input
 from mappers.fused.law_of_cosines import (
     frame_triangles,
@@ -127,7 +127,7 @@ class LawOfCosinesSMACOF(TransformerMixin, BaseEstimator):
         "trim": [Interval(Real, 0, None, closed="neither"), None],
         **ITERATION_CONSTRAINTS,
         "outlier": [Interval(Real, 0, None, closed="neither")],
-        "max_rounds": [Interval(Integral, 1, None, closed="left")],
+        "max_rounds": ROUND_CONSTRAINTS["max_rounds"],
         "n_init": [Interval(Integral, 0, None, closed="left")],
         "refine": [StrOptions({"range-bearing", "bearing"}), None],
         "random_state": ["random_state"],

@@ -53,6 +53,7 @@ import scipy.sparse as sp
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils._param_validation import Interval, StrOptions
 
+from mappers.core.iteration_params import ROUND_CONSTRAINTS
 from mappers.core.validation import check_views
 from mappers.defaults import localisation_free
 from mappers.viewpoints.engine import (
@@ -131,8 +132,7 @@ class BearingAdjustment(TransformerMixin, BaseEstimator):
         "start_params": [Mapping, None],
         "loss": [StrOptions({"huber", "cauchy"}), None],
         "robust_scale": [Interval(Real, 0, None, closed="neither")],
-        "max_rounds": [Interval(Integral, 1, None, closed="left")],
-        "tol": [Interval(Real, 0, None, closed="left")],
+        **ROUND_CONSTRAINTS,
         "pose_iters": [Interval(Integral, 1, None, closed="left")],
         "min_step_objects": [Interval(Integral, 3, None, closed="left")],
         "min_views": [Interval(Integral, 2, None, closed="left")],

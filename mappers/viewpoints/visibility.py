@@ -69,6 +69,7 @@ from sklearn.utils._param_validation import Interval
 
 from mappers.core.estimator_params import store_params
 from mappers.core.flicker import step_runs
+from mappers.core.iteration_params import ROUND_CONSTRAINTS
 from mappers.core.sensors import check_matrix
 from mappers.core.validation import check_views
 from mappers.defaults import choose_for_history, localisation_free
@@ -210,9 +211,8 @@ class VisibilityAdjustment(TransformerMixin, BaseEstimator):
 
     _parameter_constraints: dict = {
         "start": [str, None],
-        "max_rounds": [Interval(Integral, 1, None, closed="left")],
+        **ROUND_CONSTRAINTS,
         "inner_iters": [Interval(Integral, 1, None, closed="left")],
-        "tol": [Interval(Real, 0, None, closed="left")],
         "min_step_objects": [Interval(Integral, 1, None, closed="left")],
         "min_views": [Interval(Integral, 1, None, closed="left")],
         "grid_cells": [Interval(Integral, 2, None, closed="left")],
