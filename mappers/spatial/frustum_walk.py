@@ -40,6 +40,7 @@ from mappers.spatial.frustum import (
     FrustumCamera,
     view_log_prob,
 )
+from mappers.spatial.walk_adjustment import WalkPrior, walk_joint_steps
 
 __all__ = ["MAX_WALK_ENTRIES", "FrustumWalkAdjustment", "height_search", "walk_viewpoints"]
 
@@ -173,6 +174,8 @@ class FrustumWalkAdjustment(FrustumAdjustment):
         "height_margin": [Interval(Real, 0.0, None, closed="left")],
         "height_step": [Interval(Real, 0.0, None, closed="neither")],
         "joint_rounds": [Interval(Integral, 0, None, closed="left")],
+        "walk_joint": ["boolean"],
+        "final_rounds": [Interval(Integral, 0, None, closed="left")],
     }
 
     def __init__(self, *, camera_height: float | None = None, pitch_deg: float | None = None,
@@ -183,7 +186,7 @@ class FrustumWalkAdjustment(FrustumAdjustment):
                  step_sigma: float = 0.15, turn_sigma_deg: float = 30.0,
                  walk_spacing: float = 0.125, walk_headings: int = 36,
                  height_margin: float = 0.5, height_step: float = 0.05,
-                 joint_rounds: int = 10):
+                 joint_rounds: int = 10, walk_joint: bool = False, final_rounds: int = 0):
         super().__init__(camera_height=camera_height, pitch_deg=pitch_deg, hfov_deg=hfov_deg,
                          vfov_deg=vfov_deg, max_range=max_range, softness=softness,
                          range_softness=range_softness, miss_rate=miss_rate, rounds=rounds,
@@ -195,6 +198,8 @@ class FrustumWalkAdjustment(FrustumAdjustment):
         self.height_margin = height_margin
         self.height_step = height_step
         self.joint_rounds = joint_rounds
+        self.walk_joint = walk_joint
+        self.final_rounds = final_rounds
 
     def _walk(self, P, S, camera: FrustumCamera, softness: float) -> np.ndarray:
         return walk_viewpoints(P, S, camera, softness=softness,
@@ -221,5 +226,16 @@ class FrustumWalkAdjustment(FrustumAdjustment):
                               range_softness=self.range_softness, miss_rate=self.miss_rate)
             P, loss = problem(s).object_steps(P, C, self.rounds)
             if k < len(soft) - 1:  # the joint rounds move the map; the next walk search the
-                P, C, loss = problem(s).joint(P, C, self.joint_rounds)  # viewpoints again
+                P, C, loss = self._joint(problem(s), P, C, self.joint_rounds)  # viewpoints again
+        if self.final_rounds:
+            P, C, loss = self._joint(problem(soft[-1]), P, C, self.final_rounds)
         return P, C, loss, start_C, start_loss
+
+    def _joint(self, prob, P, C, rounds: int):
+        """``rounds`` joint rounds of tags and viewpoints: with the walk prior
+        (:func:`~mappers.spatial.walk_adjustment.walk_joint_steps`) if ``walk_joint``, else
+        FRUSTUM-BA's."""
+        if self.walk_joint:
+            prior = WalkPrior(self.step_sigma, math.radians(self.turn_sigma_deg))
+            return walk_joint_steps(prob, P, C, rounds, prior)
+        return prob.joint(P, C, rounds)
