@@ -228,14 +228,14 @@ class FrustumWalkAdjustment(FrustumAdjustment):
             if k < len(soft) - 1:  # the joint rounds move the map; the next walk search the
                 P, C, loss = self._joint(problem(s), P, C, self.joint_rounds)  # viewpoints again
         if self.final_rounds:
-            P, C, loss = self._joint(problem(soft[-1]), P, C, self.final_rounds)
+            P, C, loss = self._joint(problem(soft[-1]), P, C, self.final_rounds, True)
         return P, C, loss, start_C, start_loss
 
-    def _joint(self, prob, P, C, rounds: int):
+    def _joint(self, prob, P, C, rounds: int, walk: bool | None = None):
         """``rounds`` joint rounds of tags and viewpoints: with the walk prior
-        (:func:`~mappers.spatial.walk_adjustment.walk_joint_steps`) if ``walk_joint``, else
-        FRUSTUM-BA's."""
-        if self.walk_joint:
+        (:func:`~mappers.spatial.walk_adjustment.walk_joint_steps`) if ``walk`` (None:
+        ``walk_joint``), else FRUSTUM-BA's."""
+        if self.walk_joint if walk is None else walk:
             prior = WalkPrior(self.step_sigma, math.radians(self.turn_sigma_deg))
             return walk_joint_steps(prob, P, C, rounds, prior)
         return prob.joint(P, C, rounds)
