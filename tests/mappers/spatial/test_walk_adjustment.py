@@ -115,9 +115,25 @@ def test_bad_input():
     with pytest.raises(ValueError, match=r"\(N, 3\)"):
         walk_joint_steps(prob, P[:, :2], C, 2, PRIOR)
     X = seen.T.astype(float)
-    with pytest.raises(ValueError, match="walk_joint"):
-        FrustumWalkAdjustment(**CAMERA, walk_joint="yes").fit(
-            X, anchor_ids=ANCHORS, anchor_positions=P[ANCHORS])
     with pytest.raises(ValueError, match="final_rounds"):
         FrustumWalkAdjustment(**CAMERA, final_rounds=-1).fit(
             X, anchor_ids=ANCHORS, anchor_positions=P[ANCHORS])
+
+
+def test_frustum_ba_walk_ends_on_the_walk_priors_optimum():
+    """FRUSTUM-BA-WALK's ``final_rounds`` start where ``final_rounds=0`` ends and only take
+    steps that lower the frustum loss plus the walk prior's cost."""
+    P, C, seen = walk_world(m=14, n=120)
+    rng = np.random.default_rng(2)
+    start = P + np.r_[np.zeros((6, 3)), rng.normal(0.0, 0.1, (len(P) - 6, 3))]
+    X = seen.T.astype(float)
+    kw = {**CAMERA, "softness": (0.05,), "rounds": 3, "walk_spacing": 0.2, "walk_headings": 18}
+    fits = [FrustumWalkAdjustment(**kw, final_rounds=r).fit(
+        X, anchor_ids=ANCHORS, anchor_positions=P[ANCHORS], start_positions=start)
+        for r in (0, 5)]
+    assert all(f.refined_ for f in fits)
+    n_pairs = seen.size
+    cost = [f.loss_ * n_pairs + PRIOR.cost(f.poses_) for f in fits]
+    assert cost[1] < cost[0]
+    assert not np.allclose(fits[0].poses_, fits[1].poses_)
+    np.testing.assert_allclose(fits[1].embedding_[ANCHORS], P[ANCHORS], atol=1e-12)
