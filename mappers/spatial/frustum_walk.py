@@ -199,7 +199,7 @@ class FrustumWalkAdjustment(FrustumAdjustment):
                  step_sigma: float = 0.15, turn_sigma_deg: float = 30.0,
                  walk_spacing: float = 0.25, walk_headings: int = 18,
                  height_margin: float = 0.5, height_step: float = 0.05,
-                 joint_rounds: int = 10, final_rounds: int = 10):
+                 joint_rounds: int = 10, final_rounds: int = 5):
         super().__init__(camera_height=camera_height, pitch_deg=pitch_deg, hfov_deg=hfov_deg,
                          vfov_deg=vfov_deg, max_range=max_range, softness=softness,
                          range_softness=range_softness, miss_rate=miss_rate, rounds=rounds,

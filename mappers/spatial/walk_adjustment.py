@@ -11,8 +11,10 @@ odometry) enters the adjustment as quadratic terms on consecutive viewpoints' di
                                             + (wrap(dtheta_t) / turn_sigma)^2 ],
 
 ``d._t`` the difference of viewpoints ``t + 1`` and ``t`` (the heading's wrapped to
-``(-pi, pi]``). Its minimum is the maximum a posteriori map and walk of the same model whose
-posterior means the walk search returns on a grid.
+``[-pi, pi)``). Its minimum is the maximum a posteriori map and walk of the same model whose
+posterior means the walk search returns on a grid. That point is a shrunk walk (the prior's cost
+falls with the walk's scale), so FRUSTUM-BA-WALK runs a few rounds from the walk search's means
+rather than to convergence (``docs/dead-ends.md``, "Camera3D sightings").
 
 The viewpoints' block of the Gauss-Newton normal equations becomes block-tridiagonal (3 x 3
 blocks: a step is linked to its neighbours), a band of half-width 5 in the 3N unknowns. Each
