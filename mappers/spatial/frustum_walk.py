@@ -27,9 +27,10 @@ heights refine to 0.10 m off without the search and 0.06 m with it, layout 34000
 
 The walk search's viewpoints are posterior means on a grid, drawn toward the map's middle; after
 the last one, :func:`mappers.spatial.walk_adjustment.walk_joint_steps` moves tags and viewpoints
-together under the frustum likelihood *and* the walk prior (its maximum a posteriori point), so
-the viewpoints leave the grid without drifting from the walk as FRUSTUM-BA's joint rounds let
-them (``docs/dead-ends.md``, "Camera3D sightings").
+together under the frustum likelihood *and* the walk prior, a few rounds toward their maximum a
+posteriori point (not to it: that walk is a shrunk one), so the viewpoints leave the grid without
+drifting from the walk as FRUSTUM-BA's joint rounds let them (``docs/dead-ends.md``, "Camera3D
+sightings").
 """
 
 from __future__ import annotations
@@ -156,10 +157,11 @@ class FrustumWalkAdjustment(FrustumAdjustment):
     Levenberg-Marquardt rounds of tags and viewpoints (layout 34000 of ``LFMDR-Camera3D-v0``:
     0.27 m without them, 0.17 m with them; the walk search that follows sets the viewpoints
     again). After the sharpest softness, ``final_rounds`` joint rounds of tags and viewpoints
-    that keep the walk prior (:func:`mappers.spatial.walk_adjustment.walk_joint_steps`, the
-    maximum a posteriori map and walk from the last walk search's posterior means; layouts
-    34000-34009: 0.212 m without them, 0.191 m with them and the coarser grid and two
-    softnesses of the defaults, in about a third of the CPU; ``docs/guide/3d.md``). The result
+    that keep the walk prior (:func:`mappers.spatial.walk_adjustment.walk_joint_steps`, from
+    the last walk search's posterior means toward the maximum a posteriori map and walk;
+    layouts 34000-34009: 0.212 m at 47 s of CPU per map before them, 0.169 m at 13 s with 5 of
+    them, the coarser grid and the two softnesses of the defaults; 25 fresh layouts: 0.215 m
+    before, 0.184 m; ``docs/guide/3d.md``). The result
     is the last viewpoints and the tags fitted with them. Guard as FRUSTUM-BA's: the result is
     kept only if its loss at the sharpest softness (with its viewpoints) is below the start
     map's (with the viewpoints the walk search gives it).
