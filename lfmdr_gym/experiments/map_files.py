@@ -268,6 +268,7 @@ def write_map_files(
     title: str = "",
     frame: str = "map",
     plot: bool = True,
+    notes: Sequence[str] | None = None,
 ) -> MapFiles:
     """Write a map's files into ``out`` as one set (:func:`lfmdr_gym.atomic.atomic_file_set`):
     on any error ``out`` is left exactly as it was.
@@ -285,6 +286,8 @@ def write_map_files(
         title: the figure's title.
         frame: the anchors' frame, named in the tag map.
         plot: write ``map.png`` (needs matplotlib).
+        notes: the warnings written under the figure (default: ``result.warnings``; a log's
+            map gives them naming landmark ids).
     """
     rows = map_rows(result, landmarks, anchor_rows)
     doc = tag_map(rows, frame=frame)
@@ -300,7 +303,8 @@ def write_map_files(
         if plot:
             anchors = dict(zip((int(a) for a in anchor_rows), np.asarray(anchor_positions),
                                strict=True))
-            _plot(files.path("map.png"), rows, truth, anchors, title, tuple(result.warnings),
+            _plot(files.path("map.png"), rows, truth, anchors, title,
+                  tuple(result.warnings if notes is None else notes),
                   _covariances(result, len(rows), np.asarray(result.positions).shape[1]))
         names = files.names
     return MapFiles(out, tuple(out / n for n in names), scores)
