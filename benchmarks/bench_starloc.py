@@ -30,20 +30,17 @@ import sys
 import warnings
 from pathlib import Path
 
-import matplotlib
 import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402 - after choosing the non-interactive backend
-
-from lfmdr_gym.atomic import atomic_savefig, atomic_write_text  # noqa: E402
-from lfmdr_gym.datasets.starloc import (  # noqa: E402
+from lfmdr_gym.atomic import atomic_write_text
+from lfmdr_gym.datasets.starloc import (
     read_starloc,
     scored_tags,
     starloc_anchors,
     starloc_survey,
 )
-from lfmdr_gym.experiments.starloc import map_starloc  # noqa: E402
+from lfmdr_gym.experiments.figures import plot_views_3d
+from lfmdr_gym.experiments.starloc import map_starloc
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = ROOT.parent / "shared" / "data" / "starloc"
@@ -63,7 +60,8 @@ def centroid_mpe(seq: Path) -> float:
 
 def draw_views(seq: Path, path: Path) -> None:
     """Three orthographic views (top, front, side) of the stereo map of ``seq`` against the tag
-    survey, anchors marked, saved to ``path`` (PNG)."""
+    survey, anchors marked, saved to ``path`` (PNG;
+    :func:`lfmdr_gym.experiments.figures.plot_views_3d`)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         r = map_starloc(seq, "range-bearing")
@@ -71,25 +69,9 @@ def draw_views(seq: Path, path: Path) -> None:
     tags = sorted(r.positions)
     est = np.array([r.positions[t] for t in tags])
     tru = xyz.loc[tags].to_numpy(dtype=float)
-    anchor = np.isin(tags, r.anchors)
-    fig, axes = plt.subplots(1, 3, figsize=(13, 4.4))
-    for ax, (a, b), name in zip(axes, [(0, 1), (0, 2), (1, 2)], ["top (x, y)", "front (x, z)",
-                                                                  "side (y, z)"], strict=True):
-        for k in range(len(tags)):
-            ax.plot([tru[k, a], est[k, a]], [tru[k, b], est[k, b]], color="0.6", lw=0.8)
-        ax.scatter(tru[:, a], tru[:, b], s=28, facecolors="none", edgecolors="k", label="survey")
-        ax.scatter(est[~anchor, a], est[~anchor, b], s=12, c="tab:blue", label="map")
-        ax.scatter(est[anchor, a], est[anchor, b], s=60, marker="^", c="tab:red", label="anchor")
-        ax.set_title(name)
-        ax.set_aspect("equal")
-        ax.set_xlabel("xyz"[a] + " [m]")
-        ax.set_ylabel("xyz"[b] + " [m]")
-    axes[0].legend(loc="best", fontsize=8)
-    fig.suptitle(f"STAR-loc {r.sequence}: SPATIAL-BA from the stereo detections, "
-                 f"MPE {r.mpe:.3f} m over {r.n_scored} tags ({r.mapped:.0%} mapped)")
-    fig.tight_layout()
-    atomic_savefig(fig, path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
+    plot_views_3d(est, tru, np.flatnonzero(np.isin(tags, r.anchors)), path,
+                  title=f"STAR-loc {r.sequence}: SPATIAL-BA from the stereo detections, "
+                        f"MPE {r.mpe:.3f} m over {r.n_scored} tags ({r.mapped:.0%} mapped)")
 
 
 def main(argv: list[str] | None = None) -> int:

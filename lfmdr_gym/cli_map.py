@@ -131,7 +131,7 @@ def _cmd_map_log(args: argparse.Namespace) -> int:
     unmapped = [run.landmarks[i] for i in run.map.unmapped]
     if unmapped:
         print(f"unmapped landmarks: {unmapped}")
-    print_warnings(run.map.warnings)
+    print_warnings(run.notes)
     s = run.scores
     if s is not None:
         print(f"MPE {_number(s['mpe'], 4)} m (non-anchor {_number(s['mpe_nonanchor'], 4)} m), "

@@ -28,6 +28,7 @@ __all__ = [
     "plot_curves",
     "plot_estimate",
     "plot_map",
+    "plot_views_3d",
     "slug",
     "summarise",
     "write_table",
@@ -293,6 +294,34 @@ def _wrapped(texts: Sequence[str], width: int, prefix: str = "") -> list[str]:
     return lines
 
 
+def _draw_points(ax: Any, est: np.ndarray, truth: np.ndarray, anchors: np.ndarray,
+                 axes: tuple[int, int] = (0, 1)) -> None:
+    """Onto ``ax``, the plane ``axes`` of a map: a line from each known truth to its estimate,
+    the truth as circles, the estimates as crosses, the anchors' truth as squares."""
+    a, b = axes
+    known = np.all(np.isfinite(truth), axis=1)
+    mapped = np.all(np.isfinite(est), axis=1)
+    for t, e in zip(truth[known & mapped], est[known & mapped], strict=True):
+        ax.plot([t[a], e[a]], [t[b], e[b]], color="tab:red", lw=0.8)
+    for rows, pts, style in (
+        (known & ~anchors, truth, {"s": 22, "facecolors": "none", "edgecolors": "k",
+                                   "label": "true"}),
+        (mapped & ~anchors, est, {"s": 16, "marker": "x", "color": "tab:blue",
+                                  "label": "estimate"}),
+        (known & anchors, truth, {"s": 60, "marker": "s", "facecolors": "none",
+                                  "edgecolors": "tab:green", "label": "anchor"}),
+    ):
+        ax.scatter(pts[rows, a], pts[rows, b], **style)
+
+
+def _axes_in_metres(ax: Any, horizontal: str, vertical: str) -> None:
+    """Equal scales, the two axes named in metres, a light grid."""
+    ax.set_aspect("equal")
+    ax.set_xlabel(f"{horizontal} [m]")
+    ax.set_ylabel(f"{vertical} [m]")
+    ax.grid(alpha=0.3)
+
+
 def plot_estimate(
     positions: np.ndarray,
     truth: np.ndarray,
@@ -330,13 +359,7 @@ def plot_estimate(
     ax = fig.add_subplot()
     known = np.all(np.isfinite(truth), axis=1)
     mapped = np.all(np.isfinite(est), axis=1)
-    both = known & mapped
-    for (x0, y0), (x1, y1) in zip(truth[both], est[both], strict=True):
-        ax.plot([x0, x1], [y0, y1], color="tab:red", lw=0.8)
-    ax.scatter(*truth[known & ~anchors].T, s=22, facecolors="none", edgecolors="k", label="true")
-    ax.scatter(*est[mapped & ~anchors].T, s=16, marker="x", color="tab:blue", label="estimate")
-    ax.scatter(*truth[known & anchors].T, s=60, marker="s", facecolors="none",
-               edgecolors="tab:green", label="anchor")
+    _draw_points(ax, est, truth, anchors)
     if covariances is not None:
         from lfmdr_gym.render import draw_ellipses
 
@@ -349,10 +372,7 @@ def plot_estimate(
         if known[j] or mapped[j]:
             ax.annotate(str(label), truth[j] if known[j] else est[j], fontsize=6, color="0.4",
                         xytext=(2, 2), textcoords="offset points")
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.grid(alpha=0.3)
+    _axes_in_metres(ax, "x", "y")
     ax.legend(fontsize=8, loc="upper right")
     if title_lines:
         ax.set_title("\n".join(title_lines), fontsize=9)
@@ -362,3 +382,44 @@ def plot_estimate(
     atomic_savefig(fig, path)
     return Path(path)
 
+
+
+_VIEWS_3D = (("top", 0, 1), ("front", 0, 2), ("side", 1, 2))
+"""The three orthographic views of a 3-D map: name, horizontal axis, vertical axis."""
+
+
+def plot_views_3d(positions: np.ndarray, truth: np.ndarray, anchor_ids: Sequence[int] | np.ndarray,
+                  path: Path, *, title: str = "", notes: Sequence[str] = ()) -> Path:
+    """A 3-D map as three orthographic views (top: x-y, front: x-z, side: y-z), saved atomically.
+
+    As :func:`plot_estimate` in each view: the truth as circles, the estimates as crosses with a
+    line to their truth, anchors as squares, unmapped objects (NaN estimates) as grey crosses at
+    the truth; a NaN truth row (a landmark without ground truth) draws its estimate alone.
+    ``positions`` and ``truth`` are (M, 3); ``notes`` are written below the views.
+    """
+    est = np.asarray(positions, dtype=float)
+    truth = np.asarray(truth, dtype=float)
+    if est.ndim != 2 or est.shape[1] != 3 or truth.shape != est.shape:
+        raise ValueError(f"plot_views_3d draws (M, 3) positions and truth of the same shape, got "
+                         f"{est.shape} and {truth.shape}")
+    anchors = np.zeros(len(truth), dtype=bool)
+    anchors[np.asarray(anchor_ids, dtype=int)] = True
+    lost = np.all(np.isfinite(truth), axis=1) & ~np.all(np.isfinite(est), axis=1)
+    note_lines = _wrapped(notes, 2 * _NOTE_CHARS, prefix="warning: ")
+    fig = _figure(13.0, 4.6 + len(note_lines) * _NOTE_LINE)
+    axes = fig.subplots(1, 3)
+    for ax, (name, a, b) in zip(axes, _VIEWS_3D, strict=True):
+        _draw_points(ax, est, truth, anchors, (a, b))
+        if lost.any():
+            ax.scatter(truth[lost, a], truth[lost, b], s=40, marker="x", color="grey",
+                       label="unmapped")
+        ax.set_title(f"{name} ({'xyz'[a]}, {'xyz'[b]})", fontsize=9)
+        _axes_in_metres(ax, "xyz"[a], "xyz"[b])
+    axes[0].legend(fontsize=8, loc="best")
+    if title:
+        fig.suptitle("\n".join(_wrapped([title], 2 * _TITLE_CHARS)), fontsize=10)
+    if note_lines:
+        fig.supxlabel("\n".join(note_lines), fontsize=7, x=0.01, ha="left",
+                      multialignment="left", color="tab:red")
+    atomic_savefig(fig, path, bbox_inches="tight")  # equal-aspect views: keep labels
+    return Path(path)

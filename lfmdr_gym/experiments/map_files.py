@@ -11,7 +11,8 @@ Files written into the output folder:
 - ``map.json`` and ``map.yaml``: the same map as a tag map (the fields of :func:`tag_map`): the
   frame and units, and a list of ``{id, x, y[, z], anchor[, covariance]}``, one per mapped
   landmark; the unmapped ones listed by id.
-- ``map.png``: the estimates (and the truth, when given) seen from above.
+- ``map.png``: the estimates (and the truth, when given) seen from above; a 3-D map in three
+  orthographic views (top, front, side).
 - ``scores.json`` (with ground truth): MPE and MOE (paper §4.3.2; :mod:`mappers.core.scores`)
   over the mapped landmarks the truth has, MPE over the non-anchor ones among them, and the ids
   of the landmarks the truth lacks (not scored) and of those left unmapped.
@@ -238,14 +239,19 @@ def _plot(path: Path, rows: Sequence[Mapping[str, Any]], truth: Any, anchors: Ma
           title: str, notes: Sequence[str], cov: np.ndarray | None = None) -> None:
     """``map.png``: estimates and truth seen from above (x, y), anchors (row -> known position)
     as squares; without truth, the estimates are labelled; with covariances ((M, d, d)), each
-    estimate's 95 % ellipse (of its x-y block)."""
-    from lfmdr_gym.experiments.figures import plot_estimate
+    estimate's 95 % ellipse (of its x-y block). A 3-D map (rows with ``z``) is drawn in three
+    orthographic views (:func:`lfmdr_gym.experiments.figures.plot_views_3d`)."""
+    from lfmdr_gym.experiments.figures import plot_estimate, plot_views_3d
 
-    est = np.array([[np.nan if r[a] is None else r[a] for a in ("x", "y")] for r in rows])
+    axes = [a for a in _AXES if a in rows[0]] if rows else ["x", "y"]
+    est = np.array([[np.nan if r[a] is None else r[a] for a in axes] for r in rows])
     lookup = _truth_lookup(truth) if truth is not None else {}
-    true = np.array([lookup[r["landmark"]][:2] if r["landmark"] in lookup else
-                     np.asarray(anchors[k], dtype=float)[:2] if k in anchors else (np.nan, np.nan)
-                     for k, r in enumerate(rows)])
+    true = np.array([lookup[r["landmark"]] if r["landmark"] in lookup else
+                     np.asarray(anchors[k], dtype=float) if k in anchors else
+                     np.full(len(axes), np.nan) for k, r in enumerate(rows)], dtype=float)
+    if len(axes) == 3:
+        plot_views_3d(est, true, sorted(anchors), path, title=title, notes=notes)
+        return
     plot_estimate(est, true, sorted(anchors), path, title=title, notes=notes,
                   labels=[str(r["landmark"]) for r in rows],
                   covariances=None if cov is None else cov[:, :2, :2])
@@ -262,6 +268,7 @@ def write_map_files(
     title: str = "",
     frame: str = "map",
     plot: bool = True,
+    notes: Sequence[str] | None = None,
 ) -> MapFiles:
     """Write a map's files into ``out`` as one set (:func:`lfmdr_gym.atomic.atomic_file_set`):
     on any error ``out`` is left exactly as it was.
@@ -279,6 +286,8 @@ def write_map_files(
         title: the figure's title.
         frame: the anchors' frame, named in the tag map.
         plot: write ``map.png`` (needs matplotlib).
+        notes: the warnings written under the figure (default: ``result.warnings``; a log's
+            map gives them naming landmark ids).
     """
     rows = map_rows(result, landmarks, anchor_rows)
     doc = tag_map(rows, frame=frame)
@@ -294,7 +303,8 @@ def write_map_files(
         if plot:
             anchors = dict(zip((int(a) for a in anchor_rows), np.asarray(anchor_positions),
                                strict=True))
-            _plot(files.path("map.png"), rows, truth, anchors, title, tuple(result.warnings),
+            _plot(files.path("map.png"), rows, truth, anchors, title,
+                  tuple(result.warnings if notes is None else notes),
                   _covariances(result, len(rows), np.asarray(result.positions).shape[1]))
         names = files.names
     return MapFiles(out, tuple(out / n for n in names), scores)

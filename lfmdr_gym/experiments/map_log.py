@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from lfmdr_gym.experiments.map_files import MapFiles, write_map_files
+from lfmdr_gym.experiments.object_names import landmark_notes
 from lfmdr_gym.histories.history import History
 
 __all__ = ["LOG_SUFFIXES", "LogMap", "is_observation_log", "map_observation_log"]
@@ -38,6 +39,9 @@ class LogMap:
         landmarks: landmark ids, one per row of ``map.positions``, as they are in the log.
         method, param: the method's label and its parameters as a label.
         files: what was written (None when ``out`` was None).
+        notes: the map's warnings with the objects they name as landmark ids, not rows
+            (:func:`lfmdr_gym.experiments.object_names.landmark_notes`); ``map.warnings``
+            count rows.
     """
 
     map: Any
@@ -46,6 +50,7 @@ class LogMap:
     method: str
     param: str
     files: MapFiles | None
+    notes: tuple[str, ...] = ()
 
     @property
     def scores(self) -> dict[str, Any] | None:
@@ -103,12 +108,13 @@ def map_observation_log(
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the map's own warnings are in result.warnings
         result = map_history(history, label, chosen)
+    notes = tuple(landmark_notes(result.warnings, landmarks, history))
     files = None
     if out is not None:
         title = (f"{Path(path).name}, {method_label(label, chosen)}, "
                  f"{history.n_steps} steps")
         files = write_map_files(out, result, landmarks, history.anchor_ids,
                                 history.anchor_positions, truth=truth_table, title=title,
-                                frame=frame, plot=plot)
-    return LogMap(result, history, landmarks, label, param_label(chosen), files)
+                                frame=frame, plot=plot, notes=notes)
+    return LogMap(result, history, landmarks, label, param_label(chosen), files, notes)
 

@@ -16,7 +16,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import re
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -36,6 +35,7 @@ from lfmdr_gym.datasets.mrclam import (
     run_meta,
 )
 from lfmdr_gym.datasets.mrclam_table import mrclam_anchors, mrclam_landmarks, mrclam_observations
+from lfmdr_gym.experiments.object_names import landmark_notes
 from lfmdr_gym.histories.history import History
 from lfmdr_gym.histories.observations import observations_to_history
 from mappers.core.sensors import COLUMNS_PER_STEP, check_sensor_set, sensor_name, sensors_of
@@ -176,60 +176,6 @@ def _load(run_dir, key, robots, bin_width, anchors, groundtruth_fixes):
     return (history if isinstance(key, str) else dict(history.parts)), report
 
 
-# Phrases of the mappers' warnings followed by a bracketed list of object rows, and how they read
-# once the rows are landmark subject numbers.
-_ROW_PHRASES = {
-    r"objects": "landmarks",
-    r"object\(s\) \(rows\)": "landmark(s)",
-    r"groups": "groups of landmarks",
-    r"pair distance\(s\)": "pair distance(s) between landmarks",
-    r"anchors": "anchors",
-}
-_ROW_LIST = re.compile(r"\b(" + "|".join(_ROW_PHRASES) + r") (?=\[)")
-# a method's own warning, as build_map records it ("LOC-SMA: RigidityWarning: ..."): its rows
-# are those of the objects it was given (the ones with data), not the history's
-_METHOD_NOTE = re.compile(r"^[^\s:]+: [A-Za-z]*Warning: ")
-
-
-def _bracketed(text: str, start: int) -> int:
-    """The index just past the bracket that closes the one at ``text[start]``."""
-    depth = 0
-    for k in range(start, len(text)):
-        depth += {"[": 1, "(": 1, "]": -1, ")": -1}.get(text[k], 0)
-        if depth == 0:
-            return k + 1
-    return len(text)
-
-
-def _in_subjects(note: str, subjects: np.ndarray, rows: np.ndarray) -> str:
-    """``note`` with the object rows it names (after ``objects``, ``groups``, ``pair
-    distance(s)``, ``anchors``...) written as landmark subject numbers: row ``k`` is
-    ``subjects[rows[k]]``; a number outside ``rows`` is left as it is."""
-    out, at = [], 0
-    for match in _ROW_LIST.finditer(note):
-        if match.start() < at:
-            continue
-        end = _bracketed(note, match.end())
-        words = next(v for k, v in _ROW_PHRASES.items() if re.fullmatch(k, match.group(1)))
-        ids = re.sub(r"\d+", lambda m: (str(int(subjects[rows[int(m.group())]]))
-                                        if int(m.group()) < len(rows) else m.group()),
-                     note[match.end():end])
-        out += [note[at:match.start()], f"{words} {ids}"]
-        at = end
-    return "".join(out) + note[at:]
-
-
-def _with_data(histories: Any) -> np.ndarray:
-    """The rows ``build_map`` hands the method: the objects with an observed non-zero entry."""
-    parts = histories.values() if isinstance(histories, dict) else [histories]
-    rows = None
-    for h in parts:
-        X = np.asarray(h.matrix) != 0
-        has = np.any(X if h.mask is None else X & np.asarray(h.mask), axis=1)
-        rows = has if rows is None else rows | has
-    return np.flatnonzero(rows)
-
-
 def _scores(positions: np.ndarray, history: History) -> tuple[float, float, float]:
     """MPE and MOE over the mapped non-anchor landmarks, and the anchors' centroid baseline."""
     from mappers import mean_orientation_error, mean_position_error
@@ -342,9 +288,7 @@ def _warn_map(result: Any, histories: Any, run: Any, sensor: str,
     """The map's warnings and unmapped subjects, as messages naming the run, each also warned
     (as a ``MRCLAMDataWarning`` at the caller of :func:`map_mrclam_run`)."""
     msgs: list[str] = []
-    fitted, every = _with_data(histories), np.arange(len(subjects))
-    for w in result.warnings:  # the objects they name as landmark subjects, not as rows
-        w = _in_subjects(w, subjects, fitted if _METHOD_NOTE.match(w) else every)
+    for w in landmark_notes(result.warnings, subjects, histories):  # subjects, not rows
         msgs.append(f"{run} ({sensor}, {result.method}): {w}")
         warnings.warn(msgs[-1], MRCLAMDataWarning, stacklevel=3)
     if result.unmapped:

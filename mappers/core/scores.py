@@ -17,7 +17,10 @@ def check_scored_pair(estimate, truth, exclude, dim: int = 2) -> tuple[np.ndarra
     est = np.asarray(estimate, dtype=float)
     tru = np.asarray(truth, dtype=float)
     if est.ndim != 2 or est.shape[1] != dim:
-        raise ValueError(f"estimate must have shape (M, {dim}), got {est.shape}")
+        hint = (": a 3-D map is scored by mappers.mean_position_error_3d and "
+                "mappers.tetrahedron_orientation_error"
+                if dim == 2 and est.ndim == 2 and est.shape[1] == 3 else "")
+        raise ValueError(f"estimate must have shape (M, {dim}), got {est.shape}{hint}")
     if tru.shape != est.shape:
         raise ValueError(f"truth must have the shape of estimate {est.shape}, got {tru.shape}")
     keep = np.ones(len(est), dtype=bool)

@@ -26,6 +26,7 @@ EXAMPLES = {
     "map_synthetic": None,
     "mrclam_map": [str(MRCLAM), "--sensor", "range"],
     "map_rosbag": ["--steps", "300", "--container", "mcap", "--msgtype", "apriltag_msgs"],
+    "camera3d_map": ["--steps", "300", "--out", "{tmp}/c.png"],
 }
 
 

@@ -188,7 +188,7 @@ def test_loader_returns_a_history_and_fuses_range_and_bearing(tmp_path):
 
 
 def test_map_warnings_name_landmark_subjects_not_rows(tmp_path):
-    from lfmdr_gym.experiments.mrclam import _in_subjects
+    from lfmdr_gym.experiments.object_names import name_rows as _in_subjects
 
     subjects = np.arange(6, 21)
     every = np.arange(15)

@@ -143,3 +143,40 @@ def test_figure_draws_the_95_percent_ellipses(tmp_path, monkeypatch):
     write_map_files(tmp_path, _map(covariances=cov), IDS, ANCHORS, ANCHOR_POS)
     assert drawn == [1]  # the one mapped non-anchor landmark
     assert (tmp_path / "map.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_a_3d_map_is_drawn_in_three_views_with_its_heights(tmp_path, monkeypatch):
+    pytest.importorskip("matplotlib")
+    from matplotlib.image import imread
+
+    from lfmdr_gym.experiments import figures
+
+    drawn = {}
+    real = figures.plot_views_3d
+
+    def spy(est, true, anchors, path, **kw):
+        drawn.update(est=est, true=true, anchors=anchors)
+        return real(est, true, anchors, path, **kw)
+
+    monkeypatch.setattr(figures, "plot_views_3d", spy)
+    z = np.array([0.0, 0.0, 0.5, np.nan, 1.0])
+    pos = np.column_stack([POSITIONS, z])
+    truth = {"tag_a": (0.0, 0.0, 0.0), "tag_b": (2.0, 0.0, 0.0), "7": (2.0, 0.1, 0.4)}
+    m = SimpleNamespace(positions=pos, warnings=("a warning",))
+    write_map_files(tmp_path, m, IDS, ANCHORS, np.column_stack([ANCHOR_POS, [0.0, 0.0, 1.0]]),
+                    truth=truth)
+    np.testing.assert_array_equal(drawn["est"][:, 2], z)
+    np.testing.assert_array_equal(drawn["true"][2], [2.0, 0.1, 0.4])  # from the truth
+    np.testing.assert_array_equal(drawn["true"][4], [1.0, 1.0, 1.0])  # an anchor without truth
+    assert np.isnan(drawn["true"][3]).all() and drawn["anchors"] == ANCHORS
+    height, width = imread(tmp_path / "map.png").shape[:2]
+    assert width > 2.5 * height  # three views side by side
+
+
+def test_the_three_views_refuse_a_2d_map(tmp_path):
+    pytest.importorskip("matplotlib")
+    from lfmdr_gym.experiments.figures import plot_views_3d
+
+    with pytest.raises(ValueError, match=r"\(M, 3\) positions"):
+        plot_views_3d(POSITIONS, POSITIONS, ANCHORS, tmp_path / "m.png")
+    assert not (tmp_path / "m.png").exists()

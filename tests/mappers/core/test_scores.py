@@ -42,6 +42,16 @@ def test_mpe_bad_input(est, truth, exclude, match):
         mean_position_error(est, truth, exclude=exclude)
 
 
+def test_a_3d_map_given_to_the_2d_scores_is_sent_to_the_3d_ones():
+    """A newcomer's (M, 3) map given to the paper's scores: the error names the 3-D scores."""
+    for score in (mean_position_error, mean_orientation_error):
+        with pytest.raises(ValueError, match=r"got \(4, 3\): a 3-D map is scored by "
+                                             r"mappers.mean_position_error_3d"):
+            score(np.zeros((4, 3)), np.zeros((4, 3)))
+    with pytest.raises(ValueError, match=r"got \(4, 4\)$"):  # no 3-D hint for other shapes
+        mean_position_error(np.zeros((4, 4)), np.zeros((4, 4)))
+
+
 @pytest.mark.parametrize(
     "exclude, match",
     [([5], "out of range"), ([0.5], "integer"), (None, "NaN/inf rows")],
