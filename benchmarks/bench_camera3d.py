@@ -24,7 +24,8 @@ they cannot tell a tag from its mirror image in it (docs/guide/3d.md).
 ``--env-kw`` sets an env keyword beyond the noise (e.g. ``max_range=1.5``), for every sensor.
 ``--visibility-method FRUSTUM-BA`` maps the sightings by the frustum adjustment instead of the
 default, given the env's camera calibration (height, pitch, fields of view, range limit: the
-sensor's known mounting, as a user would give it; never a pose).
+sensor's known mounting, as a user would give it; never a pose). ``--visibility-kw NAME=VALUE``
+passes a parameter to that method (e.g. ``final_rounds=10`` for FRUSTUM-BA-WALK).
 
 Writes one row per layout and sensor to ``--out`` (atomically, again after every row) and prints mean / median / max
 MPE, the mapped share and the median CPU time per sensor.
@@ -78,19 +79,20 @@ def score(estimate: np.ndarray, truth: np.ndarray, anchor_ids: np.ndarray) -> tu
     return float(err.mean()), placed.size / rest.size
 
 
-def env_kwargs(pairs: list[str]) -> dict[str, Any]:
-    """``NAME=VALUE`` pairs as env keywords (values read as Python literals: 1.5, None, True)."""
+def env_kwargs(pairs: list[str], option: str = "--env-kw") -> dict[str, Any]:
+    """``NAME=VALUE`` pairs (of the command-line ``option``) as keywords (values read as Python
+    literals: 1.5, None, True)."""
     import ast
 
     out = {}
     for pair in pairs:
         name, sep, value = pair.partition("=")
         if not sep or not name:
-            raise ValueError(f"--env-kw takes NAME=VALUE, got {pair!r}")
+            raise ValueError(f"{option} takes NAME=VALUE, got {pair!r}")
         try:
             out[name] = ast.literal_eval(value)
         except (ValueError, SyntaxError):
-            raise ValueError(f"--env-kw {name}: {value!r} is not a number, None, True or False") from None
+            raise ValueError(f"{option} {name}: {value!r} is not a number, None, True or False") from None
     return out
 
 
@@ -108,10 +110,11 @@ def camera_calibration(extra: dict[str, Any] | None = None) -> dict[str, Any]:
 
 def run_one(seed: int, sensor: str, steps: int, bearing_noise_deg: float,
             range_noise: float, extra: dict[str, Any] | None = None,
-            visibility_method: str | None = None) -> dict[str, Any]:
+            visibility_method: str | None = None,
+            visibility_params: dict[str, Any] | None = None) -> dict[str, Any]:
     """One layout's map for one sensor: a row of the CSV (``visibility_method``: a 3-D
-    sightings method by label instead of the default; FRUSTUM-BA gets the camera's
-    calibration)."""
+    sightings method by label instead of the default, with ``visibility_params``; FRUSTUM-BA
+    gets the camera's calibration)."""
     kwargs = {"sensor": sensor, **noise_kwargs(sensor, bearing_noise_deg, range_noise),
               **(extra or {})}
     history = collect(ENV_ID, RandomWalkPolicy(), steps, seed=seed, make_kwargs=kwargs)
@@ -127,6 +130,7 @@ def run_one(seed: int, sensor: str, steps: int, bearing_noise_deg: float,
         method = row["method"] = visibility_method
         if visibility_method.upper() in ("FRUSTUM-BA", "FRUSTUM-BA-WALK"):
             params = camera_calibration(extra)
+        params.update(visibility_params or {})
     cpu = time.process_time()
     try:
         with warnings.catch_warnings():
@@ -190,6 +194,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--env-kw", action="append", default=[], metavar="NAME=VALUE")
     ap.add_argument("--visibility-method", default=None, metavar="LABEL",
                     help="a 3-D sightings method instead of the default (e.g. FRUSTUM-BA)")
+    ap.add_argument("--visibility-kw", action="append", default=[], metavar="NAME=VALUE",
+                    help="a parameter of --visibility-method (e.g. final_rounds=10)")
     ap.add_argument("--out", type=Path, default=Path("docs/results/camera3d/camera3d.csv"))
     args = ap.parse_args(argv)
     sensors = [s for s in args.sensors.split(",") if s]
@@ -198,13 +204,16 @@ def main(argv: list[str] | None = None) -> None:
         ap.error(f"unknown sensor(s) {unknown}")
     try:
         extra = env_kwargs(args.env_kw)
+        vis_params = env_kwargs(args.visibility_kw, "--visibility-kw")
     except ValueError as exc:
         ap.error(str(exc))
+    if vis_params and not args.visibility_method:
+        ap.error("--visibility-kw needs --visibility-method (the default method takes none)")
     rows = []
     for k in range(args.layouts):
         for sensor in sensors:
             row = run_one(args.seed0 + k, sensor, args.steps, args.bearing_noise_deg,
-                          args.range_noise, extra, args.visibility_method)
+                          args.range_noise, extra, args.visibility_method, vis_params)
             rows.append(row)
             write_csv(rows, args.out)  # after every row: a long run stopped early keeps its rows
             print(f"seed {row['layout_seed']} {sensor:<14} {row['method'] or '-':<16} "

@@ -24,6 +24,13 @@ position, the viewpoints held: a tag low on a wall and one high on a post are bo
 from beyond about 1.1 m, so a tag started at the wrong height is in a local minimum that the
 Newton steps of its three coordinates do not leave (with the true viewpoints held, COVIS-3D's
 heights refine to 0.10 m off without the search and 0.06 m with it, layout 34000).
+
+The walk search's viewpoints are posterior means on a grid, drawn toward the map's middle; after
+the last one, :func:`mappers.spatial.walk_adjustment.walk_joint_steps` moves tags and viewpoints
+together under the frustum likelihood *and* the walk prior, a few rounds toward their maximum a
+posteriori point (not to it: that walk is a shrunk one), so the viewpoints leave the grid without
+drifting from the walk as FRUSTUM-BA's joint rounds let them (``docs/dead-ends.md``, "Camera3D
+sightings").
 """
 
 from __future__ import annotations
@@ -40,6 +47,7 @@ from mappers.spatial.frustum import (
     FrustumCamera,
     view_log_prob,
 )
+from mappers.spatial.walk_adjustment import WalkPrior, walk_joint_steps
 
 __all__ = ["MAX_WALK_ENTRIES", "FrustumWalkAdjustment", "height_search", "walk_viewpoints"]
 
@@ -148,9 +156,15 @@ class FrustumWalkAdjustment(FrustumAdjustment):
     and, but after the sharpest softness, ``joint_rounds`` of FRUSTUM-BA's joint
     Levenberg-Marquardt rounds of tags and viewpoints (layout 34000 of ``LFMDR-Camera3D-v0``:
     0.27 m without them, 0.17 m with them; the walk search that follows sets the viewpoints
-    again, and the result is the last walk search's viewpoints and the tags fitted to them).
-    Guard as FRUSTUM-BA's: the result is kept only if its loss at the sharpest softness (with its
-    viewpoints) is below the start map's (with the viewpoints the walk search gives it).
+    again). After the sharpest softness, ``final_rounds`` joint rounds of tags and viewpoints
+    that keep the walk prior (:func:`mappers.spatial.walk_adjustment.walk_joint_steps`, from
+    the last walk search's posterior means toward the maximum a posteriori map and walk;
+    layouts 34000-34009: 0.212 m at 47 s of CPU per map before them, 0.169 m at 13 s with 5 of
+    them, the coarser grid and the two softnesses of the defaults; 25 fresh layouts: 0.215 m
+    before, 0.184 m; ``docs/guide/3d.md``). The result
+    is the last viewpoints and the tags fitted with them. Guard as FRUSTUM-BA's: the result is
+    kept only if its loss at the sharpest softness (with its viewpoints) is below the start
+    map's (with the viewpoints the walk search gives it).
 
     Parameters: the camera's calibration and ``softness``, ``range_softness``, ``miss_rate``,
     ``rounds``, ``max_iter`` as :class:`~mappers.spatial.frustum.FrustumAdjustment`, and
@@ -160,7 +174,10 @@ class FrustumWalkAdjustment(FrustumAdjustment):
         walk_spacing: the position grid's spacing [m]; walk_headings: headings on the grid.
         height_margin: the heights searched span the anchors' heights widened by this [m] on
             each side; height_step: their spacing [m].
-        joint_rounds: joint rounds after each softness but the last.
+        joint_rounds: FRUSTUM-BA's joint rounds after each softness but the last.
+        final_rounds: joint rounds with the walk prior after the last softness (0: none; with
+            ``softness=(0.1, 0.05, 0.03)``, ``walk_spacing=0.125``, ``walk_headings=36`` that
+            is FRUSTUM-BA-WALK as it was before them).
     ``grid``, ``headings`` and ``pose_iters`` are FRUSTUM-BA's per-step search's and unused.
     """
 
@@ -173,17 +190,18 @@ class FrustumWalkAdjustment(FrustumAdjustment):
         "height_margin": [Interval(Real, 0.0, None, closed="left")],
         "height_step": [Interval(Real, 0.0, None, closed="neither")],
         "joint_rounds": [Interval(Integral, 0, None, closed="left")],
+        "final_rounds": [Interval(Integral, 0, None, closed="left")],
     }
 
     def __init__(self, *, camera_height: float | None = None, pitch_deg: float | None = None,
                  hfov_deg: float | None = None, vfov_deg: float | None = None,
-                 max_range: float | None = None, softness=(0.1, 0.05, 0.03),
+                 max_range: float | None = None, softness=(0.1, 0.03),
                  range_softness: float = 0.1, miss_rate: float = 0.02, rounds: int = 20,
                  grid: int = 15, headings: int = 36, pose_iters: int = 3, max_iter: int = 300,
                  step_sigma: float = 0.15, turn_sigma_deg: float = 30.0,
-                 walk_spacing: float = 0.125, walk_headings: int = 36,
+                 walk_spacing: float = 0.25, walk_headings: int = 18,
                  height_margin: float = 0.5, height_step: float = 0.05,
-                 joint_rounds: int = 10):
+                 joint_rounds: int = 10, final_rounds: int = 5):
         super().__init__(camera_height=camera_height, pitch_deg=pitch_deg, hfov_deg=hfov_deg,
                          vfov_deg=vfov_deg, max_range=max_range, softness=softness,
                          range_softness=range_softness, miss_rate=miss_rate, rounds=rounds,
@@ -195,6 +213,7 @@ class FrustumWalkAdjustment(FrustumAdjustment):
         self.height_margin = height_margin
         self.height_step = height_step
         self.joint_rounds = joint_rounds
+        self.final_rounds = final_rounds
 
     def _walk(self, P, S, camera: FrustumCamera, softness: float) -> np.ndarray:
         return walk_viewpoints(P, S, camera, softness=softness,
@@ -208,7 +227,8 @@ class FrustumWalkAdjustment(FrustumAdjustment):
     def _solve(self, P, S, camera: FrustumCamera, soft: np.ndarray, problem, free, anchors):
         """For each softness: the walk's viewpoints, each free object's best height, its
         Newton steps with the viewpoints held, and (but after the last) FRUSTUM-BA's joint
-        rounds; the start is the walk's viewpoints at the last softness."""
+        rounds; then the joint rounds with the walk prior. The start is the walk's viewpoints
+        at the last softness."""
         z = anchors[:, 2]
         heights = np.arange(z.min() - self.height_margin,
                             z.max() + self.height_margin + self.height_step / 2, self.height_step)
@@ -222,4 +242,7 @@ class FrustumWalkAdjustment(FrustumAdjustment):
             P, loss = problem(s).object_steps(P, C, self.rounds)
             if k < len(soft) - 1:  # the joint rounds move the map; the next walk search the
                 P, C, loss = problem(s).joint(P, C, self.joint_rounds)  # viewpoints again
+        if self.final_rounds:  # FRUSTUM-BA's rounds here drift from the walk: keep its prior
+            prior = WalkPrior(self.step_sigma, math.radians(self.turn_sigma_deg))
+            P, C, loss = walk_joint_steps(problem(soft[-1]), P, C, self.final_rounds, prior)
         return P, C, loss, start_C, start_loss
