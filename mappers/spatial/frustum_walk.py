@@ -154,15 +154,14 @@ class FrustumWalkAdjustment(FrustumAdjustment):
     :func:`walk_viewpoints` given the map, each free tag's height by :func:`height_search`
     given the viewpoints, then ``rounds`` Newton steps of the free tags (the viewpoints held),
     and, but after the sharpest softness, ``joint_rounds`` of FRUSTUM-BA's joint
-    Levenberg-Marquardt rounds of tags and viewpoints (layout 34000 of ``LFMDR-Camera3D-v0``:
-    0.27 m without them, 0.17 m with them; the walk search that follows sets the viewpoints
-    again). After the sharpest softness, ``final_rounds`` joint rounds of tags and viewpoints
-    that keep the walk prior (:func:`mappers.spatial.walk_adjustment.walk_joint_steps`, from
-    the last walk search's posterior means toward the maximum a posteriori map and walk;
-    layouts 34000-34009: 0.212 m at 47 s of CPU per map before them, 0.169 m at 13 s with 5 of
-    them, the coarser grid and the two softnesses of the defaults; 25 fresh layouts: 0.215 m
-    before, 0.184 m; ``docs/guide/3d.md``). The result
-    is the last viewpoints and the tags fitted with them. Guard as FRUSTUM-BA's: the result is
+    Levenberg-Marquardt rounds of tags and viewpoints (the walk search that follows sets the
+    viewpoints again). After the sharpest softness, ``final_rounds`` joint rounds of tags and
+    viewpoints that keep the walk prior
+    (:func:`mappers.spatial.walk_adjustment.walk_joint_steps`, from the last walk search's
+    posterior means toward the maximum a posteriori map and walk). The defaults (the grid, the
+    softnesses, the rounds) were chosen on ``LFMDR-Camera3D-v0`` and confirmed on fresh layouts:
+    ``docs/guide/3d.md`` has the figures. The result is the last viewpoints and the tags fitted
+    with them. Guard as FRUSTUM-BA's: the result is
     kept only if its loss at the sharpest softness (with its viewpoints) is below the start
     map's (with the viewpoints the walk search gives it).
 
