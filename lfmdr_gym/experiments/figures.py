@@ -389,13 +389,16 @@ _VIEWS_3D = (("top", 0, 1), ("front", 0, 2), ("side", 1, 2))
 
 
 def plot_views_3d(positions: np.ndarray, truth: np.ndarray, anchor_ids: Sequence[int] | np.ndarray,
-                  path: Path, *, title: str = "", notes: Sequence[str] = ()) -> Path:
+                  path: Path, *, title: str = "", notes: Sequence[str] = (),
+                  covariances: np.ndarray | None = None) -> Path:
     """A 3-D map as three orthographic views (top: x-y, front: x-z, side: y-z), saved atomically.
 
     As :func:`plot_estimate` in each view: the truth as circles, the estimates as crosses with a
     line to their truth, anchors as squares, unmapped objects (NaN estimates) as grey crosses at
     the truth; a NaN truth row (a landmark without ground truth) draws its estimate alone.
     ``positions`` and ``truth`` are (M, 3); ``notes`` are written below the views.
+    ``covariances`` ((M, 3, 3), ``Map.covariances``) draws in each view each estimate's 95 %
+    ellipse of its position in that plane (the covariance's 2 x 2 block of the view's axes).
     """
     est = np.asarray(positions, dtype=float)
     truth = np.asarray(truth, dtype=float)
@@ -410,6 +413,11 @@ def plot_views_3d(positions: np.ndarray, truth: np.ndarray, anchor_ids: Sequence
     axes = fig.subplots(1, 3)
     for ax, (name, a, b) in zip(axes, _VIEWS_3D, strict=True):
         _draw_points(ax, est, truth, anchors, (a, b))
+        if covariances is not None:
+            from lfmdr_gym.render import draw_ellipses
+
+            plane = np.asarray(covariances, dtype=float)[:, [a, b]][:, :, [a, b]]
+            draw_ellipses(ax, est[:, [a, b]], plane)
         if lost.any():
             ax.scatter(truth[lost, a], truth[lost, b], s=40, marker="x", color="grey",
                        label="unmapped")

@@ -240,7 +240,8 @@ def _plot(path: Path, rows: Sequence[Mapping[str, Any]], truth: Any, anchors: Ma
     """``map.png``: estimates and truth seen from above (x, y), anchors (row -> known position)
     as squares; without truth, the estimates are labelled; with covariances ((M, d, d)), each
     estimate's 95 % ellipse (of its x-y block). A 3-D map (rows with ``z``) is drawn in three
-    orthographic views (:func:`lfmdr_gym.experiments.figures.plot_views_3d`)."""
+    orthographic views (:func:`lfmdr_gym.experiments.figures.plot_views_3d`), each with the
+    ellipses of its plane."""
     from lfmdr_gym.experiments.figures import plot_estimate, plot_views_3d
 
     axes = [a for a in _AXES if a in rows[0]] if rows else ["x", "y"]
@@ -250,7 +251,8 @@ def _plot(path: Path, rows: Sequence[Mapping[str, Any]], truth: Any, anchors: Ma
                      np.asarray(anchors[k], dtype=float) if k in anchors else
                      np.full(len(axes), np.nan) for k, r in enumerate(rows)], dtype=float)
     if len(axes) == 3:
-        plot_views_3d(est, true, sorted(anchors), path, title=title, notes=notes)
+        plot_views_3d(est, true, sorted(anchors), path, title=title, notes=notes,
+                      covariances=cov)
         return
     plot_estimate(est, true, sorted(anchors), path, title=title, notes=notes,
                   labels=[str(r["landmark"]) for r in rows],

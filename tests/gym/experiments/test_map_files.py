@@ -180,3 +180,20 @@ def test_the_three_views_refuse_a_2d_map(tmp_path):
     with pytest.raises(ValueError, match=r"\(M, 3\) positions"):
         plot_views_3d(POSITIONS, POSITIONS, ANCHORS, tmp_path / "m.png")
     assert not (tmp_path / "m.png").exists()
+
+
+def test_each_view_of_a_3d_map_draws_the_ellipses_of_its_plane(tmp_path, monkeypatch):
+    pytest.importorskip("matplotlib")
+    import lfmdr_gym.render
+
+    planes = []
+    monkeypatch.setattr(lfmdr_gym.render, "draw_ellipses",
+                        lambda ax, pos, cov: planes.append((np.array(pos), np.array(cov))))
+    pos = np.column_stack([POSITIONS, [0.0, 0.0, 0.5, np.nan, 1.0]])
+    cov = np.tile(np.array([[4.0, 0.5, 0.1], [0.5, 9.0, 0.2], [0.1, 0.2, 1.0]]), (5, 1, 1))
+    m = SimpleNamespace(positions=pos, warnings=(), covariances=cov)
+    write_map_files(tmp_path, m, IDS, ANCHORS, np.column_stack([ANCHOR_POS, [0.0, 0.0, 1.0]]))
+    assert len(planes) == 3  # top (x, y), front (x, z), side (y, z)
+    for (p, c), (a, b) in zip(planes, [(0, 1), (0, 2), (1, 2)], strict=True):
+        np.testing.assert_array_equal(p[2], pos[2, [a, b]])
+        np.testing.assert_array_equal(c[0], cov[0][np.ix_([a, b], [a, b])])
