@@ -102,8 +102,9 @@ def _cmd_map_history(args: argparse.Namespace) -> int:
         print(f"unmapped objects: {list(m.unmapped)}")
     print_warnings(m.warnings)
     if "mpe" in info:
+        moe = "MOE" if m.positions.shape[1] == 2 else "tetrahedron orientation error"
         print(f"MPE {info['mpe']:.4f} m (non-anchor {info['mpe_nonanchor']:.4f} m), "
-              f"MOE {info['moe']:.2f} %")
+              f"{moe} {info['moe']:.2f} %")
     else:
         print("no ground truth in the file: not scored")
     print(f"wrote {info['out'] / 'map.csv'} and {info['figure']}")

@@ -174,14 +174,19 @@ def _write_csv(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
 
 def _write_map(out: Path, positions: np.ndarray, history: History, title: str,
                notes: Sequence[str] = ()) -> Path:
-    """``map.csv`` (object, estimate, truth, anchor flag) and ``map.png`` (``notes``, the map's
-    warnings, below it); returns the figure."""
+    """``map.csv`` (object, estimate, truth, anchor flag; ``z`` and ``true_z`` too for a 3-D
+    map) and ``map.png`` (``notes``, the map's warnings, below it; a 3-D map in three
+    orthographic views); returns the figure."""
     import lfmdr_gym.experiments.figures as figures
 
     anchors = {int(i) for i in history.anchor_ids}
+    axes = "xyz"[:np.asarray(positions).shape[1]]
     with atomic_write(out / "map.csv") as fh:
         writer = csv.writer(fh)
-        writer.writerow(["object", "x", "y", "true_x", "true_y", "anchor"])
+        writer.writerow(["object", *axes, *(f"true_{a}" for a in axes), "anchor"])
         for j, (est, tru) in enumerate(zip(positions, history.object_positions, strict=True)):
             writer.writerow([j, *(f"{v:.6g}" for v in est), *(f"{v:.6g}" for v in tru), int(j in anchors)])
+    if len(axes) == 3:
+        return figures.plot_views_3d(positions, history.object_positions, history.anchor_ids,
+                                     out / "map.png", title=title, notes=notes)
     return figures.plot_map(positions, history, out / "map.png", title=title, notes=notes)

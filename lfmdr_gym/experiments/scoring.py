@@ -18,17 +18,31 @@ from lfmdr_gym.histories.history import History
 __all__ = ["evaluate", "map_history", "mpe_nonanchor", "score_map"]
 
 
-def score_map(positions: np.ndarray, unmapped: Sequence[int], history: History) -> dict[str, float]:
-    """MPE (mapped objects), MOE and MPE over mapped non-anchor objects of a map of ``history``."""
+def _scores_for(positions: np.ndarray) -> tuple[Any, Any, int]:
+    """The position score, the orientation score and the fewest objects it needs, for a map of
+    ``positions``' dimension: the paper's MPE and MOE (triangles) in the plane, their 3-D forms
+    (:mod:`mappers.core.scores_3d`: tetrahedra) in space."""
+    if np.asarray(positions).ndim == 2 and np.asarray(positions).shape[1] == 3:
+        from mappers import mean_position_error_3d, tetrahedron_orientation_error
+
+        return mean_position_error_3d, tetrahedron_orientation_error, 4
     from mappers import mean_orientation_error, mean_position_error
 
+    return mean_position_error, mean_orientation_error, 3
+
+
+def score_map(positions: np.ndarray, unmapped: Sequence[int], history: History) -> dict[str, float]:
+    """MPE (mapped objects), MOE and MPE over mapped non-anchor objects of a map of ``history``;
+    for a 3-D map, ``moe`` is the tetrahedron orientation error
+    (:func:`mappers.tetrahedron_orientation_error`)."""
+    mpe, moe, fewest = _scores_for(positions)
     truth = history.object_positions
     unmapped = [int(i) for i in unmapped]
     nan = float("nan")
     mapped = history.n_objects - len(unmapped)
     return {
-        "mpe": mean_position_error(positions, truth, exclude=unmapped) if mapped else nan,
-        "moe": mean_orientation_error(positions, truth, exclude=unmapped) if mapped >= 3 else nan,
+        "mpe": mpe(positions, truth, exclude=unmapped) if mapped else nan,
+        "moe": moe(positions, truth, exclude=unmapped) if mapped >= fewest else nan,
         "mpe_nonanchor": mpe_nonanchor(positions, unmapped, history),
         "unmapped": len(unmapped),
     }
@@ -37,12 +51,10 @@ def score_map(positions: np.ndarray, unmapped: Sequence[int], history: History) 
 def mpe_nonanchor(positions: np.ndarray, unmapped: Sequence[int], history: History) -> float:
     """MPE [m] over the mapped non-anchor objects of a map of ``history`` (the figure the
     benchmarks report); NaN when none is mapped (the first steps through a limited view)."""
-    from mappers import mean_position_error
-
     non_anchor = sorted({int(i) for i in unmapped} | {int(i) for i in history.anchor_ids})
     if history.n_objects <= len(non_anchor):
         return float("nan")
-    return mean_position_error(positions, history.object_positions, exclude=non_anchor)
+    return _scores_for(positions)[0](positions, history.object_positions, exclude=non_anchor)
 
 
 def map_history(history: History, method: str | None, params: Mapping[str, Any] | None = None) -> Any:

@@ -227,3 +227,21 @@ def test_convert_starloc_then_map_in_3d(tmp_path, capsys):
     assert scores["mpe_nonanchor"] < 0.05 and scores["moe"] is None
     rows = list(csv.DictReader(open(tmp_path / "m" / "map.csv", newline="")))
     assert {"landmark", "x", "y", "z", "anchor", "mapped"} <= set(rows[0])
+
+
+def test_a_recorded_3d_history_is_mapped_scored_and_drawn_in_3d(tmp_path, capsys):
+    """``lfmdr collect --env LFMDR-Camera3D-v0`` then ``lfmdr map``: 3-D scores and files."""
+    npz = tmp_path / "c3.npz"
+    assert main(["collect", "--env", "LFMDR-Camera3D-v0", "--steps", "200", "--seed", "2",
+                 "--env-kw", "bearing_noise_deg=1.0", "--env-kw", "range_noise=0.02",
+                 "--out", str(npz)]) == 0
+    assert main(["map", str(npz), "--out", str(tmp_path / "m")]) == 0
+    printed = capsys.readouterr().out
+    mpe, moe = re.search(r"MPE ([\d.]+) m .* tetrahedron orientation error ([\d.]+) %",
+                         printed).groups()
+    assert 0 < float(mpe) < 0.05 and float(moe) < 5.0, printed
+    with open(tmp_path / "m" / "map.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert list(rows[0]) == ["object", "x", "y", "z", "true_x", "true_y", "true_z", "anchor"]
+    err = [np.linalg.norm([float(r[a]) - float(r[f"true_{a}"]) for a in "xyz"]) for r in rows]
+    assert np.mean(err) == pytest.approx(float(mpe), abs=1e-4)  # the printed MPE, all objects
