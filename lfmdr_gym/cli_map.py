@@ -34,6 +34,17 @@ def _positive_seconds(text: str) -> float:
 
 
 # --------------------------------------------------------------------------------- lfmdr map
+_UNCERTAINTY_KINDS = ("model", "jackknife", "bootstrap", "anchors", "floor")
+
+
+def _uncertainty_kind(text: str) -> str:
+    if text not in _UNCERTAINTY_KINDS:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a kind of uncertainty; choose one of "
+                                         f"{', '.join(_UNCERTAINTY_KINDS)} (or give "
+                                         "--uncertainty alone)")
+    return text
+
+
 def add_map(sub: Any) -> None:
     """``lfmdr map HISTORY.npz`` or ``lfmdr map LOG.csv|LOG.parquet --anchors A.csv``."""
     from mappers.core.sensors import FUSED_SENSORS, SENSORS
@@ -58,6 +69,13 @@ def add_map(sub: Any) -> None:
                    help="map only the first N steps (default: all)")
     p.add_argument("--out", default=None, metavar="DIR",
                    help="output directory (default: next to the history, named after it)")
+    p.add_argument("--uncertainty", nargs="?", const=True, default=False, type=_uncertainty_kind,
+                   metavar="KIND",
+                   help="give each landmark a covariance: cov_* columns in map.csv (and a "
+                        "covariance in map.json / map.yaml), 95 %% ellipses in map.png. KIND: "
+                        f"{', '.join(_UNCERTAINTY_KINDS)}; alone: the method's own with the "
+                        "systematic floor where it has a model (build_map's uncertainty=True; "
+                        "docs/guide/uncertainty.md)")
     log = p.add_argument_group("observation logs (.csv, .parquet)")
     log.add_argument("--anchors", default=None, metavar="A.csv",
                      help="landmarks of known position, a table landmark,x,y (at least 3, not "
@@ -95,7 +113,7 @@ def _cmd_map_history(args: argparse.Namespace) -> int:
     from lfmdr_gym.experiments.params import method_label
 
     info = map_history_file(args.history, args.method, params=args.param,
-                            n_steps=args.steps, out=args.out)
+                            n_steps=args.steps, out=args.out, uncertainty=args.uncertainty)
     m = info["map"]
     print(f"{info['history']!r}: {method_label(info['method'], info['param'])}")
     if m.unmapped:
@@ -125,7 +143,8 @@ def _cmd_map_log(args: argparse.Namespace) -> int:
     out = args.out if args.out is not None else Path(args.history).with_suffix("")
     run = map_observation_log(args.history, args.anchors, truth=args.truth, sensor=args.sensor,
                               bin_width=args.bin_width, method=args.method, params=args.param,
-                              n_steps=args.steps, out=out, frame=args.frame)
+                              n_steps=args.steps, out=out, frame=args.frame,
+                              uncertainty=args.uncertainty)
     h = run.history
     print(f"{args.history}: {h.n_objects} landmarks, {h.n_steps} steps ({h.sensor}), "
           f"{method_label(run.method, run.param)}")

@@ -32,7 +32,8 @@ import numpy as np
 
 from lfmdr_gym.atomic import atomic_file_set
 
-__all__ = ["MapFiles", "map_rows", "score_against_truth", "tag_map", "write_map_files"]
+__all__ = ["MapFiles", "covariance_columns", "map_rows", "score_against_truth", "tag_map",
+           "write_map_files"]
 
 _AXES = ("x", "y", "z")
 
@@ -72,8 +73,9 @@ def _covariances(result: Any, m: int, d: int) -> np.ndarray | None:
     return cov
 
 
-def _cov_names(d: int) -> list[tuple[str, int, int]]:
-    """(column, row, col) of a covariance's upper triangle: cov_xx, cov_xy, cov_yy (+ z)."""
+def covariance_columns(d: int) -> list[tuple[str, int, int]]:
+    """(column, row, col) of a covariance's upper triangle: cov_xx, cov_xy, cov_yy (+ z); the
+    columns of a map's ``map.csv`` when it has covariances."""
     pairs = [(i, j) for j in range(d) for i in range(j + 1)]  # xx, xy, yy, xz, yz, zz
     return [(f"cov_{_AXES[i]}{_AXES[j]}", i, j) for i, j in pairs]
 
@@ -95,7 +97,7 @@ def map_rows(result: Any, landmarks: Sequence[Any], anchor_rows: Sequence[int]) 
         row.update(anchor=int(k in anchors), mapped=int(mapped))
         if cov is not None:
             row.update({name: _number(cov[k, i, j]) if mapped else None
-                        for name, i, j in _cov_names(d)})
+                        for name, i, j in covariance_columns(d)})
         rows.append(row)
     return rows
 
@@ -129,7 +131,7 @@ def tag_map(rows: Sequence[Mapping[str, Any]], *, frame: str = "map") -> dict[st
                  "anchor": bool(row["anchor"])}
         if "cov_xx" in row:
             cov = [[None] * d for _ in range(d)]
-            for name, i, j in _cov_names(d):
+            for name, i, j in covariance_columns(d):
                 cov[i][j] = cov[j][i] = row[name]
             entry["covariance"] = cov
         entries.append(entry)

@@ -70,6 +70,7 @@ def map_observation_log(
     out: str | os.PathLike | None = None,
     frame: str = "map",
     plot: bool = True,
+    uncertainty: bool | str = False,
 ) -> LogMap:
     """Map an observation table (CSV or Parquet) with the anchors of a landmark table.
 
@@ -86,6 +87,9 @@ def map_observation_log(
         out: the output folder (written as one set; on any error left as it was).
         frame: the anchors' frame, named in ``map.json`` / ``map.yaml``.
         plot: write ``map.png``.
+        uncertainty: each landmark's covariance, as ``build_map``'s ``uncertainty``
+            (docs/guide/uncertainty.md): ``map.csv``'s ``cov_*`` columns, the tag map's
+            ``covariance`` and ``map.png``'s 95 % ellipses.
     """
     from lfmdr_gym.experiments.mapping import method_and_params
     from lfmdr_gym.experiments.params import method_label, param_label
@@ -107,7 +111,7 @@ def map_observation_log(
     label, chosen = method_and_params(method, history, params)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the map's own warnings are in result.warnings
-        result = map_history(history, label, chosen)
+        result = map_history(history, label, chosen, uncertainty=uncertainty)
     notes = tuple(landmark_notes(result.warnings, landmarks, history))
     files = None
     if out is not None:

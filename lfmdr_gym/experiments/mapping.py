@@ -138,9 +138,11 @@ def map_history_file(
     params: Iterable[str] | Mapping[str, Any] | None = None,
     n_steps: int | None = None,
     out: str | os.PathLike | None = None,
+    uncertainty: bool | str = False,
 ) -> dict[str, Any]:
     """Map a saved history (``method`` None: the default for its sensor and kind); scores when
-    its ground truth is known; writes ``map.csv`` + ``map.png``.
+    its ground truth is known; writes ``map.csv`` + ``map.png``. ``uncertainty``: as
+    ``build_map``'s (``map.csv``'s ``cov_*`` columns and ``map.png``'s 95 % ellipses).
 
     Returns a dict with ``map`` (the ``mappers.Map``), ``history`` and, when every object's true
     position is in the file, ``mpe``, ``moe``, ``mpe_nonanchor``.
@@ -152,14 +154,15 @@ def map_history_file(
     out = ensure_writable_dir(out if out is not None else Path(path).with_suffix(""))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        result = map_history(history, method, params)
+        result = map_history(history, method, params, uncertainty=uncertainty)
     info: dict[str, Any] = {"map": result, "history": history, "method": method,
                             "param": param_label(params), "out": out}
     title = f"{Path(path).name}, {method_label(method, params)}, N={history.n_steps}"
     if np.all(np.isfinite(history.object_positions)):
         info.update(score_map(result.positions, result.unmapped, history))
         title += f": MPE {info['mpe']:.3f} m, MOE {info['moe']:.2f} %"
-    info["figure"] = _write_map(out, result.positions, history, title, notes=result.warnings)
+    info["figure"] = _write_map(out, result.positions, history, title, notes=result.warnings,
+                                covariances=getattr(result, "covariances", None))
     return info
 
 
@@ -173,20 +176,27 @@ def _write_csv(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
 
 
 def _write_map(out: Path, positions: np.ndarray, history: History, title: str,
-               notes: Sequence[str] = ()) -> Path:
+               notes: Sequence[str] = (), covariances: np.ndarray | None = None) -> Path:
     """``map.csv`` (object, estimate, truth, anchor flag; ``z`` and ``true_z`` too for a 3-D
-    map) and ``map.png`` (``notes``, the map's warnings, below it; a 3-D map in three
-    orthographic views); returns the figure."""
+    map; the ``covariances``' ``cov_*`` columns when given) and ``map.png`` (``notes``, the
+    map's warnings, below it; the 95 % ellipses; a 3-D map in three orthographic views);
+    returns the figure."""
     import lfmdr_gym.experiments.figures as figures
+    from lfmdr_gym.experiments.map_files import covariance_columns
 
     anchors = {int(i) for i in history.anchor_ids}
-    axes = "xyz"[:np.asarray(positions).shape[1]]
+    d = np.asarray(positions).shape[1]
+    axes, cov = "xyz"[:d], [] if covariances is None else covariance_columns(d)
     with atomic_write(out / "map.csv") as fh:
         writer = csv.writer(fh)
-        writer.writerow(["object", *axes, *(f"true_{a}" for a in axes), "anchor"])
+        writer.writerow(["object", *axes, *(f"true_{a}" for a in axes), "anchor",
+                         *(name for name, _, _ in cov)])
         for j, (est, tru) in enumerate(zip(positions, history.object_positions, strict=True)):
-            writer.writerow([j, *(f"{v:.6g}" for v in est), *(f"{v:.6g}" for v in tru), int(j in anchors)])
-    if len(axes) == 3:
+            writer.writerow([j, *(f"{v:.6g}" for v in est), *(f"{v:.6g}" for v in tru), int(j in anchors),
+                             *(f"{covariances[j, a, b]:.6g}" for _, a, b in cov)])
+    if d == 3:
         return figures.plot_views_3d(positions, history.object_positions, history.anchor_ids,
-                                     out / "map.png", title=title, notes=notes)
-    return figures.plot_map(positions, history, out / "map.png", title=title, notes=notes)
+                                     out / "map.png", title=title, notes=notes,
+                                     covariances=covariances)
+    return figures.plot_map(positions, history, out / "map.png", title=title, notes=notes,
+                            covariances=covariances)

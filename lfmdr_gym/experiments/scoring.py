@@ -57,13 +57,15 @@ def mpe_nonanchor(positions: np.ndarray, unmapped: Sequence[int], history: Histo
     return _scores_for(positions)[0](positions, history.object_positions, exclude=non_anchor)
 
 
-def map_history(history: History, method: str | None, params: Mapping[str, Any] | None = None) -> Any:
+def map_history(history: History, method: str | None, params: Mapping[str, Any] | None = None,
+                *, uncertainty: bool | str = False) -> Any:
     """``method``'s map of ``history`` (a ``mappers.Map``) from the history and its anchors; None =
-    the default for the history's sensor and kind (complete or masked)."""
+    the default for the history's sensor and kind (complete or masked). ``uncertainty``: as
+    ``build_map``'s (``Map.covariances``; docs/guide/uncertainty.md)."""
     from mappers import build_map
 
     return build_map(history, history.anchor_ids, history.anchor_positions, method,
-                     **dict(params or {}))
+                     uncertainty=uncertainty, **dict(params or {}))
 
 
 def evaluate(history: History, method: str, params: Mapping[str, Any] | None = None) -> dict[str, Any]:

@@ -245,3 +245,24 @@ def test_a_recorded_3d_history_is_mapped_scored_and_drawn_in_3d(tmp_path, capsys
     assert list(rows[0]) == ["object", "x", "y", "z", "true_x", "true_y", "true_z", "anchor"]
     err = [np.linalg.norm([float(r[a]) - float(r[f"true_{a}"]) for a in "xyz"]) for r in rows]
     assert np.mean(err) == pytest.approx(float(mpe), abs=1e-4)  # the printed MPE, all objects
+
+
+def test_uncertainty_puts_covariances_in_the_files_of_a_log_and_of_a_history(tmp_path, capsys):
+    history, npz, log, anchors, _ = _episode(tmp_path, "LFMDR-Bearing-v0", steps=150)
+    assert main(["map", str(log), "--anchors", str(anchors), "--out", str(tmp_path / "log"),
+                 "--uncertainty", "model"]) == 0
+    assert main(["map", str(npz), "--out", str(tmp_path / "npz"), "--uncertainty"]) == 0
+    for out, key in ((tmp_path / "log", "landmark"), (tmp_path / "npz", "object")):
+        with open(out / "map.csv", newline="") as fh:
+            rows = list(csv.DictReader(fh))
+        assert list(rows[0])[-3:] == ["cov_xx", "cov_xy", "cov_yy"]
+        anchor = np.array([r["anchor"] == "1" for r in rows])
+        var = np.array([[float(r["cov_xx"]), float(r["cov_yy"])] for r in rows])
+        assert np.all(var[anchor] == 0) and np.all(var[~anchor] > 0), out
+        assert [int(r[key]) for r in rows] == list(range(history.n_objects))
+    doc = json.loads((tmp_path / "log" / "map.json").read_text())
+    assert all(len(e["covariance"]) == 2 for e in doc["landmarks"])
+    with pytest.raises(SystemExit) as stop:
+        main(["map", str(npz), "--uncertainty", "sandwich"])
+    assert stop.value.code == 2
+    assert "'sandwich' is not a kind of uncertainty" in capsys.readouterr().err
