@@ -411,11 +411,11 @@ def plot_views_3d(positions: np.ndarray, truth: np.ndarray, anchor_ids: Sequence
     note_lines = _wrapped(notes, 2 * _NOTE_CHARS, prefix="warning: ")
     fig = _figure(13.0, 4.6 + len(note_lines) * _NOTE_LINE)
     axes = fig.subplots(1, 3)
+    if covariances is not None:
+        from lfmdr_gym.render import draw_ellipses
     for ax, (name, a, b) in zip(axes, _VIEWS_3D, strict=True):
         _draw_points(ax, est, truth, anchors, (a, b))
         if covariances is not None:
-            from lfmdr_gym.render import draw_ellipses
-
             plane = np.asarray(covariances, dtype=float)[:, [a, b]][:, :, [a, b]]
             draw_ellipses(ax, est[:, [a, b]], plane)
         if lost.any():

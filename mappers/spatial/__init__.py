@@ -4,7 +4,7 @@ Rays (and ranges) -> SPATIAL-BA, the 6-DoF viewpoint bundle adjustment started f
 registered to one another by their common objects; sightings -> COVIS-3D, co-observation
 embedded in three dimensions, or FRUSTUM-BA, the frustum adjustment of a planar robot's
 calibrated camera (FRUSTUM-BA-WALK: with the walk prior on the viewpoints of an ordered
-walk), or COVIS-3D-MEDIAN, the median of three co-observation embeddings of ordered steps;
+walk), or COVIS-3D-MEDIAN, the median of four co-observation embeddings of ordered steps;
 ranges alone -> RANGE-3D, the range-only adjustment of the objects and the
 viewpoints' positions. No odometry, no motion model.
 """
